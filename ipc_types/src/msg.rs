@@ -1,0 +1,870 @@
+//! Payloads that cross a process boundary.
+//!
+//! Every type here is `#[repr(C)]`, has no pointer, heap or `Drop`, and carries a versioned
+//! `#[type_name]` so that two separately built binaries agree on it (iceoryx2 compares the
+//! name and the size/alignment when a port opens a service). Bump the `/vN` suffix when a
+//! layout changes: an old process then fails to connect instead of misreading memory.
+//!
+//! Enumerations that arrive from shared memory are stored as raw integers with a checked
+//! accessor: another process may write any bit pattern, and reading an invalid
+//! discriminant into a Rust enum would be undefined behaviour.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+/// How many pipeline stages a message can record on its way through the graph.
+pub const MAX_STAGES: usize = 8;
+/// How many control points a trajectory can carry (a uniform cubic B-spline).
+pub const MAX_CONTROL_POINTS: usize = 64;
+/// How many marker ids a pad observation lists.
+pub const MAX_MARKERS: usize = 16;
+/// How many processes the watchdog reports on.
+pub const MAX_WATCHED: usize = 16;
+/// Length of fixed text fields (reasons, process names), bytes.
+pub const TEXT_LEN: usize = 48;
+
+/// A pipeline stage, used to tag latency stamps.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    /// The simulator (rendering, physics) or a real sensor driver.
+    Sensor = 1,
+    /// camera-ingest.
+    CameraIngest = 2,
+    /// aruco-pnp.
+    ArucoPnp = 3,
+    /// depth-map.
+    DepthMap = 4,
+    /// planner.
+    Planner = 5,
+    /// fsm.
+    Fsm = 6,
+    /// px4-link.
+    Px4Link = 7,
+    /// watchdog.
+    Watchdog = 8,
+    /// Benchmarks and tests.
+    Bench = 15,
+}
+
+impl Stage {
+    /// Decodes a raw stage id; `None` for an id no stage has.
+    pub fn from_raw(raw: u32) -> Option<Self> {
+        Some(match raw {
+            1 => Self::Sensor,
+            2 => Self::CameraIngest,
+            3 => Self::ArucoPnp,
+            4 => Self::DepthMap,
+            5 => Self::Planner,
+            6 => Self::Fsm,
+            7 => Self::Px4Link,
+            8 => Self::Watchdog,
+            15 => Self::Bench,
+            _ => return None,
+        })
+    }
+
+    /// Short name for logs and profiles.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Sensor => "sensor",
+            Self::CameraIngest => "camera-ingest",
+            Self::ArucoPnp => "aruco-pnp",
+            Self::DepthMap => "depth-map",
+            Self::Planner => "planner",
+            Self::Fsm => "fsm",
+            Self::Px4Link => "px4-link",
+            Self::Watchdog => "watchdog",
+            Self::Bench => "bench",
+        }
+    }
+}
+
+/// When one stage took a message in and let it out, in monotonic nanoseconds.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::StageStamp/v1")]
+pub struct StageStamp {
+    /// Raw [`Stage`] id.
+    pub stage: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+    /// When the stage started on the data (monotonic ns).
+    pub enter_ns: u64,
+    /// When the stage published its result (monotonic ns).
+    pub exit_ns: u64,
+}
+
+/// The user header of every topic: what end-to-end latency profiling needs.
+///
+/// `capture_ns` is the capture time of the sensor data the message derives from, carried
+/// unchanged down the graph, so that any consumer can tell how old its input really is.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::Header/v1")]
+pub struct Header {
+    /// Per-publisher sequence number, starting at 1; gaps mean drops.
+    pub seq: u64,
+    /// Capture time of the originating sensor data (monotonic ns); 0 when none.
+    pub capture_ns: u64,
+    /// Number of valid entries in `stages`.
+    pub stage_count: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+    /// Stage stamps, oldest first.
+    pub stages: [StageStamp; MAX_STAGES],
+}
+
+impl Header {
+    /// A header for data captured at `capture_ns`, with no stage stamps yet.
+    pub fn captured_at(capture_ns: u64) -> Self {
+        Self {
+            capture_ns,
+            ..Self::default()
+        }
+    }
+
+    /// A header that continues `upstream`'s history: same capture time, same stamps.
+    pub fn derived_from(upstream: &Header) -> Self {
+        Self {
+            seq: 0,
+            ..*upstream
+        }
+    }
+
+    /// Records a stage; when full, the oldest stamp after the first is dropped so that both
+    /// the origin and the newest stages stay visible.
+    pub fn push_stage(&mut self, stage: Stage, enter_ns: u64, exit_ns: u64) {
+        let stamp = StageStamp {
+            stage: stage as u32,
+            reserved: 0,
+            enter_ns,
+            exit_ns,
+        };
+        let n = (self.stage_count as usize).min(MAX_STAGES);
+        if n < MAX_STAGES {
+            self.stages[n] = stamp;
+            self.stage_count = (n + 1) as u32;
+        } else {
+            self.stages.copy_within(2.., 1);
+            self.stages[MAX_STAGES - 1] = stamp;
+        }
+    }
+
+    /// The valid stamps.
+    pub fn stages(&self) -> &[StageStamp] {
+        &self.stages[..(self.stage_count as usize).min(MAX_STAGES)]
+    }
+}
+
+/// A rigid transform: translation in metres and a unit quaternion (x, y, z, w).
+///
+/// Named at each use by what it maps (`world_from_body`, `camera_from_pad`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("landing::Pose/v1")]
+pub struct Pose {
+    /// Translation, metres.
+    pub translation: [f64; 3],
+    /// Rotation as a unit quaternion, (x, y, z, w).
+    pub rotation_xyzw: [f64; 4],
+}
+
+impl Default for Pose {
+    fn default() -> Self {
+        Self::IDENTITY
+    }
+}
+
+impl Pose {
+    /// The identity transform.
+    pub const IDENTITY: Pose = Pose {
+        translation: [0.0; 3],
+        rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
+    };
+
+    /// True when every number is finite: consumers must not act on anything else.
+    pub fn is_finite(&self) -> bool {
+        self.translation
+            .iter()
+            .chain(&self.rotation_xyzw)
+            .all(|v| v.is_finite())
+    }
+}
+
+/// Pixel layout of a camera frame.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PixelEncoding {
+    /// 8-bit grey.
+    Mono8 = 1,
+    /// 8-bit blue, green, red (OpenCV's order).
+    Bgr8 = 2,
+    /// 8-bit red, green, blue.
+    Rgb8 = 3,
+}
+
+impl PixelEncoding {
+    /// Decodes a raw encoding; `None` for an unknown one (the frame must be dropped).
+    pub fn from_raw(raw: u32) -> Option<Self> {
+        match raw {
+            1 => Some(Self::Mono8),
+            2 => Some(Self::Bgr8),
+            3 => Some(Self::Rgb8),
+            _ => None,
+        }
+    }
+
+    /// Bytes per pixel.
+    pub fn bytes_per_pixel(self) -> usize {
+        match self {
+            Self::Mono8 => 1,
+            Self::Bgr8 | Self::Rgb8 => 3,
+        }
+    }
+}
+
+/// Metadata of a camera frame; the pixels are the `[u8]` slice payload behind it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::CameraFrameHeader/v1")]
+pub struct CameraFrameHeader {
+    /// Sequence, capture time (middle of exposure) and stage stamps.
+    pub msg: Header,
+    /// Width, pixels.
+    pub width: u32,
+    /// Height, pixels.
+    pub height: u32,
+    /// Bytes from one row to the next (>= width * bytes per pixel).
+    pub stride: u32,
+    /// Raw [`PixelEncoding`].
+    pub encoding: u32,
+    /// Which camera took the frame (0 = the downward pad camera).
+    pub camera_id: u32,
+    /// 1 when the pixels were already undistorted (ideal pinhole).
+    pub undistorted: u32,
+    /// Exposure time, ns.
+    pub exposure_ns: u64,
+}
+
+impl CameraFrameHeader {
+    /// The payload length this header implies, or `None` when the header is inconsistent
+    /// (unknown encoding, stride shorter than a row, overflow).
+    pub fn expected_len(&self) -> Option<usize> {
+        let enc = PixelEncoding::from_raw(self.encoding)?;
+        let row = (self.width as usize).checked_mul(enc.bytes_per_pixel())?;
+        if (self.stride as usize) < row || self.width == 0 || self.height == 0 {
+            return None;
+        }
+        (self.stride as usize).checked_mul(self.height as usize)
+    }
+}
+
+/// Pinhole intrinsics, pixels.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::Intrinsics/v1")]
+pub struct Intrinsics {
+    /// Focal length x, px.
+    pub fx: f64,
+    /// Focal length y, px.
+    pub fy: f64,
+    /// Principal point x, px.
+    pub cx: f64,
+    /// Principal point y, px.
+    pub cy: f64,
+}
+
+/// Metadata of a depth frame; the depths are the `[u16]` slice payload behind it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::DepthFrameHeader/v1")]
+pub struct DepthFrameHeader {
+    /// Sequence, capture time and stage stamps.
+    pub msg: Header,
+    /// Width, pixels.
+    pub width: u32,
+    /// Height, pixels.
+    pub height: u32,
+    /// Metres per depth unit (0.001 for a D435 in its default mode).
+    pub depth_scale_m: f64,
+    /// Intrinsics of the depth image.
+    pub intrinsics: Intrinsics,
+    /// Which depth camera (0 = forward).
+    pub camera_id: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+}
+
+/// The pad pose seen in one camera frame.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("landing::PadObservation/v1")]
+pub struct PadObservation {
+    /// Sequence, capture time of the frame, stage stamps.
+    pub msg: Header,
+    /// Pad in the camera's optical frame.
+    pub camera_from_pad: Pose,
+    /// Pad in the world, through the vehicle state at capture time.
+    pub world_from_pad: Pose,
+    /// Covariance of world_from_pad, (x, y, z, roll, pitch, yaw), row-major.
+    pub covariance: [f64; 36],
+    /// RMS reprojection error over all used corners, px.
+    pub reprojection_error_px: f64,
+    /// Number of valid entries in `marker_ids`.
+    pub marker_count: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+    /// Ids of the markers whose corners went into the pose.
+    pub marker_ids: [u32; MAX_MARKERS],
+}
+
+impl Default for PadObservation {
+    fn default() -> Self {
+        Self {
+            msg: Header::default(),
+            camera_from_pad: Pose::IDENTITY,
+            world_from_pad: Pose::IDENTITY,
+            covariance: [0.0; 36],
+            reprojection_error_px: 0.0,
+            marker_count: 0,
+            reserved: 0,
+            marker_ids: [0; MAX_MARKERS],
+        }
+    }
+}
+
+/// PX4 flight mode as px4-link decodes it from HEARTBEAT.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FlightMode {
+    /// Not known (no heartbeat yet, or a mode this stack does not name).
+    Unknown = 0,
+    /// Manual / stabilized / altitude / position modes: a pilot flies.
+    Manual = 1,
+    /// AUTO.TAKEOFF.
+    Takeoff = 2,
+    /// AUTO.LOITER (hold).
+    Hold = 3,
+    /// AUTO.LAND or AUTO.PRECLAND.
+    Land = 4,
+    /// OFFBOARD: this stack flies.
+    Offboard = 5,
+    /// AUTO.RTL.
+    ReturnToLaunch = 6,
+    /// AUTO.MISSION.
+    Mission = 7,
+}
+
+impl FlightMode {
+    /// Decodes a raw mode; unknown values read as [`FlightMode::Unknown`].
+    pub fn from_raw(raw: u32) -> Self {
+        match raw {
+            1 => Self::Manual,
+            2 => Self::Takeoff,
+            3 => Self::Hold,
+            4 => Self::Land,
+            5 => Self::Offboard,
+            6 => Self::ReturnToLaunch,
+            7 => Self::Mission,
+            _ => Self::Unknown,
+        }
+    }
+}
+
+/// Landed state as PX4's EXTENDED_SYS_STATE reports it.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LandedState {
+    /// Not reported.
+    Unknown = 0,
+    /// On the ground.
+    OnGround = 1,
+    /// Flying.
+    InAir = 2,
+    /// Taking off.
+    Takeoff = 3,
+    /// Landing.
+    Landing = 4,
+}
+
+impl LandedState {
+    /// Decodes a raw state; unknown values read as [`LandedState::Unknown`].
+    pub fn from_raw(raw: u32) -> Self {
+        match raw {
+            1 => Self::OnGround,
+            2 => Self::InAir,
+            3 => Self::Takeoff,
+            4 => Self::Landing,
+            _ => Self::Unknown,
+        }
+    }
+}
+
+/// Health of the link to the autopilot.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::LinkHealth/v1")]
+pub struct LinkHealth {
+    /// 1 while autopilot heartbeats arrive within their timeout.
+    pub connected: u32,
+    /// MAVLink messages that failed to parse since start.
+    pub parse_errors: u32,
+    /// When the last autopilot heartbeat arrived (monotonic ns).
+    pub last_heartbeat_ns: u64,
+    /// When the last telemetry message arrived (monotonic ns).
+    pub last_telemetry_ns: u64,
+    /// Messages lost according to MAVLink sequence numbers.
+    pub messages_lost: u64,
+}
+
+/// The vehicle's estimated state, as the autopilot reports it (never ground truth).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::VehicleState/v1")]
+pub struct VehicleState {
+    /// Sequence, estimate time (`capture_ns`), stage stamps.
+    pub msg: Header,
+    /// Body (FLU) in the world (ENU).
+    pub world_from_body: Pose,
+    /// Velocity in the world frame, m/s.
+    pub velocity: [f64; 3],
+    /// Body rates (FLU), rad/s.
+    pub body_rates: [f64; 3],
+    /// 1 when armed.
+    pub armed: u32,
+    /// Raw [`FlightMode`].
+    pub flight_mode: u32,
+    /// Raw [`LandedState`].
+    pub landed_state: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+    /// The autopilot link.
+    pub link: LinkHealth,
+}
+
+/// State of one occupancy cell on the wire.
+#[repr(u8)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CellState {
+    /// Never observed: neither free nor occupied.
+    Unknown = 0,
+    /// Observed free.
+    Free = 1,
+    /// Observed occupied.
+    Occupied = 2,
+    /// Free, but within the inflation radius of an occupied cell.
+    Inflated = 3,
+}
+
+impl CellState {
+    /// Decodes a raw cell; anything unexpected is treated as unknown, never as free.
+    pub fn from_raw(raw: u8) -> Self {
+        match raw {
+            1 => Self::Free,
+            2 => Self::Occupied,
+            3 => Self::Inflated,
+            _ => Self::Unknown,
+        }
+    }
+}
+
+/// Metadata of the local occupancy window; cells are the `[u8]` slice payload behind it,
+/// x fastest, then y, then z, one [`CellState`] each.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::OccupancyMapHeader/v1")]
+pub struct OccupancyMapHeader {
+    /// Sequence, capture time of the newest depth frame integrated, stage stamps.
+    pub msg: Header,
+    /// World position of the window's minimum corner, m.
+    pub origin: [f64; 3],
+    /// Cell edge, m.
+    pub resolution: f64,
+    /// Inflation radius applied, m.
+    pub inflation: f64,
+    /// Cells along x, y, z.
+    pub dims: [u32; 3],
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+}
+
+/// What the planner is asked to do.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GoalMode {
+    /// Stop where you are (emergency-stop trajectory).
+    Stop = 0,
+    /// Fly to a fixed point.
+    Point = 1,
+    /// Meet a moving target at the given state (rendezvous).
+    Rendezvous = 2,
+}
+
+impl GoalMode {
+    /// Decodes a raw mode; unknown values read as [`GoalMode::Stop`], the safe choice.
+    pub fn from_raw(raw: u32) -> Self {
+        match raw {
+            1 => Self::Point,
+            2 => Self::Rendezvous,
+            _ => Self::Stop,
+        }
+    }
+}
+
+/// A goal for the planner, world frame.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::PlannerGoal/v1")]
+pub struct PlannerGoal {
+    /// Sequence, capture time of the observation behind the goal, stage stamps.
+    pub msg: Header,
+    /// Goal position, m.
+    pub position: [f64; 3],
+    /// Goal velocity, m/s (the pad's velocity for a rendezvous).
+    pub velocity: [f64; 3],
+    /// Goal acceleration, m/s^2.
+    pub acceleration: [f64; 3],
+    /// Yaw at the goal, rad (ENU, from +x toward +y).
+    pub yaw: f64,
+    /// Raw [`GoalMode`].
+    pub mode: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+}
+
+/// A uniform cubic B-spline trajectory in the world frame.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("landing::Trajectory/v1")]
+pub struct Trajectory {
+    /// Sequence, capture time of the input behind the plan, stage stamps.
+    pub msg: Header,
+    /// Plan id; increases with each new plan.
+    pub id: u64,
+    /// When the curve's parameter starts (monotonic ns).
+    pub start_ns: u64,
+    /// Knot interval, s.
+    pub knot_interval_s: f64,
+    /// Number of valid control points (>= 4 for a curve).
+    pub count: u32,
+    /// 1 for an emergency-stop trajectory.
+    pub emergency: u32,
+    /// Control points, m.
+    pub control_points: [[f64; 3]; MAX_CONTROL_POINTS],
+}
+
+impl Default for Trajectory {
+    fn default() -> Self {
+        Self {
+            msg: Header::default(),
+            id: 0,
+            start_ns: 0,
+            knot_interval_s: 0.0,
+            count: 0,
+            emergency: 0,
+            control_points: [[0.0; 3]; MAX_CONTROL_POINTS],
+        }
+    }
+}
+
+impl Trajectory {
+    /// The valid control points.
+    pub fn points(&self) -> &[[f64; 3]] {
+        &self.control_points[..(self.count as usize).min(MAX_CONTROL_POINTS)]
+    }
+}
+
+/// Planning statistics, one per planning call.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::PlannerStats/v1")]
+pub struct PlannerStats {
+    /// Sequence, capture time of the input, stage stamps.
+    pub msg: Header,
+    /// Trajectory id the call produced (0 on failure).
+    pub trajectory_id: u64,
+    /// Wall time of the call, ms.
+    pub planning_ms: f64,
+    /// Optimizer iterations.
+    pub iterations: u32,
+    /// Rebound rounds.
+    pub rebounds: u32,
+    /// 1 on success.
+    pub success: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+}
+
+/// A position/velocity/acceleration/yaw setpoint for the autopilot, world ENU.
+///
+/// A field that is not to be controlled has its bit cleared in `valid`: NaN never goes on
+/// the wire (PX4 reads NaN as "ignore", but a NaN from a bug must not look like intent).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::Setpoint/v1")]
+pub struct Setpoint {
+    /// Sequence, capture time of the input, stage stamps.
+    pub msg: Header,
+    /// Position, m.
+    pub position: [f64; 3],
+    /// Velocity feed-forward, m/s.
+    pub velocity: [f64; 3],
+    /// Acceleration feed-forward, m/s^2.
+    pub acceleration: [f64; 3],
+    /// Yaw, rad (ENU).
+    pub yaw: f64,
+    /// Which fields hold: [`Setpoint::POSITION`] | [`Setpoint::VELOCITY`] | ...
+    pub valid: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+}
+
+impl Setpoint {
+    /// `position` holds.
+    pub const POSITION: u32 = 1;
+    /// `velocity` holds.
+    pub const VELOCITY: u32 = 2;
+    /// `acceleration` holds.
+    pub const ACCELERATION: u32 = 4;
+    /// `yaw` holds.
+    pub const YAW: u32 = 8;
+}
+
+/// States of the landing mission.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MissionState {
+    /// On the ground, disarmed, waiting for the start.
+    Idle = 0,
+    /// Arming and climbing.
+    Takeoff = 1,
+    /// Flying to the preset search point.
+    GoToPreset = 2,
+    /// Hovering at the preset point until the pad is seen.
+    WaitForPad = 3,
+    /// Following the pad at altitude.
+    Track = 4,
+    /// Descending while tracking.
+    Descend = 5,
+    /// Committed to touchdown.
+    Land = 6,
+    /// On the pad, disarmed.
+    Landed = 7,
+    /// Pad lost: hold, climb, then give up.
+    Lost = 8,
+    /// Mission aborted by an operator or the watchdog.
+    Abort = 9,
+    /// Landing in place because something failed.
+    SafeLand = 10,
+}
+
+impl MissionState {
+    /// Decodes a raw state; `None` for an unknown one.
+    pub fn from_raw(raw: u32) -> Option<Self> {
+        Some(match raw {
+            0 => Self::Idle,
+            1 => Self::Takeoff,
+            2 => Self::GoToPreset,
+            3 => Self::WaitForPad,
+            4 => Self::Track,
+            5 => Self::Descend,
+            6 => Self::Land,
+            7 => Self::Landed,
+            8 => Self::Lost,
+            9 => Self::Abort,
+            10 => Self::SafeLand,
+            _ => return None,
+        })
+    }
+}
+
+/// A fixed-capacity UTF-8 text field (reasons, names), zero-padded.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("landing::Text/v1")]
+pub struct Text {
+    /// Used bytes.
+    pub len: u32,
+    /// The bytes; only `..len` are meaningful.
+    pub bytes: [u8; TEXT_LEN],
+}
+
+impl Default for Text {
+    fn default() -> Self {
+        Self {
+            len: 0,
+            bytes: [0; TEXT_LEN],
+        }
+    }
+}
+
+impl Text {
+    /// Copies `s`, cut at a character boundary to fit.
+    pub fn new(s: &str) -> Self {
+        let mut end = s.len().min(TEXT_LEN);
+        while !s.is_char_boundary(end) {
+            end -= 1;
+        }
+        let mut t = Self::default();
+        t.bytes[..end].copy_from_slice(&s.as_bytes()[..end]);
+        t.len = end as u32;
+        t
+    }
+
+    /// The text; invalid UTF-8 from a misbehaving writer reads as an empty string.
+    pub fn as_str(&self) -> &str {
+        let n = (self.len as usize).min(TEXT_LEN);
+        std::str::from_utf8(&self.bytes[..n]).unwrap_or("")
+    }
+}
+
+/// The mission state machine's status, published on every transition and periodically.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::FsmStatus/v1")]
+pub struct FsmStatus {
+    /// Sequence, time, stage stamps.
+    pub msg: Header,
+    /// Raw [`MissionState`], now.
+    pub state: u32,
+    /// Raw [`MissionState`] before the last transition.
+    pub previous: u32,
+    /// When the last transition happened (monotonic ns).
+    pub since_ns: u64,
+    /// Why the last transition happened.
+    pub reason: Text,
+    /// 1 while the pad filter holds a valid estimate.
+    pub pad_valid: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+    /// Estimated pad position, world, m.
+    pub pad_position: [f64; 3],
+    /// Estimated pad velocity, world, m/s.
+    pub pad_velocity: [f64; 3],
+}
+
+/// What a safety command orders.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SafetyAction {
+    /// Nothing (a cleared command).
+    None = 0,
+    /// Hold position.
+    Hold = 1,
+    /// Land where the vehicle is, now.
+    SafeLand = 2,
+    /// Stop the mission and land (operator abort).
+    Abort = 3,
+}
+
+impl SafetyAction {
+    /// Decodes a raw action; unknown values read as [`SafetyAction::SafeLand`], the safe
+    /// reading of a command nobody can parse.
+    pub fn from_raw(raw: u32) -> Self {
+        match raw {
+            0 => Self::None,
+            1 => Self::Hold,
+            3 => Self::Abort,
+            _ => Self::SafeLand,
+        }
+    }
+}
+
+/// An order from the watchdog or an operator, executed at once by px4-link and fsm.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::SafetyCommand/v1")]
+pub struct SafetyCommand {
+    /// Sequence, issue time, stage stamps.
+    pub msg: Header,
+    /// Raw [`SafetyAction`].
+    pub action: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+    /// Who ordered it ("watchdog", "operator").
+    pub source: Text,
+    /// Why.
+    pub reason: Text,
+}
+
+/// Health of one supervised process as the watchdog sees it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::ProcessHealth/v1")]
+pub struct ProcessHealth {
+    /// Process name.
+    pub name: Text,
+    /// 1 while its heartbeat arrives within its deadline.
+    pub alive: u32,
+    /// Heartbeat deadlines missed since start.
+    pub missed_deadlines: u32,
+    /// When its last heartbeat arrived (monotonic ns).
+    pub last_heartbeat_ns: u64,
+    /// When its newest output was published (monotonic ns); 0 when it has none.
+    pub last_output_ns: u64,
+}
+
+/// The watchdog's view of the whole stack.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::WatchdogView/v1")]
+pub struct WatchdogView {
+    /// Sequence, time, stage stamps.
+    pub msg: Header,
+    /// Number of valid entries in `processes`.
+    pub count: u32,
+    /// 1 once the watchdog has ordered a safe landing.
+    pub safe_land_ordered: u32,
+    /// Per-process health.
+    pub processes: [ProcessHealth; MAX_WATCHED],
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn header_keeps_origin_and_newest_stages_when_full() {
+        let mut h = Header::captured_at(5);
+        for i in 0..(MAX_STAGES as u64 + 3) {
+            h.push_stage(Stage::Bench, i, i + 1);
+        }
+        assert_eq!(h.stages().len(), MAX_STAGES);
+        assert_eq!(h.stages()[0].enter_ns, 0);
+        assert_eq!(h.stages()[MAX_STAGES - 1].enter_ns, MAX_STAGES as u64 + 2);
+        assert_eq!(h.capture_ns, 5);
+    }
+
+    #[test]
+    fn frame_header_rejects_inconsistent_geometry() {
+        let mut h = CameraFrameHeader {
+            width: 640,
+            height: 480,
+            stride: 640,
+            encoding: PixelEncoding::Mono8 as u32,
+            ..Default::default()
+        };
+        assert_eq!(h.expected_len(), Some(640 * 480));
+        h.encoding = PixelEncoding::Bgr8 as u32;
+        assert_eq!(h.expected_len(), None, "stride shorter than a BGR row");
+        h.encoding = 99;
+        assert_eq!(h.expected_len(), None, "unknown encoding");
+    }
+
+    #[test]
+    fn text_cuts_at_a_character_boundary() {
+        let long = "é".repeat(TEXT_LEN);
+        let t = Text::new(&long);
+        assert!(t.as_str().len() <= TEXT_LEN);
+        assert!(t.as_str().chars().all(|c| c == 'é'));
+    }
+
+    #[test]
+    fn unknown_raw_values_decode_to_safe_defaults() {
+        assert_eq!(SafetyAction::from_raw(77), SafetyAction::SafeLand);
+        assert_eq!(GoalMode::from_raw(77), GoalMode::Stop);
+        assert_eq!(CellState::from_raw(77), CellState::Unknown);
+        assert_eq!(FlightMode::from_raw(77), FlightMode::Unknown);
+        assert_eq!(PixelEncoding::from_raw(77), None);
+    }
+}

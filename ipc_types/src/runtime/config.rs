@@ -1,0 +1,231 @@
+//! TOML configuration loading with validation.
+//!
+//! A user mistake must produce one line that names the file, the key and what is allowed,
+//! so config types derive `Deserialize` with `deny_unknown_fields` and implement
+//! [`Validate`] for ranges and cross-field rules; [`load`] turns every failure into a
+//! [`ConfigError`] whose `Display` is that one line.
+
+use std::path::{Path, PathBuf};
+
+use serde::de::DeserializeOwned;
+
+/// A config value that parsed but is not allowed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Invalid {
+    /// Dotted key path, e.g. `ipc.heartbeat_deadline_ms`.
+    pub key: String,
+    /// What is wrong and what is allowed.
+    pub message: String,
+}
+
+impl Invalid {
+    /// An invalid value at `key`.
+    pub fn new(key: impl Into<String>, message: impl Into<String>) -> Self {
+        Self {
+            key: key.into(),
+            message: message.into(),
+        }
+    }
+
+    /// Puts this error under a parent section: `key` becomes `section.key`.
+    pub fn under(mut self, section: &str) -> Self {
+        self.key = format!("{section}.{}", self.key);
+        self
+    }
+}
+
+/// Cross-field and range checks that serde cannot express.
+pub trait Validate {
+    /// Ok when every value is allowed.
+    fn validate(&self) -> Result<(), Invalid>;
+}
+
+/// Checks `lo <= value <= hi` (and finiteness for floats).
+pub fn check_range<T>(key: &str, value: T, lo: T, hi: T) -> Result<(), Invalid>
+where
+    T: PartialOrd + std::fmt::Display + Copy,
+{
+    // `!(a <= b)` rather than `a > b` so that NaN fails too.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    if !(lo <= value && value <= hi) {
+        return Err(Invalid::new(
+            key,
+            format!("{value} is out of range (allowed: {lo} to {hi})"),
+        ));
+    }
+    Ok(())
+}
+
+/// Why a configuration could not be used. `Display` is one line.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("config {path}: cannot read: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML.
+    #[error("config {path}: line {line}: {message}")]
+    Syntax {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line of the error.
+        line: usize,
+        /// What the parser said.
+        message: String,
+    },
+    /// A key is unknown, missing or of the wrong type.
+    #[error("config {path}: key `{key}`: {message}")]
+    Key {
+        /// The file.
+        path: PathBuf,
+        /// Dotted key path.
+        key: String,
+        /// What is wrong and what is allowed.
+        message: String,
+    },
+    /// A value parsed but is not allowed.
+    #[error("config {path}: key `{key}`: {message}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// Dotted key path.
+        key: String,
+        /// What is wrong and what is allowed.
+        message: String,
+    },
+}
+
+/// Reads, parses and validates a whole config file.
+pub fn load<T: DeserializeOwned + Validate>(path: &Path) -> Result<T, ConfigError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse(&text, path)
+}
+
+/// Parses and validates config text; `origin` names it in errors.
+pub fn parse<T: DeserializeOwned + Validate>(text: &str, origin: &Path) -> Result<T, ConfigError> {
+    let de = toml::Deserializer::parse(text).map_err(|e| syntax_error(text, origin, &e))?;
+    let value: T = serde_path_to_error::deserialize(de).map_err(|e| {
+        let key = e.path().to_string();
+        let inner = e.into_inner();
+        // Unknown-field errors point at the parent; a value that failed to parse where the
+        // syntax was fine is still a key problem.
+        ConfigError::Key {
+            path: origin.to_path_buf(),
+            key: if key == "." {
+                "(top level)".into()
+            } else {
+                key
+            },
+            message: one_line(inner.message()),
+        }
+    })?;
+    value.validate().map_err(|inv| ConfigError::Invalid {
+        path: origin.to_path_buf(),
+        key: inv.key,
+        message: inv.message,
+    })?;
+    Ok(value)
+}
+
+fn syntax_error(text: &str, origin: &Path, e: &toml::de::Error) -> ConfigError {
+    let line = e
+        .span()
+        .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1)
+        .unwrap_or(0);
+    ConfigError::Syntax {
+        path: origin.to_path_buf(),
+        line,
+        message: one_line(e.message()),
+    }
+}
+
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde::Deserialize;
+
+    #[derive(Debug, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct Inner {
+        rate_hz: f64,
+    }
+
+    #[derive(Debug, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct Cfg {
+        camera: Inner,
+    }
+
+    impl Validate for Cfg {
+        fn validate(&self) -> Result<(), Invalid> {
+            check_range("rate_hz", self.camera.rate_hz, 1.0, 120.0).map_err(|e| e.under("camera"))
+        }
+    }
+
+    fn err(text: &str) -> String {
+        parse::<Cfg>(text, Path::new("cam.toml"))
+            .map(|_| ())
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default()
+    }
+
+    #[test]
+    fn a_wrong_key_names_the_file_the_key_and_the_allowed_keys() {
+        let e = err("[camera]\nrate_hz = 30.0\nfps = 3\n");
+        assert!(e.starts_with("config cam.toml: key `camera"), "{e}");
+        assert!(e.contains("fps") && e.contains("rate_hz"), "{e}");
+        assert!(!e.contains('\n'));
+    }
+
+    #[test]
+    fn a_wrong_type_names_the_key_and_the_expected_type() {
+        let e = err("[camera]\nrate_hz = \"fast\"\n");
+        assert!(e.contains("key `camera.rate_hz`"), "{e}");
+        assert!(e.contains("expected"), "{e}");
+        assert!(!e.contains('\n'));
+    }
+
+    #[test]
+    fn an_out_of_range_value_names_the_range() {
+        let e = err("[camera]\nrate_hz = 500.0\n");
+        assert_eq!(
+            e,
+            "config cam.toml: key `camera.rate_hz`: 500 is out of range (allowed: 1 to 120)"
+        );
+    }
+
+    #[test]
+    fn nan_is_out_of_every_range() {
+        assert!(check_range("x", f64::NAN, 0.0, 1.0).is_err());
+    }
+
+    #[test]
+    fn a_syntax_error_names_the_line() {
+        let e = err("[camera]\nrate_hz = = 3\n");
+        assert!(e.starts_with("config cam.toml: line 2:"), "{e}");
+    }
+
+    #[test]
+    fn a_missing_file_is_a_read_error() {
+        let e = load::<Cfg>(Path::new("/nonexistent/cam.toml"))
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            e.starts_with("config /nonexistent/cam.toml: cannot read"),
+            "{e}"
+        );
+    }
+}

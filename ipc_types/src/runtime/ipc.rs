@@ -1,0 +1,840 @@
+//! iceoryx2 binding: node set-up, typed ports, heartbeats and the wait loop.
+//!
+//! Every topic is a publish-subscribe service with a [`MessageHeader`] user header, paired
+//! with an event service of the same name: publishers notify after each send, subscribers
+//! sleep in a wait set on the listener. Subscribers keep a short buffer with safe overflow,
+//! so a consumer that lags loses the oldest samples instead of reading stale data late.
+
+use std::cell::Cell;
+use std::fmt::Debug;
+use std::time::Duration;
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::{Notifier, NotifierNotifyError};
+use iceoryx2::port::publisher::Publisher as IoxPublisher;
+use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::sample::Sample;
+use iceoryx2::sample_mut::SampleMut;
+use iceoryx2::sample_mut_uninit::SampleMutUninit;
+use iceoryx2::waitset::WaitSetRunResult;
+
+use crate::msg::{CameraFrameHeader, DepthFrameHeader, Header, OccupancyMapHeader};
+
+/// The iceoryx2 service flavour used between processes.
+pub type Svc = ipc::Service;
+
+/// Environment variable holding the per-run iceoryx2 prefix.
+pub const PREFIX_ENV: &str = "LANDING_IPC_PREFIX";
+/// Prefix used when neither flag nor environment sets one.
+pub const DEFAULT_PREFIX: &str = "landing_";
+
+/// How many samples a subscriber buffers before the oldest is overwritten.
+const SUBSCRIBER_BUFFER: usize = 4;
+/// How many samples a subscriber may hold at once.
+const MAX_BORROWED: usize = 2;
+/// Processes that may subscribe to one topic.
+const MAX_SUBSCRIBERS: usize = 8;
+/// Processes that may publish one topic (a restarted process briefly overlaps its ghost).
+const MAX_PUBLISHERS: usize = 4;
+
+/// Errors of the IPC layer. Each names the service it concerns.
+#[derive(Debug, thiserror::Error)]
+pub enum IpcError {
+    /// The prefix is not a usable file-name fragment.
+    #[error(
+        "iceoryx2 prefix `{0}` is not allowed (allowed: 1 to 32 characters of A-Z a-z 0-9 _ - .)"
+    )]
+    BadPrefix(String),
+    /// The node could not be created.
+    #[error("cannot create iceoryx2 node `{name}`: {reason}")]
+    Node {
+        /// Node name.
+        name: String,
+        /// What iceoryx2 said.
+        reason: String,
+    },
+    /// A service or port could not be opened or created.
+    #[error("iceoryx2 service `{service}`: {reason}")]
+    Service {
+        /// Service name.
+        service: String,
+        /// What iceoryx2 said.
+        reason: String,
+    },
+    /// Sending, loaning or receiving failed.
+    #[error("iceoryx2 `{service}`: {op} failed: {reason}")]
+    Port {
+        /// Service name.
+        service: String,
+        /// The operation.
+        op: &'static str,
+        /// What iceoryx2 said.
+        reason: String,
+    },
+    /// The wait set failed.
+    #[error("wait loop: {0}")]
+    WaitSet(String),
+}
+
+fn service_err(service: &str, e: impl Debug) -> IpcError {
+    IpcError::Service {
+        service: service.to_string(),
+        reason: format!("{e:?}"),
+    }
+}
+
+fn port_err(service: &str, op: &'static str, e: impl Debug) -> IpcError {
+    IpcError::Port {
+        service: service.to_string(),
+        op,
+        reason: format!("{e:?}"),
+    }
+}
+
+/// The iceoryx2 prefix that isolates one stack (or one test) from every other on the host.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct IpcPrefix(String);
+
+impl IpcPrefix {
+    /// Checks a prefix: 1 to 32 characters from `[A-Za-z0-9_.-]`.
+    pub fn new(s: &str) -> Result<Self, IpcError> {
+        let ok = !s.is_empty()
+            && s.len() <= 32
+            && s.bytes()
+                .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-' || b == b'.');
+        if ok {
+            Ok(Self(s.to_string()))
+        } else {
+            Err(IpcError::BadPrefix(s.to_string()))
+        }
+    }
+
+    /// The flag if given, else `LANDING_IPC_PREFIX`, else [`DEFAULT_PREFIX`].
+    pub fn from_flag_or_env(flag: Option<&str>) -> Result<Self, IpcError> {
+        match flag {
+            Some(f) => Self::new(f),
+            None => match std::env::var(PREFIX_ENV) {
+                Ok(v) => Self::new(&v),
+                Err(_) => Self::new(DEFAULT_PREFIX),
+            },
+        }
+    }
+
+    /// A fresh prefix for one test or benchmark run: unique per process and call.
+    pub fn unique(tag: &str) -> Self {
+        use std::sync::atomic::{AtomicU32, Ordering};
+        static COUNTER: AtomicU32 = AtomicU32::new(0);
+        let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+        let tag: String = tag
+            .chars()
+            .filter(|c| c.is_ascii_alphanumeric())
+            .take(10)
+            .collect();
+        Self(format!("lt_{tag}_{}_{n}_", std::process::id()))
+    }
+
+    /// The prefix text.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+/// Access to the common header of any topic's user header.
+pub trait MessageHeader: Debug + ZeroCopySend + Default + Copy + 'static {
+    /// The common header.
+    fn msg(&self) -> &Header;
+    /// The common header, mutable.
+    fn msg_mut(&mut self) -> &mut Header;
+}
+
+macro_rules! impl_message_header {
+    ($($t:ty),*) => {$(
+        impl MessageHeader for $t {
+            fn msg(&self) -> &Header { &self.msg }
+            fn msg_mut(&mut self) -> &mut Header { &mut self.msg }
+        }
+    )*};
+}
+
+impl MessageHeader for Header {
+    fn msg(&self) -> &Header {
+        self
+    }
+    fn msg_mut(&mut self) -> &mut Header {
+        self
+    }
+}
+
+impl_message_header!(CameraFrameHeader, DepthFrameHeader, OccupancyMapHeader);
+
+/// A process's connection to iceoryx2: one node, named after the process.
+pub struct Ipc {
+    node: Node<Svc>,
+    process: String,
+}
+
+impl Debug for Ipc {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Ipc")
+            .field("process", &self.process)
+            .finish()
+    }
+}
+
+impl Ipc {
+    /// Creates the node of `process` under `prefix`, cleaning up what dead nodes of earlier
+    /// runs left behind (systemd restarts processes; stale resources must not block them).
+    pub fn open(process: &str, prefix: &IpcPrefix) -> Result<Self, IpcError> {
+        let mut config = Config::default();
+        config.global.prefix = FileName::new(prefix.as_str().as_bytes())
+            .map_err(|_| IpcError::BadPrefix(prefix.as_str().to_string()))?;
+        let name = NodeName::new(process).map_err(|e| IpcError::Node {
+            name: process.to_string(),
+            reason: format!("{e:?}"),
+        })?;
+        let node = NodeBuilder::new()
+            .name(&name)
+            .config(&config)
+            .create::<Svc>()
+            .map_err(|e| IpcError::Node {
+                name: process.to_string(),
+                reason: format!("{e:?}"),
+            })?;
+        let cleaned = node.try_cleanup_dead_nodes();
+        if cleaned.cleanups > 0 {
+            tracing::info!(
+                cleaned = cleaned.cleanups,
+                "removed stale iceoryx2 resources of dead nodes"
+            );
+        }
+        Ok(Self {
+            node,
+            process: process.to_string(),
+        })
+    }
+
+    /// The iceoryx2 node (for node listing and dead-node detection).
+    pub fn node(&self) -> &Node<Svc> {
+        &self.node
+    }
+
+    /// The process name this node was created with.
+    pub fn process(&self) -> &str {
+        &self.process
+    }
+
+    fn service_name(service: &str) -> Result<ServiceName, IpcError> {
+        ServiceName::new(service).map_err(|e| service_err(service, e))
+    }
+
+    fn event_service(
+        &self,
+        service: &str,
+    ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, IpcError> {
+        self.node
+            .service_builder(&Self::service_name(service)?)
+            .event()
+            .max_notifiers(MAX_PUBLISHERS)
+            .max_listeners(MAX_SUBSCRIBERS)
+            .open_or_create()
+            .map_err(|e| service_err(service, e))
+    }
+
+    /// A publisher of fixed-size messages `T` on `service`.
+    pub fn publisher<T>(&self, service: &str) -> Result<Publisher<T>, IpcError>
+    where
+        T: Debug + ZeroCopySend + Copy + 'static,
+    {
+        let factory = self
+            .node
+            .service_builder(&Self::service_name(service)?)
+            .publish_subscribe::<T>()
+            .user_header::<Header>()
+            .enable_safe_overflow(true)
+            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+            .subscriber_max_borrowed_samples(MAX_BORROWED)
+            .history_size(1)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_publishers(MAX_PUBLISHERS)
+            .open_or_create()
+            .map_err(|e| service_err(service, e))?;
+        let port = factory
+            .publisher_builder()
+            .create()
+            .map_err(|e| service_err(service, e))?;
+        let notifier = self
+            .event_service(service)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| service_err(service, e))?;
+        Ok(Publisher {
+            port,
+            notifier,
+            service: service.to_string(),
+            seq: 0,
+        })
+    }
+
+    /// A subscriber of fixed-size messages `T` on `service`.
+    pub fn subscriber<T>(&self, service: &str) -> Result<Subscriber<T>, IpcError>
+    where
+        T: Debug + ZeroCopySend + Copy + 'static,
+    {
+        let factory = self
+            .node
+            .service_builder(&Self::service_name(service)?)
+            .publish_subscribe::<T>()
+            .user_header::<Header>()
+            .enable_safe_overflow(true)
+            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+            .subscriber_max_borrowed_samples(MAX_BORROWED)
+            .history_size(1)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_publishers(MAX_PUBLISHERS)
+            .open_or_create()
+            .map_err(|e| service_err(service, e))?;
+        let port = factory
+            .subscriber_builder()
+            .buffer_size(SUBSCRIBER_BUFFER)
+            .create()
+            .map_err(|e| service_err(service, e))?;
+        let listener = self
+            .event_service(service)?
+            .listener_builder()
+            .create()
+            .map_err(|e| service_err(service, e))?;
+        Ok(Subscriber {
+            port,
+            listener,
+            service: service.to_string(),
+            last_seq: Cell::new(0),
+            gaps: Cell::new(0),
+        })
+    }
+
+    /// A publisher of variable-length `[T]` payloads (frames, maps) with header `H`.
+    /// `max_len` elements is the largest payload it will loan.
+    pub fn slice_publisher<T, H>(
+        &self,
+        service: &str,
+        max_len: usize,
+    ) -> Result<SlicePublisher<T, H>, IpcError>
+    where
+        T: Debug + ZeroCopySend + Copy + 'static,
+        H: MessageHeader,
+    {
+        let factory = self
+            .node
+            .service_builder(&Self::service_name(service)?)
+            .publish_subscribe::<[T]>()
+            .user_header::<H>()
+            .enable_safe_overflow(true)
+            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+            .subscriber_max_borrowed_samples(MAX_BORROWED)
+            .history_size(0)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_publishers(MAX_PUBLISHERS)
+            .open_or_create()
+            .map_err(|e| service_err(service, e))?;
+        let port = factory
+            .publisher_builder()
+            .initial_max_slice_len(max_len)
+            .allocation_strategy(AllocationStrategy::Static)
+            .create()
+            .map_err(|e| service_err(service, e))?;
+        let notifier = self
+            .event_service(service)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| service_err(service, e))?;
+        Ok(SlicePublisher {
+            port,
+            notifier,
+            service: service.to_string(),
+            seq: 0,
+            max_len,
+        })
+    }
+
+    /// A subscriber of variable-length `[T]` payloads with header `H`.
+    pub fn slice_subscriber<T, H>(&self, service: &str) -> Result<SliceSubscriber<T, H>, IpcError>
+    where
+        T: Debug + ZeroCopySend + Copy + 'static,
+        H: MessageHeader,
+    {
+        let factory = self
+            .node
+            .service_builder(&Self::service_name(service)?)
+            .publish_subscribe::<[T]>()
+            .user_header::<H>()
+            .enable_safe_overflow(true)
+            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+            .subscriber_max_borrowed_samples(MAX_BORROWED)
+            .history_size(0)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_publishers(MAX_PUBLISHERS)
+            .open_or_create()
+            .map_err(|e| service_err(service, e))?;
+        let port = factory
+            .subscriber_builder()
+            .buffer_size(SUBSCRIBER_BUFFER)
+            .create()
+            .map_err(|e| service_err(service, e))?;
+        let listener = self
+            .event_service(service)?
+            .listener_builder()
+            .create()
+            .map_err(|e| service_err(service, e))?;
+        Ok(SliceSubscriber {
+            port,
+            listener,
+            service: service.to_string(),
+            last_seq: Cell::new(0),
+            gaps: Cell::new(0),
+        })
+    }
+
+    fn heartbeat_service(
+        &self,
+        process: &str,
+        deadline: Duration,
+    ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, IpcError> {
+        let name = crate::services::heartbeat(process);
+        self.node
+            .service_builder(&Self::service_name(&name)?)
+            .event()
+            .deadline(deadline)
+            .max_notifiers(MAX_PUBLISHERS)
+            .max_listeners(MAX_SUBSCRIBERS)
+            .open_or_create()
+            .map_err(|e| service_err(&name, e))
+    }
+
+    /// This process's heartbeat: an event with a deadline that the watchdog watches.
+    /// Beat it at least once per `deadline`, from the loop that does the work, so that a
+    /// hung loop misses it.
+    pub fn heartbeat(&self, deadline: Duration) -> Result<Heartbeat, IpcError> {
+        let notifier = self
+            .heartbeat_service(&self.process, deadline)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| service_err(&crate::services::heartbeat(&self.process), e))?;
+        Ok(Heartbeat {
+            notifier,
+            missed: 0,
+        })
+    }
+
+    /// A listener on `process`'s heartbeat, for a supervisor; attach it to the wait loop as
+    /// a deadline to learn when the process hangs.
+    pub fn heartbeat_listener(
+        &self,
+        process: &str,
+        deadline: Duration,
+    ) -> Result<Listener<Svc>, IpcError> {
+        self.heartbeat_service(process, deadline)?
+            .listener_builder()
+            .create()
+            .map_err(|e| service_err(&crate::services::heartbeat(process), e))
+    }
+}
+
+/// Publishes fixed-size messages and wakes subscribers.
+pub struct Publisher<T: Debug + ZeroCopySend + Copy + 'static> {
+    port: IoxPublisher<Svc, T, Header>,
+    notifier: Notifier<Svc>,
+    service: String,
+    seq: u64,
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static> Publisher<T> {
+    /// Writes `value` into a loaned shared-memory sample, stamps `header` with the next
+    /// sequence number, sends it and notifies subscribers. Returns the sequence number.
+    pub fn send(&mut self, header: Header, value: &T) -> Result<u64, IpcError> {
+        let mut sample = self
+            .port
+            .loan_uninit()
+            .map_err(|e| port_err(&self.service, "loan", e))?;
+        self.seq += 1;
+        *sample.user_header_mut() = Header {
+            seq: self.seq,
+            ..header
+        };
+        let sample = sample.write_payload(*value);
+        sample
+            .send()
+            .map_err(|e| port_err(&self.service, "send", e))?;
+        notify(&self.notifier, &self.service)?;
+        Ok(self.seq)
+    }
+
+    /// The service this publisher writes.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+}
+
+/// Publishes variable-length payloads, written in place in shared memory.
+pub struct SlicePublisher<T: Debug + ZeroCopySend + Copy + 'static, H: MessageHeader> {
+    port: IoxPublisher<Svc, [T], H>,
+    notifier: Notifier<Svc>,
+    service: String,
+    seq: u64,
+    max_len: usize,
+}
+
+/// A loaned, not yet written payload of `len` elements in shared memory.
+pub type SliceLoan<T, H> = SampleMutUninit<Svc, [core::mem::MaybeUninit<T>], H>;
+/// A loaned, written payload in shared memory, ready to send.
+pub type SliceSample<T, H> = SampleMut<Svc, [T], H>;
+
+impl<T: Debug + ZeroCopySend + Copy + 'static, H: MessageHeader> SlicePublisher<T, H> {
+    /// The largest payload this publisher can loan, in elements.
+    pub fn max_len(&self) -> usize {
+        self.max_len
+    }
+
+    /// Loans `len` uninitialized elements of shared memory; the producer writes its data
+    /// straight into them (a camera driver, a renderer), so nothing is copied afterwards.
+    pub fn loan_uninit(&mut self, len: usize) -> Result<SliceLoan<T, H>, IpcError> {
+        self.port
+            .loan_slice_uninit(len)
+            .map_err(|e| port_err(&self.service, "loan", e))
+    }
+
+    /// Sends a written sample: stamps the next sequence number into its header, then
+    /// notifies subscribers. Returns the sequence number.
+    pub fn send(&mut self, mut sample: SliceSample<T, H>) -> Result<u64, IpcError> {
+        self.seq += 1;
+        sample.user_header_mut().msg_mut().seq = self.seq;
+        sample
+            .send()
+            .map_err(|e| port_err(&self.service, "send", e))?;
+        notify(&self.notifier, &self.service)?;
+        Ok(self.seq)
+    }
+
+    /// The service this publisher writes.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+}
+
+fn notify(notifier: &Notifier<Svc>, service: &str) -> Result<(), IpcError> {
+    match notifier.notify() {
+        Ok(_) | Err(NotifierNotifyError::MissedDeadline) => Ok(()),
+        Err(e) => Err(port_err(service, "notify", e)),
+    }
+}
+
+/// Receives fixed-size messages.
+pub struct Subscriber<T: Debug + ZeroCopySend + Copy + 'static> {
+    port: IoxSubscriber<Svc, T, Header>,
+    listener: Listener<Svc>,
+    service: String,
+    last_seq: Cell<u64>,
+    gaps: Cell<u64>,
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static> Subscriber<T> {
+    /// The oldest unread sample, read in place from shared memory, or `None`.
+    pub fn receive(&self) -> Result<Option<Sample<Svc, T, Header>>, IpcError> {
+        let s = self
+            .port
+            .receive()
+            .map_err(|e| port_err(&self.service, "receive", e))?;
+        if let Some(s) = &s {
+            track_seq(&self.last_seq, &self.gaps, s.user_header().seq);
+        }
+        Ok(s)
+    }
+
+    /// The newest unread sample, dropping older ones: what a controller wants.
+    pub fn latest(&self) -> Result<Option<Sample<Svc, T, Header>>, IpcError> {
+        let mut newest = None;
+        while let Some(s) = self.receive()? {
+            newest = Some(s);
+        }
+        Ok(newest)
+    }
+
+    /// The event listener to wait on.
+    pub fn listener(&self) -> &Listener<Svc> {
+        &self.listener
+    }
+
+    /// Messages lost to overflow or a publisher restart, counted from sequence gaps.
+    pub fn gaps(&self) -> u64 {
+        self.gaps.get()
+    }
+}
+
+/// Receives variable-length payloads, read in place from shared memory.
+pub struct SliceSubscriber<T: Debug + ZeroCopySend + Copy + 'static, H: MessageHeader> {
+    port: IoxSubscriber<Svc, [T], H>,
+    listener: Listener<Svc>,
+    service: String,
+    last_seq: Cell<u64>,
+    gaps: Cell<u64>,
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static, H: MessageHeader> SliceSubscriber<T, H> {
+    /// The oldest unread sample, or `None`. The payload is the publisher's memory: no copy.
+    pub fn receive(&self) -> Result<Option<Sample<Svc, [T], H>>, IpcError> {
+        let s = self
+            .port
+            .receive()
+            .map_err(|e| port_err(&self.service, "receive", e))?;
+        if let Some(s) = &s {
+            track_seq(&self.last_seq, &self.gaps, s.user_header().msg().seq);
+        }
+        Ok(s)
+    }
+
+    /// The newest unread sample, dropping (and counting) older ones, so that a slow
+    /// consumer always works on the freshest frame.
+    pub fn latest(&self) -> Result<Option<Sample<Svc, [T], H>>, IpcError> {
+        let mut newest = None;
+        while let Some(s) = self.receive()? {
+            newest = Some(s);
+        }
+        Ok(newest)
+    }
+
+    /// The event listener to wait on.
+    pub fn listener(&self) -> &Listener<Svc> {
+        &self.listener
+    }
+
+    /// Samples lost to overflow or a publisher restart, counted from sequence gaps.
+    pub fn gaps(&self) -> u64 {
+        self.gaps.get()
+    }
+}
+
+fn track_seq(last: &Cell<u64>, gaps: &Cell<u64>, seq: u64) {
+    let l = last.get();
+    if l != 0 && seq > l + 1 {
+        gaps.set(gaps.get() + seq - l - 1);
+    }
+    last.set(seq);
+}
+
+/// This process's heartbeat notifier.
+pub struct Heartbeat {
+    notifier: Notifier<Svc>,
+    missed: u64,
+}
+
+impl Heartbeat {
+    /// Signals "alive". A beat later than the deadline still goes out; it is counted.
+    pub fn beat(&mut self) -> Result<(), IpcError> {
+        match self.notifier.notify() {
+            Ok(_) => Ok(()),
+            Err(NotifierNotifyError::MissedDeadline) => {
+                self.missed += 1;
+                Ok(())
+            }
+            Err(e) => Err(port_err("heartbeat", "notify", e)),
+        }
+    }
+
+    /// Beats that came later than the deadline.
+    pub fn missed(&self) -> u64 {
+        self.missed
+    }
+}
+
+/// Why the wait loop woke the caller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wake {
+    /// `listeners[i]` was notified (new data); its events are already drained.
+    Data(usize),
+    /// `deadlines[i]` saw no event within its deadline.
+    DeadlineMissed(usize),
+    /// The periodic tick.
+    Tick,
+}
+
+/// Why the wait loop returned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LoopExit {
+    /// SIGTERM (systemd stop).
+    Terminate,
+    /// SIGINT (Ctrl-C).
+    Interrupt,
+    /// The callback asked to stop.
+    Stopped,
+}
+
+/// Sleeps until data arrives on one of `listeners`, a deadline in `deadlines` passes, or the
+/// `tick` interval elapses, and calls `on_wake` for each. Returns cleanly on SIGINT/SIGTERM
+/// or when `on_wake` returns `false`.
+pub fn run_wait_loop(
+    listeners: &[&Listener<Svc>],
+    deadlines: &[(&Listener<Svc>, Duration)],
+    tick: Option<Duration>,
+    mut on_wake: impl FnMut(Wake) -> bool,
+) -> Result<LoopExit, IpcError> {
+    let waitset = WaitSetBuilder::new()
+        .create::<Svc>()
+        .map_err(|e| IpcError::WaitSet(format!("{e:?}")))?;
+    let mut data_guards = Vec::with_capacity(listeners.len());
+    for l in listeners {
+        data_guards.push(
+            waitset
+                .attach_notification(*l)
+                .map_err(|e| IpcError::WaitSet(format!("{e:?}")))?,
+        );
+    }
+    let mut deadline_guards = Vec::with_capacity(deadlines.len());
+    for (l, d) in deadlines {
+        deadline_guards.push(
+            waitset
+                .attach_deadline(*l, *d)
+                .map_err(|e| IpcError::WaitSet(format!("{e:?}")))?,
+        );
+    }
+    let tick_guard = match tick {
+        Some(t) => Some(
+            waitset
+                .attach_interval(t)
+                .map_err(|e| IpcError::WaitSet(format!("{e:?}")))?,
+        ),
+        None => None,
+    };
+
+    let mut stopped = false;
+    let result = waitset.wait_and_process(|id| {
+        let mut keep = true;
+        for (i, g) in data_guards.iter().enumerate() {
+            if id.has_event_from(g) {
+                // Drain the event counter so the wait set does not fire again for it.
+                let _ = listeners[i].try_wait(|_| {});
+                keep &= on_wake(Wake::Data(i));
+            }
+        }
+        for (i, g) in deadline_guards.iter().enumerate() {
+            if id.has_event_from(g) {
+                let _ = deadlines[i].0.try_wait(|_| {});
+            } else if id.has_missed_deadline(g) {
+                keep &= on_wake(Wake::DeadlineMissed(i));
+            }
+        }
+        if let Some(g) = &tick_guard
+            && id.has_event_from(g)
+        {
+            keep &= on_wake(Wake::Tick);
+        }
+        if keep {
+            CallbackProgression::Continue
+        } else {
+            stopped = true;
+            CallbackProgression::Stop
+        }
+    });
+    match result {
+        Ok(WaitSetRunResult::TerminationRequest) => Ok(LoopExit::Terminate),
+        Ok(WaitSetRunResult::Interrupt) => Ok(LoopExit::Interrupt),
+        Ok(_) => Ok(LoopExit::Stopped),
+        Err(e) if stopped => {
+            tracing::debug!(error = ?e, "wait set ended after stop");
+            Ok(LoopExit::Stopped)
+        }
+        Err(e) => Err(IpcError::WaitSet(format!("{e:?}"))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn prefixes_reject_path_characters() {
+        assert!(IpcPrefix::new("run_1-a.b").is_ok());
+        assert!(IpcPrefix::new("../x").is_err());
+        assert!(IpcPrefix::new("").is_err());
+        assert!(IpcPrefix::new(&"a".repeat(33)).is_err());
+        assert!(IpcPrefix::new(IpcPrefix::unique("some test!").as_str()).is_ok());
+    }
+
+    #[test]
+    fn sequence_gaps_are_counted() {
+        let (last, gaps) = (Cell::new(0), Cell::new(0));
+        for s in [1, 2, 5, 6, 9] {
+            track_seq(&last, &gaps, s);
+        }
+        assert_eq!(gaps.get(), 4);
+    }
+
+    #[test]
+    fn a_message_sent_in_one_node_arrives_in_another_with_its_header() {
+        let prefix = IpcPrefix::unique("pubsub");
+        let a = Ipc::open("a", &prefix).expect("node a");
+        let b = Ipc::open("b", &prefix).expect("node b");
+        let sub = b
+            .subscriber::<crate::msg::PlannerGoal>("t/goal")
+            .expect("subscriber");
+        let mut publ = a
+            .publisher::<crate::msg::PlannerGoal>("t/goal")
+            .expect("publisher");
+        let goal = crate::msg::PlannerGoal {
+            position: [1.0, 2.0, 3.0],
+            ..Default::default()
+        };
+        publ.send(Header::captured_at(42), &goal).expect("send");
+        publ.send(Header::captured_at(43), &goal).expect("send");
+        let s = sub.latest().expect("receive").expect("a sample");
+        assert_eq!(s.position, [1.0, 2.0, 3.0]);
+        assert_eq!(s.user_header().seq, 2);
+        assert_eq!(s.user_header().capture_ns, 43);
+    }
+
+    #[test]
+    fn two_prefixes_never_see_each_other() {
+        let a = Ipc::open("a", &IpcPrefix::unique("iso")).expect("node a");
+        let b = Ipc::open("b", &IpcPrefix::unique("iso")).expect("node b");
+        let sub = b.subscriber::<u64>("t/iso").expect("subscriber");
+        let mut publ = a.publisher::<u64>("t/iso").expect("publisher");
+        publ.send(Header::default(), &7).expect("send");
+        assert!(sub.receive().expect("receive").is_none());
+    }
+
+    #[test]
+    fn the_wait_loop_wakes_on_data_and_reports_a_missed_heartbeat() {
+        let prefix = IpcPrefix::unique("wait");
+        let a = Ipc::open("worker", &prefix).expect("node");
+        let w = Ipc::open("watcher", &prefix).expect("node");
+        let hb_listener = w
+            .heartbeat_listener("worker", Duration::from_millis(30))
+            .expect("hb listener");
+        let mut hb = a.heartbeat(Duration::from_millis(30)).expect("hb");
+        let sub = w.subscriber::<u64>("t/wait").expect("sub");
+        let mut publ = a.publisher::<u64>("t/wait").expect("pub");
+        hb.beat().expect("beat");
+        publ.send(Header::default(), &5).expect("send");
+        let mut got_data = false;
+        let mut missed = false;
+        let exit = run_wait_loop(
+            &[sub.listener()],
+            &[(&hb_listener, Duration::from_millis(30))],
+            Some(Duration::from_secs(2)),
+            |wake| {
+                match wake {
+                    Wake::Data(0) => {
+                        got_data = matches!(sub.receive(), Ok(Some(s)) if *s == 5);
+                    }
+                    Wake::DeadlineMissed(0) => missed = true,
+                    Wake::Tick => return false,
+                    _ => {}
+                }
+                !(got_data && missed)
+            },
+        )
+        .expect("loop");
+        assert_eq!(exit, LoopExit::Stopped);
+        assert!(got_data, "data wake-up");
+        assert!(missed, "the worker stopped beating, so its deadline passed");
+    }
+}

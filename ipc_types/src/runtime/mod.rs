@@ -1,0 +1,17 @@
+//! The runtime every process shares: iceoryx2 node and ports, heartbeats, the wait loop,
+//! the clock, configuration loading and logging.
+//!
+//! Process *libraries* never use this module: they take inputs and time as arguments. Only
+//! the thin `main.rs` of each process, and tools, bind those libraries to it.
+
+pub mod clock;
+pub mod config;
+pub mod ipc;
+pub mod logging;
+
+pub use clock::{Clock, MonotonicClock, SimClock, monotonic_ns};
+pub use config::{ConfigError, Invalid, Validate};
+pub use ipc::{
+    Heartbeat, Ipc, IpcError, IpcPrefix, LoopExit, MessageHeader, Publisher, SlicePublisher,
+    SliceSubscriber, Subscriber, Wake, run_wait_loop,
+};
