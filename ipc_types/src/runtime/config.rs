@@ -150,6 +150,50 @@ fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
+/// The `[ipc]` section every process reads: how it finds the others and how often it
+/// must say it is alive.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IpcConfig {
+    /// iceoryx2 prefix (the `--ipc-prefix` flag and `LANDING_IPC_PREFIX` override it).
+    pub prefix: String,
+    /// How often each process beats its heartbeat, ms.
+    pub heartbeat_period_ms: u64,
+    /// How long the watchdog waits for a beat before it calls a process hung, ms.
+    pub heartbeat_deadline_ms: u64,
+}
+
+impl Default for IpcConfig {
+    fn default() -> Self {
+        Self {
+            prefix: crate::runtime::ipc::DEFAULT_PREFIX.to_string(),
+            heartbeat_period_ms: 100,
+            heartbeat_deadline_ms: 500,
+        }
+    }
+}
+
+impl Validate for IpcConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        crate::runtime::ipc::IpcPrefix::new(&self.prefix).map_err(|_| {
+            Invalid::new(
+                "prefix",
+                format!(
+                    "`{}` is not allowed (allowed: 1 to 32 characters of A-Z a-z 0-9 _ - .)",
+                    self.prefix
+                ),
+            )
+        })?;
+        check_range("heartbeat_period_ms", self.heartbeat_period_ms, 10, 10_000)?;
+        check_range(
+            "heartbeat_deadline_ms",
+            self.heartbeat_deadline_ms,
+            2 * self.heartbeat_period_ms,
+            60_000,
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -20,6 +20,7 @@ use iceoryx2::sample_mut_uninit::SampleMutUninit;
 use iceoryx2::waitset::WaitSetRunResult;
 
 use crate::msg::{CameraFrameHeader, DepthFrameHeader, Header, OccupancyMapHeader};
+use crate::runtime::clock::monotonic_ns;
 
 /// The iceoryx2 service flavour used between processes.
 pub type Svc = ipc::Service;
@@ -643,6 +644,152 @@ impl Heartbeat {
     /// Beats that came later than the deadline.
     pub fn missed(&self) -> u64 {
         self.missed
+    }
+}
+
+/// Waits for a periodic stream (a camera, a depth sensor) with the lowest latency a
+/// consumer can get without burning a core.
+///
+/// Waking a sleeping process costs tens of microseconds on a virtual machine or a Jetson in
+/// a deep idle state, far more than iceoryx2's ~1 us transport. Sensor streams are periodic,
+/// so this waiter learns the period from arrivals, sleeps on the event until `guard` before
+/// the next sample is due, then polls for at most `guard + max_spin`, and falls back to
+/// sleeping on the event when the sample is late. At 30 Hz with a 200 us guard the spinning
+/// costs about 1% of one core.
+#[derive(Debug, Clone)]
+pub struct PeriodicWait {
+    guard_ns: u64,
+    max_spin_ns: u64,
+    period_ns: Option<u64>,
+    intervals: [u64; 8],
+    interval_count: usize,
+    last_arrival_ns: u64,
+    spin_hits: u64,
+    sleep_hits: u64,
+    slack_set: bool,
+}
+
+impl PeriodicWait {
+    /// A waiter that starts polling `guard` before the expected arrival and gives up
+    /// polling `max_spin` after it.
+    pub fn new(guard: Duration, max_spin: Duration) -> Self {
+        Self {
+            guard_ns: guard.as_nanos() as u64,
+            max_spin_ns: max_spin.as_nanos() as u64,
+            period_ns: None,
+            intervals: [0; 8],
+            interval_count: 0,
+            last_arrival_ns: 0,
+            spin_hits: 0,
+            sleep_hits: 0,
+            slack_set: false,
+        }
+    }
+
+    /// How many samples were caught while polling, and how many woke a sleeping wait:
+    /// a high second number means the stream is too irregular for the guard.
+    pub fn hits(&self) -> (u64, u64) {
+        (self.spin_hits, self.sleep_hits)
+    }
+
+    /// The learned period, once two samples have arrived.
+    pub fn period(&self) -> Option<Duration> {
+        self.period_ns.map(Duration::from_nanos)
+    }
+
+    /// Learns the period as the median of the last 8 intervals, ignoring bursts (samples
+    /// that queued up and were read back to back), so neither a burst nor a dropped sample
+    /// moves the estimate much.
+    fn on_arrival(&mut self, now: u64) {
+        const MIN_INTERVAL_NS: u64 = 100_000;
+        if self.last_arrival_ns != 0 {
+            let dt = now.saturating_sub(self.last_arrival_ns);
+            if (MIN_INTERVAL_NS..2_000_000_000).contains(&dt) {
+                let n = self.intervals.len();
+                self.intervals[self.interval_count % n] = dt;
+                self.interval_count += 1;
+                let mut recent = self.intervals;
+                let k = self.interval_count.min(n);
+                recent[..k].sort_unstable();
+                self.period_ns = Some(recent[k / 2]);
+            }
+        }
+        self.last_arrival_ns = now;
+    }
+
+    /// Returns the next value of `poll` (which receives from the subscriber that owns
+    /// `listener`), or `None` after `timeout`.
+    pub fn wait<T>(
+        &mut self,
+        listener: &Listener<Svc>,
+        timeout: Duration,
+        mut poll: impl FnMut() -> Option<T>,
+    ) -> Option<T> {
+        if !self.slack_set {
+            // The default 50 us timer slack would make every nap overshoot into the guard.
+            // SAFETY: PR_SET_TIMERSLACK takes an integer and affects only this thread.
+            unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong) };
+            self.slack_set = true;
+        }
+        let start = monotonic_ns();
+        let deadline = start.saturating_add(timeout.as_nanos() as u64);
+        let mut spinning = false;
+        loop {
+            if let Some(v) = poll() {
+                if spinning {
+                    self.spin_hits += 1;
+                } else {
+                    self.sleep_hits += 1;
+                }
+                self.on_arrival(monotonic_ns());
+                // Events that accumulated while polling must not wake the next wait.
+                let _ = listener.try_wait(|_| {});
+                return Some(v);
+            }
+            let now = monotonic_ns();
+            if now >= deadline {
+                return None;
+            }
+            let expected = self.period_ns.map(|p| self.last_arrival_ns + p);
+            match expected {
+                Some(exp) if now + self.guard_ns < exp => {
+                    spinning = false;
+                    wait_readable(listener, (exp - self.guard_ns - now).min(deadline - now));
+                }
+                Some(exp) if now < exp + self.max_spin_ns => {
+                    spinning = true;
+                    std::hint::spin_loop();
+                }
+                _ => {
+                    spinning = false;
+                    wait_readable(listener, (deadline - now).min(100_000_000));
+                }
+            }
+        }
+    }
+}
+
+/// Sleeps until `listener` has an event or `timeout_ns` passes, with the kernel timer's
+/// precision (iceoryx2's own `timed_wait` rounds short timeouts up to several ms), then
+/// drains the listener.
+fn wait_readable(listener: &Listener<Svc>, timeout_ns: u64) {
+    use iceoryx2::prelude::FileDescriptorBased;
+    // SAFETY: the descriptor is only passed to ppoll while `listener`, which owns it, is
+    // borrowed; it is not stored or closed.
+    let fd = unsafe { listener.file_descriptor().native_handle() };
+    let mut pfd = libc::pollfd {
+        fd,
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    let ts = libc::timespec {
+        tv_sec: (timeout_ns / 1_000_000_000) as libc::time_t,
+        tv_nsec: (timeout_ns % 1_000_000_000) as libc::c_long,
+    };
+    // SAFETY: `pfd` and `ts` are valid for the call; a null signal mask keeps the current one.
+    let rc = unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) };
+    if rc > 0 {
+        let _ = listener.try_wait(|_| {});
     }
 }
 

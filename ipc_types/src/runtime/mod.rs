@@ -10,8 +10,8 @@ pub mod ipc;
 pub mod logging;
 
 pub use clock::{Clock, MonotonicClock, SimClock, monotonic_ns};
-pub use config::{ConfigError, Invalid, Validate};
+pub use config::{ConfigError, Invalid, IpcConfig, Validate};
 pub use ipc::{
-    Heartbeat, Ipc, IpcError, IpcPrefix, LoopExit, MessageHeader, Publisher, SlicePublisher,
-    SliceSubscriber, Subscriber, Wake, run_wait_loop,
+    Heartbeat, Ipc, IpcError, IpcPrefix, LoopExit, MessageHeader, PeriodicWait, Publisher,
+    SlicePublisher, SliceSubscriber, Subscriber, Wake, run_wait_loop,
 };

@@ -1,1 +1,72 @@
-fn main() {}
+//! `landing`: the one user-facing command of the landing stack.
+
+mod bench_ipc;
+mod config_cmd;
+mod stats;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Autonomous quadrotor landing on a moving platform: missions, benchmarks, tools.
+#[derive(Debug, Parser)]
+#[command(name = "landing", version, about, long_about = None)]
+struct Cli {
+    /// iceoryx2 prefix that isolates this run from other stacks on the host
+    /// (default: $LANDING_IPC_PREFIX, else a fresh one per benchmark).
+    #[arg(long, global = true, value_name = "PREFIX")]
+    ipc_prefix: Option<String>,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Measure parts of the stack on this machine.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+    /// Work with configuration files.
+    #[command(subcommand)]
+    Config(ConfigCommand),
+}
+
+#[derive(Debug, Subcommand)]
+enum BenchCommand {
+    /// One-way latency of camera frames between two OS processes: iceoryx2 zero-copy
+    /// against a Unix domain socket copy.
+    Ipc(bench_ipc::IpcArgs),
+    /// Internal: the publishing side of `bench ipc`, started by it in a second process.
+    #[command(hide = true)]
+    IpcPeer(bench_ipc::PeerArgs),
+}
+
+#[derive(Debug, Subcommand)]
+enum ConfigCommand {
+    /// Check a stack configuration file; prints one line naming any problem.
+    Check {
+        /// The file (e.g. deploy/config/landing.toml).
+        #[arg(value_name = "FILE")]
+        file: PathBuf,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    ipc_types::runtime::logging::init("warn");
+    let result = match cli.command {
+        Command::Bench(BenchCommand::Ipc(args)) => bench_ipc::run(&args, cli.ipc_prefix.as_deref()),
+        Command::Bench(BenchCommand::IpcPeer(args)) => {
+            bench_ipc::run_peer(&args, cli.ipc_prefix.as_deref())
+        }
+        Command::Config(ConfigCommand::Check { file }) => config_cmd::check(&file),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // One line, whole chain: what failed and why.
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

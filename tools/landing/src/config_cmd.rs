@@ -1,0 +1,29 @@
+//! `landing config check`: validates the whole stack configuration file.
+
+use std::path::Path;
+
+use anyhow::Result;
+use ipc_types::runtime::config::{self, Invalid, IpcConfig, Validate};
+use serde::Deserialize;
+
+/// The whole stack configuration. Each process reads only its own section, strictly; this
+/// type checks the file as a whole, so an unknown section is caught too.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StackConfig {
+    /// How processes find each other and prove they are alive.
+    pub ipc: IpcConfig,
+}
+
+impl Validate for StackConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        self.ipc.validate().map_err(|e| e.under("ipc"))
+    }
+}
+
+/// Loads and validates `file`; prints `ok` on success.
+pub fn check(file: &Path) -> Result<()> {
+    let _cfg: StackConfig = config::load(file)?;
+    println!("{}: ok", file.display());
+    Ok(())
+}

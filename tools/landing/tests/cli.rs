@@ -1,0 +1,142 @@
+//! The `landing` command as a user meets it: help everywhere, one-line errors for bad
+//! configuration, and the IPC benchmark's JSON shape.
+
+use std::process::{Command, Output};
+
+fn landing(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_landing"))
+        .args(args)
+        .output()
+        .expect("run landing")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).to_string()
+}
+
+#[test]
+fn every_subcommand_has_help() {
+    for args in [
+        vec![],
+        vec!["bench"],
+        vec!["bench", "ipc"],
+        vec!["config"],
+        vec!["config", "check"],
+    ] {
+        let mut a = args.clone();
+        a.push("--help");
+        let o = landing(&a);
+        assert!(o.status.success(), "{a:?} --help failed");
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert!(out.contains("Usage: landing"), "{a:?}: {out}");
+    }
+}
+
+fn check_bad_config(name: &str, text: &str, key: &str, allowed: &str) {
+    let dir = std::env::temp_dir().join(format!("landing-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let path = dir.join(name);
+    std::fs::write(&path, text).expect("write config");
+    let o = landing(&["config", "check", path.to_str().expect("utf-8 path")]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{name}: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{name}: one line: {err}");
+    assert!(
+        err.contains(path.to_str().unwrap_or_default()),
+        "{name}: names the file: {err}"
+    );
+    assert!(
+        err.contains(&format!("`{key}`")),
+        "{name}: names the key: {err}"
+    );
+    assert!(err.contains(allowed), "{name}: says what is allowed: {err}");
+    assert!(
+        !err.contains("panicked") && !err.contains("backtrace"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_wrong_key_is_one_line_naming_the_file_the_key_and_the_allowed_keys() {
+    check_bad_config(
+        "wrong_key.toml",
+        "[ipc]\nprefix = \"a\"\nheartbeat_perod_ms = 100\nheartbeat_deadline_ms = 500\n",
+        "ipc.heartbeat_perod_ms",
+        "expected one of `prefix`, `heartbeat_period_ms`, `heartbeat_deadline_ms`",
+    );
+}
+
+#[test]
+fn a_wrong_type_is_one_line_naming_the_expected_type() {
+    check_bad_config(
+        "wrong_type.toml",
+        "[ipc]\nprefix = \"a\"\nheartbeat_period_ms = \"fast\"\nheartbeat_deadline_ms = 500\n",
+        "ipc.heartbeat_period_ms",
+        "expected u64",
+    );
+}
+
+#[test]
+fn an_out_of_range_value_is_one_line_naming_the_range() {
+    check_bad_config(
+        "out_of_range.toml",
+        "[ipc]\nprefix = \"a\"\nheartbeat_period_ms = 100\nheartbeat_deadline_ms = 50\n",
+        "ipc.heartbeat_deadline_ms",
+        "allowed: 200 to 60000",
+    );
+}
+
+#[test]
+fn the_shipped_config_is_valid() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../deploy/config/landing.toml"
+    );
+    let o = landing(&["config", "check", path]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
+fn a_missing_config_file_is_one_line() {
+    let o = landing(&["config", "check", "/nonexistent/landing.toml"]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = stderr(&o);
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("/nonexistent/landing.toml: cannot read"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_bad_ipc_prefix_is_refused_in_one_line() {
+    let o = landing(&["--ipc-prefix", "../etc", "bench", "ipc", "--frames", "50"]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = stderr(&o);
+    assert!(err.contains("prefix `../etc` is not allowed"), "{err}");
+}
+
+#[test]
+fn the_ipc_benchmark_prints_the_documented_json() {
+    let o = landing(&[
+        "bench",
+        "ipc",
+        "--json",
+        "--frames",
+        "50",
+        "--period-us",
+        "1000",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    for transport in ["iceoryx2", "unix_socket", "iceoryx2_event_wakeup"] {
+        for case in ["640x480_mono8", "1280x720_bgr8"] {
+            for q in ["p50_us", "p99_us"] {
+                let x = v[transport][case][q].as_f64().unwrap_or(-1.0);
+                assert!(x > 0.0, "{transport}.{case}.{q} = {x}");
+            }
+            assert!(v[transport][case]["p99_us"].as_f64() >= v[transport][case]["p50_us"].as_f64());
+        }
+    }
+    assert!(v["ratio_p50_1280x720"].as_f64().unwrap_or(0.0) > 0.0);
+}
