@@ -1,6 +1,8 @@
 //! A camera frame published by one OS process is read by another in place, from the very
 //! shared-memory bytes the publisher wrote, with no allocation on the receiving path.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a panic is a failed test
+
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Command, Stdio};

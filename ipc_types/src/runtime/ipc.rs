@@ -907,6 +907,24 @@ mod tests {
     }
 
     #[test]
+    fn the_periodic_waiter_learns_the_period_despite_bursts_and_drops() {
+        let mut w = PeriodicWait::new(Duration::from_micros(200), Duration::from_millis(1));
+        let mut t = 1_000_000_000u64;
+        for i in 0..20u64 {
+            // 30 Hz, with a burst (a second sample read 5 us later) every 4th frame and a
+            // dropped frame every 7th.
+            t += if i % 7 == 6 { 66_666_667 } else { 33_333_333 };
+            w.on_arrival(t);
+            if i % 4 == 0 {
+                w.on_arrival(t + 5_000);
+                t += 5_000;
+            }
+        }
+        let p = w.period().expect("a period").as_secs_f64();
+        assert!((p - 1.0 / 30.0).abs() < 0.001, "period {p}");
+    }
+
+    #[test]
     fn sequence_gaps_are_counted() {
         let (last, gaps) = (Cell::new(0), Cell::new(0));
         for s in [1, 2, 5, 6, 9] {

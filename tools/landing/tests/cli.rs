@@ -1,6 +1,8 @@
 //! The `landing` command as a user meets it: help everywhere, one-line errors for bad
 //! configuration, and the IPC benchmark's JSON shape.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a panic is a failed test
+
 use std::process::{Command, Output};
 
 fn landing(args: &[&str]) -> Output {

@@ -1,0 +1,44 @@
+# The two commands of the README: `make demo` and `make test`.
+# Both first install what is missing on a fresh Debian/Ubuntu machine.
+
+SHELL := /bin/bash
+# OpenCV with contrib (aruco) and libclang for the opencv and iceoryx2 bindings.
+APT_PACKAGES := libopencv-dev libopencv-contrib-dev clang libclang-dev pkg-config
+CARGO ?= cargo
+export CARGO_TERM_COLOR ?= never
+
+.PHONY: demo test bootstrap build lint bench help
+
+help:
+	@echo "make demo   install what is missing, build (release), run the simulated mission"
+	@echo "make test   install what is missing, then run every check and test"
+
+bootstrap:
+	@missing=""; \
+	for p in $(APT_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing system packages:$$missing"; \
+	  sudo=""; [ "$$(id -u)" -eq 0 ] || sudo=sudo; \
+	  $$sudo apt-get update -qq && \
+	  DEBIAN_FRONTEND=noninteractive $$sudo apt-get install -y -qq --no-install-recommends $$missing >/dev/null; \
+	fi
+	@command -v $(CARGO) >/dev/null || { echo "error: cargo not found: install Rust stable (rustup)"; exit 1; }
+
+build: bootstrap
+	$(CARGO) build --release --workspace
+
+# Until the mission exists, the demo runs the IPC benchmark.
+demo: build
+	./target/release/landing bench ipc
+
+lint: bootstrap
+	@if $(CARGO) fmt --version >/dev/null 2>&1; then $(CARGO) fmt --all -- --check; else echo "rustfmt not installed: format check skipped"; fi
+	@if $(CARGO) clippy --version >/dev/null 2>&1; then \
+	  $(CARGO) clippy --release --workspace --all-targets -- -D warnings; \
+	else echo "clippy not installed: lint skipped"; fi
+
+test: lint
+	$(CARGO) test --release --workspace
+
+bench: build
+	./target/release/landing bench ipc
