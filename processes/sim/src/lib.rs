@@ -14,6 +14,7 @@
 //! body FLU (x forward, y left, z up); transforms are named by what they map
 //! (`world_from_body * p_body = p_world`). SI units throughout.
 
+pub mod autopilot;
 pub mod params;
 pub mod quadrotor;
 pub mod rng;
