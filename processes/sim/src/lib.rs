@@ -15,6 +15,7 @@
 //! (`world_from_body * p_body = p_world`). SI units throughout.
 
 pub mod autopilot;
+pub mod estimator_noise;
 pub mod params;
 pub mod quadrotor;
 pub mod rng;
