@@ -19,3 +19,4 @@ pub mod estimator_noise;
 pub mod params;
 pub mod quadrotor;
 pub mod rng;
+pub mod wind;
