@@ -16,6 +16,7 @@
 
 pub mod autopilot;
 pub mod estimator_noise;
+pub mod ground_vehicle;
 pub mod params;
 pub mod quadrotor;
 pub mod rng;
