@@ -935,8 +935,8 @@ fn mix(thrust: f64, torque: &Vector3<f64>) -> Mix {
         let upper = *ui >= 1.0 - 1e-9;
         let lower = *ui <= 1e-9;
         if upper || lower {
-            for axis in 0..3 {
-                let c = cols[axis][i];
+            for (axis, col) in cols.iter().enumerate().take(3) {
+                let c = col[i];
                 if c.abs() < f64::EPSILON {
                     continue;
                 }

@@ -327,12 +327,11 @@ impl Polyline {
         if pts.len() < 2 {
             return None;
         }
-        if closed {
-            if let Some(first) = pts.first().copied() {
-                if pts.last().is_some_and(|last| (first - last).norm() > 1e-9) {
-                    pts.push(first);
-                }
-            }
+        if closed
+            && let Some(first) = pts.first().copied()
+            && pts.last().is_some_and(|last| (first - last).norm() > 1e-9)
+        {
+            pts.push(first);
         }
         let mut cumulative = vec![0.0];
         for w in pts.windows(2) {

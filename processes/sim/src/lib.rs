@@ -21,3 +21,4 @@ pub mod params;
 pub mod quadrotor;
 pub mod rng;
 pub mod wind;
+pub mod world;

@@ -2,6 +2,9 @@
 //! PX4-like tolerances. The controller sees the truth (no estimator noise)
 //! unless a test says otherwise.
 
+// Test helpers outside #[test] functions may panic too.
+#![allow(clippy::unwrap_used)]
+
 use nalgebra::Vector3;
 use sim::autopilot::{Autopilot, AutopilotParams, EstimatedState, Setpoint};
 use sim::quadrotor::{
