@@ -1269,4 +1269,83 @@ mod tests {
         assert_eq!(ap.rate_integral, Vector3::zeros());
         assert_eq!(ap.yaw_hold, None);
     }
+
+    fn assert_all_finite(out: &ControlOutput) {
+        assert!(output_is_finite(out), "{out:?}");
+        assert!(out.motors.iter().all(|m| (0.0..=1.0).contains(m)));
+    }
+
+    #[test]
+    fn non_finite_inputs_never_produce_nan_outputs() {
+        let bad_values = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY];
+        let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+        let good = level_state(Vector3::new(1.0, 2.0, 3.0));
+        let sp = Setpoint::position(Vector3::new(0.0, 0.0, 3.0), 0.2)
+            .with_velocity(Vector3::new(1.0, 0.0, 0.0))
+            .with_acceleration(Vector3::new(0.0, 0.5, 0.0));
+        for bad in bad_values {
+            for field in 0..5 {
+                for axis in 0..3 {
+                    let mut s = good;
+                    match field {
+                        0 => s.position[axis] = bad,
+                        1 => s.velocity[axis] = bad,
+                        2 => s.body_rates[axis] = bad,
+                        3 => {
+                            let mut q = s.world_from_body.into_inner();
+                            q.coords[axis] = bad;
+                            s.world_from_body = UnitQuaternion::new_unchecked(q);
+                        }
+                        _ => {}
+                    }
+                    for dt in [0.002, bad, 0.0, -1.0] {
+                        let out = ap.update(dt, &s, &sp);
+                        assert_all_finite(&out);
+                        assert!(out.status.any() || field == 4 && dt == 0.002);
+                        // The controller recovers on the next good input.
+                        let out = ap.update(0.002, &good, &sp);
+                        assert_all_finite(&out);
+                    }
+                }
+            }
+            for axis in 0..3 {
+                let mut bad_sp = sp;
+                bad_sp.position[axis] = Some(bad);
+                bad_sp.velocity[(axis + 1) % 3] = Some(bad);
+                bad_sp.acceleration[(axis + 2) % 3] = Some(bad);
+                bad_sp.yaw = Some(bad);
+                bad_sp.yaw_rate = Some(bad);
+                let out = ap.update(0.002, &good, &bad_sp);
+                assert_all_finite(&out);
+                assert!(out.status.invalid_setpoint);
+            }
+        }
+    }
+
+    #[test]
+    fn a_lost_attitude_gives_level_hover_thrust_and_a_flag() {
+        let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+        let mut s = level_state(Vector3::zeros());
+        s.world_from_body =
+            UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(0.0, 0.0, 0.0, 0.0));
+        let out = ap.update(0.002, &s, &Setpoint::default());
+        assert!(out.status.attitude_lost);
+        let hover = ap.params().mpc_thr_hover;
+        assert!(out.motors.iter().all(|m| *m == hover));
+    }
+
+    #[test]
+    fn extreme_but_finite_inputs_stay_within_limits() {
+        let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+        let mut s = level_state(Vector3::new(1e12, -1e12, 1e9));
+        s.velocity = Vector3::new(1e9, 1e9, -1e9);
+        s.body_rates = Vector3::new(1e6, -1e6, 1e6);
+        s.world_from_body = UnitQuaternion::from_euler_angles(3.0, 1.0, -2.0);
+        let sp = Setpoint::position(Vector3::new(-1e12, 1e12, -1e9), 1e9)
+            .with_acceleration(Vector3::new(1e15, 0.0, -1e15));
+        for _ in 0..100 {
+            let out = ap.update(0.002, &s, &sp);
+            assert_all_finite(&out);
+        }
+    }
 }

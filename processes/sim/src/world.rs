@@ -387,7 +387,7 @@ impl World {
         &self.estimate
     }
 
-    /// The controller's output of the last step, if it ran.
+    /// The controller's output of the last step, if it ran (None while disarmed).
     pub fn last_control(&self) -> Option<&ControlOutput> {
         self.last_control.as_ref()
     }
@@ -440,17 +440,25 @@ impl World {
     }
 
     /// Advances the world by `dt_ns` with the autopilot flying the current
-    /// setpoint. Returns the events of this step.
+    /// setpoint (motors stopped and controller idle while disarmed). Returns
+    /// the events of this step.
     pub fn step(&mut self, dt_ns: u64) -> Result<&[TimedEvent], WorldError> {
         check_step(dt_ns)?;
         let dt_s = dt_ns as f64 * 1e-9;
         let landed = self.quad.contact() != ContactState::Airborne;
         self.estimate = self.noise.apply(dt_s, self.quad.state(), landed);
-        let control = self.autopilot.update(dt_s, &self.estimate, &self.setpoint);
-        self.last_control = Some(control);
-        let commands = MotorCommands {
-            armed: self.armed && !self.crashed,
-            thrust: control.motors,
+        let commands = if self.armed && !self.crashed {
+            let control = self.autopilot.update(dt_s, &self.estimate, &self.setpoint);
+            self.last_control = Some(control);
+            MotorCommands {
+                armed: true,
+                thrust: control.motors,
+            }
+        } else {
+            // Like PX4, the controllers do not run while disarmed.
+            self.autopilot.reset();
+            self.last_control = None;
+            MotorCommands::off()
         };
         self.step_physics(dt_ns, &commands)
     }
