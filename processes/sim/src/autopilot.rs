@@ -1,0 +1,1351 @@
+//! A PX4-like cascaded multicopter controller.
+//!
+//! The simulator stands in for PX4, so the vehicle must respond to setpoints
+//! the way a PX4 vehicle does: the same cascade, the same parameter names and
+//! defaults where they make sense, the same saturation and anti-windup rules.
+//! The structure mirrors PX4's `PositionControl`, `AttitudeControl`,
+//! `RateControl` and the multirotor control allocation (sequential
+//! desaturation, airmode disabled):
+//!
+//! ```text
+//! position P -> velocity PID (+ velocity and acceleration feed-forward)
+//!   -> acceleration to thrust vector and attitude (tilt limit, hover thrust, yaw)
+//!   -> quaternion attitude P (reduced yaw priority) -> body-rate PID
+//!   -> mixer (roll/pitch before yaw, thrust never raised to unsaturate) -> 4 motors
+//! ```
+//!
+//! Everything is expressed in ENU/FLU (PX4 runs in NED/FRD; the control laws
+//! are frame-agnostic, only the signs of "up" differ). The input is the
+//! ESTIMATED state, never the truth. Outputs are always finite: non-finite
+//! inputs give a defined safe output and a flag in [`ControlStatus`].
+//!
+//! Units follow PX4: angles in parameters are in degrees (MPC_TILTMAX_AIR,
+//! MC_*RATE_MAX), the velocity gains are the `_ACC` variants (m/s^2 per m/s),
+//! thrust is normalized per motor in `[0, 1]`, torques are normalized.
+
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
+use serde::Deserialize;
+
+use crate::params::{self, ParamError};
+use crate::quadrotor::{AirframeParams, GRAVITY_M_S2, QUAD_X_MOTORS, VehicleState};
+
+/// Controller parameters, named after their PX4 counterparts.
+///
+/// In TOML the PX4 spelling is used (`MPC_XY_P = 0.95`); missing fields keep
+/// their default, unknown ones are rejected. Velocity gains are PX4's `_ACC`
+/// parameters (PX4 >= 1.12), i.e. the MPC_XY_VEL_P/I/D of older releases
+/// expressed as acceleration per velocity error.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default, rename_all = "SCREAMING_SNAKE_CASE")]
+pub struct AutopilotParams {
+    /// Horizontal position gain, 1/s (PX4 default 0.95).
+    pub mpc_xy_p: f64,
+    /// Vertical position gain, 1/s (PX4 default 1.0).
+    pub mpc_z_p: f64,
+    /// Horizontal velocity P gain, m/s^2 per m/s (PX4 default 1.8).
+    pub mpc_xy_vel_p_acc: f64,
+    /// Horizontal velocity I gain, m/s^3 per m/s (PX4 default 0.4).
+    pub mpc_xy_vel_i_acc: f64,
+    /// Horizontal velocity D gain, m/s per m/s (PX4 default 0.2).
+    pub mpc_xy_vel_d_acc: f64,
+    /// Vertical velocity P gain (PX4 default 4.0).
+    pub mpc_z_vel_p_acc: f64,
+    /// Vertical velocity I gain (PX4 default 2.0).
+    pub mpc_z_vel_i_acc: f64,
+    /// Vertical velocity D gain (PX4 default 0.0).
+    pub mpc_z_vel_d_acc: f64,
+    /// Horizontal speed limit, m/s (PX4 default 12).
+    pub mpc_xy_vel_max: f64,
+    /// Climb speed limit, m/s (PX4 default 3).
+    pub mpc_z_vel_max_up: f64,
+    /// Descent speed limit, m/s (PX4 default 1.5).
+    pub mpc_z_vel_max_dn: f64,
+    /// Horizontal acceleration limit, m/s^2 (PX4 default 5; here applied to
+    /// the total acceleration setpoint, where PX4 applies it in its trajectory
+    /// generators).
+    pub mpc_acc_hor_max: f64,
+    /// Upward acceleration limit, m/s^2 (PX4 default 4).
+    pub mpc_acc_up_max: f64,
+    /// Downward acceleration limit, m/s^2 (PX4 default 3).
+    pub mpc_acc_down_max: f64,
+    /// Maximum tilt in flight, deg (PX4 default 45).
+    pub mpc_tiltmax_air: f64,
+    /// Normalized thrust that hovers the vehicle (PX4 MPC_THR_HOVER).
+    pub mpc_thr_hover: f64,
+    /// Minimum collective thrust in flight (PX4 default 0.12).
+    pub mpc_thr_min: f64,
+    /// Maximum collective thrust (PX4 default 1.0).
+    pub mpc_thr_max: f64,
+    /// Horizontal thrust margin kept when vertical control saturates (PX4 default 0.3).
+    pub mpc_thr_xy_marg: f64,
+    /// Cut-off of the velocity-derivative low-pass for the D term, Hz (PX4 default 5).
+    pub mpc_veld_lp: f64,
+    /// Roll attitude gain, 1/s (PX4 default 6.5).
+    pub mc_roll_p: f64,
+    /// Pitch attitude gain, 1/s (PX4 default 6.5).
+    pub mc_pitch_p: f64,
+    /// Yaw attitude gain, 1/s (PX4 default 2.8).
+    pub mc_yaw_p: f64,
+    /// Yaw priority relative to roll/pitch in the attitude error, 0..1 (PX4 default 0.4).
+    pub mc_yaw_weight: f64,
+    /// Roll rate limit, deg/s (PX4 default 220).
+    pub mc_rollrate_max: f64,
+    /// Pitch rate limit, deg/s (PX4 default 220).
+    pub mc_pitchrate_max: f64,
+    /// Yaw rate limit, deg/s (PX4 default 200).
+    pub mc_yawrate_max: f64,
+    /// Roll rate P gain, normalized torque per rad/s (PX4 default 0.15).
+    pub mc_rollrate_p: f64,
+    /// Roll rate I gain (PX4 default 0.2).
+    pub mc_rollrate_i: f64,
+    /// Roll rate D gain (PX4 default 0.003).
+    pub mc_rollrate_d: f64,
+    /// Pitch rate P gain (PX4 default 0.15).
+    pub mc_pitchrate_p: f64,
+    /// Pitch rate I gain (PX4 default 0.2).
+    pub mc_pitchrate_i: f64,
+    /// Pitch rate D gain (PX4 default 0.003).
+    pub mc_pitchrate_d: f64,
+    /// Yaw rate P gain (PX4 default 0.2).
+    pub mc_yawrate_p: f64,
+    /// Yaw rate I gain (PX4 default 0.1).
+    pub mc_yawrate_i: f64,
+    /// Yaw rate D gain (PX4 default 0.0).
+    pub mc_yawrate_d: f64,
+    /// Roll rate integrator limit, normalized torque (PX4 default 0.3).
+    pub mc_rr_int_lim: f64,
+    /// Pitch rate integrator limit (PX4 default 0.3).
+    pub mc_pr_int_lim: f64,
+    /// Yaw rate integrator limit (PX4 default 0.3).
+    pub mc_yr_int_lim: f64,
+    /// Cut-off of the gyro-derivative low-pass for the rate D term, Hz (PX4 default 30).
+    pub imu_dgyro_cutoff: f64,
+}
+
+impl Default for AutopilotParams {
+    /// PX4's defaults, tuned for the default (P450) airframe.
+    fn default() -> Self {
+        Self::tuned_for(&AirframeParams::default())
+    }
+}
+
+/// Angular acceleration (rad/s^2) per unit of normalized torque about x, y, z.
+///
+/// The rate gains are in normalized torque, so a heavier or lighter frame
+/// needs them scaled; this is how [`AutopilotParams::tuned_for`] scales them.
+pub fn torque_effectiveness(airframe: &AirframeParams) -> Vector3<f64> {
+    let t_max = airframe.max_thrust_per_motor_n();
+    let lever = airframe.arm_length_m * std::f64::consts::FRAC_1_SQRT_2;
+    let [jxx, jyy, jzz] = airframe.inertia_diag_kg_m2;
+    // Each motor changes its thrust by MIX_ROLL_PITCH * t_max per unit roll/pitch.
+    let roll_pitch_torque = 4.0 * MIX_ROLL_PITCH * t_max * lever;
+    let yaw_torque =
+        4.0 * MIX_YAW * t_max * airframe.torque_coefficient / airframe.thrust_coefficient;
+    Vector3::new(
+        roll_pitch_torque / jxx,
+        roll_pitch_torque / jyy,
+        yaw_torque / jzz,
+    )
+}
+
+/// Mixer weight of roll and pitch per motor (PX4's normalized quad X: 1/sqrt 2).
+const MIX_ROLL_PITCH: f64 = std::f64::consts::FRAC_1_SQRT_2;
+/// Mixer weight of yaw per motor (PX4's normalized quad X: 1).
+const MIX_YAW: f64 = 1.0;
+
+impl AutopilotParams {
+    /// PX4's default gains and limits, with the hover thrust taken from the
+    /// airframe and the rate gains scaled so that a unit of normalized torque
+    /// gives the same angular acceleration as on the P450 the defaults were
+    /// chosen for (what a PX4 user tuning a new frame would end up with).
+    pub fn tuned_for(airframe: &AirframeParams) -> Self {
+        let reference = torque_effectiveness(&AirframeParams::default());
+        let this = torque_effectiveness(airframe);
+        let scale = Vector3::new(
+            reference.x / this.x,
+            reference.y / this.y,
+            reference.z / this.z,
+        );
+        let scale = scale.map(|s| if s.is_finite() && s > 0.0 { s } else { 1.0 });
+        Self {
+            mpc_xy_p: 0.95,
+            mpc_z_p: 1.0,
+            mpc_xy_vel_p_acc: 1.8,
+            mpc_xy_vel_i_acc: 0.4,
+            mpc_xy_vel_d_acc: 0.2,
+            mpc_z_vel_p_acc: 4.0,
+            mpc_z_vel_i_acc: 2.0,
+            mpc_z_vel_d_acc: 0.0,
+            mpc_xy_vel_max: 12.0,
+            mpc_z_vel_max_up: 3.0,
+            mpc_z_vel_max_dn: 1.5,
+            mpc_acc_hor_max: 5.0,
+            mpc_acc_up_max: 4.0,
+            mpc_acc_down_max: 3.0,
+            mpc_tiltmax_air: 45.0,
+            mpc_thr_hover: airframe.hover_thrust_normalized().clamp(0.1, 0.8),
+            mpc_thr_min: 0.12,
+            mpc_thr_max: 1.0,
+            mpc_thr_xy_marg: 0.3,
+            mpc_veld_lp: 5.0,
+            mc_roll_p: 6.5,
+            mc_pitch_p: 6.5,
+            mc_yaw_p: 2.8,
+            mc_yaw_weight: 0.4,
+            mc_rollrate_max: 220.0,
+            mc_pitchrate_max: 220.0,
+            mc_yawrate_max: 200.0,
+            mc_rollrate_p: 0.15 * scale.x,
+            mc_rollrate_i: 0.2 * scale.x,
+            mc_rollrate_d: 0.003 * scale.x,
+            mc_pitchrate_p: 0.15 * scale.y,
+            mc_pitchrate_i: 0.2 * scale.y,
+            mc_pitchrate_d: 0.003 * scale.y,
+            mc_yawrate_p: 0.2 * scale.z,
+            mc_yawrate_i: 0.1 * scale.z,
+            mc_yawrate_d: 0.0,
+            mc_rr_int_lim: 0.3,
+            mc_pr_int_lim: 0.3,
+            mc_yr_int_lim: 0.3,
+            imu_dgyro_cutoff: 30.0,
+        }
+    }
+
+    /// Gains and limits for the racer airframe in high-speed chases: tuned for
+    /// [`AirframeParams::racer`], with higher speed, tilt and acceleration limits.
+    pub fn racer() -> Self {
+        Self {
+            mpc_xy_vel_max: 20.0,
+            mpc_z_vel_max_up: 5.0,
+            mpc_z_vel_max_dn: 3.0,
+            mpc_acc_hor_max: 12.0,
+            mpc_acc_up_max: 8.0,
+            mpc_acc_down_max: 5.0,
+            mpc_tiltmax_air: 60.0,
+            ..Self::tuned_for(&AirframeParams::racer())
+        }
+    }
+
+    /// Checks every parameter, so a bad scenario is rejected before it is flown.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let positive = [
+            ("MPC_XY_P", self.mpc_xy_p),
+            ("MPC_Z_P", self.mpc_z_p),
+            ("MPC_XY_VEL_P_ACC", self.mpc_xy_vel_p_acc),
+            ("MPC_Z_VEL_P_ACC", self.mpc_z_vel_p_acc),
+            ("MPC_XY_VEL_MAX", self.mpc_xy_vel_max),
+            ("MPC_Z_VEL_MAX_UP", self.mpc_z_vel_max_up),
+            ("MPC_Z_VEL_MAX_DN", self.mpc_z_vel_max_dn),
+            ("MPC_ACC_HOR_MAX", self.mpc_acc_hor_max),
+            ("MPC_ACC_UP_MAX", self.mpc_acc_up_max),
+            ("MPC_ACC_DOWN_MAX", self.mpc_acc_down_max),
+            ("MPC_VELD_LP", self.mpc_veld_lp),
+            ("MC_ROLL_P", self.mc_roll_p),
+            ("MC_PITCH_P", self.mc_pitch_p),
+            ("MC_YAW_P", self.mc_yaw_p),
+            ("MC_ROLLRATE_MAX", self.mc_rollrate_max),
+            ("MC_PITCHRATE_MAX", self.mc_pitchrate_max),
+            ("MC_YAWRATE_MAX", self.mc_yawrate_max),
+            ("MC_ROLLRATE_P", self.mc_rollrate_p),
+            ("MC_PITCHRATE_P", self.mc_pitchrate_p),
+            ("MC_YAWRATE_P", self.mc_yawrate_p),
+            ("IMU_DGYRO_CUTOFF", self.imu_dgyro_cutoff),
+        ];
+        for (name, value) in positive {
+            params::positive(name, value)?;
+        }
+        let non_negative = [
+            ("MPC_XY_VEL_I_ACC", self.mpc_xy_vel_i_acc),
+            ("MPC_XY_VEL_D_ACC", self.mpc_xy_vel_d_acc),
+            ("MPC_Z_VEL_I_ACC", self.mpc_z_vel_i_acc),
+            ("MPC_Z_VEL_D_ACC", self.mpc_z_vel_d_acc),
+            ("MC_ROLLRATE_I", self.mc_rollrate_i),
+            ("MC_ROLLRATE_D", self.mc_rollrate_d),
+            ("MC_PITCHRATE_I", self.mc_pitchrate_i),
+            ("MC_PITCHRATE_D", self.mc_pitchrate_d),
+            ("MC_YAWRATE_I", self.mc_yawrate_i),
+            ("MC_YAWRATE_D", self.mc_yawrate_d),
+            ("MC_RR_INT_LIM", self.mc_rr_int_lim),
+            ("MC_PR_INT_LIM", self.mc_pr_int_lim),
+            ("MC_YR_INT_LIM", self.mc_yr_int_lim),
+        ];
+        for (name, value) in non_negative {
+            params::non_negative(name, value)?;
+        }
+        params::in_range("MPC_TILTMAX_AIR", self.mpc_tiltmax_air, 1.0, 89.0)?;
+        params::in_range("MC_YAW_WEIGHT", self.mc_yaw_weight, 0.0, 1.0)?;
+        params::in_range("MPC_THR_MIN", self.mpc_thr_min, 0.0, 0.5)?;
+        params::in_range("MPC_THR_MAX", self.mpc_thr_max, 0.5, 1.0)?;
+        params::in_range("MPC_THR_XY_MARG", self.mpc_thr_xy_marg, 0.0, 0.5)?;
+        if !(self.mpc_thr_hover.is_finite()
+            && self.mpc_thr_hover > self.mpc_thr_min
+            && self.mpc_thr_hover < self.mpc_thr_max)
+        {
+            return Err(ParamError::new(
+                "MPC_THR_HOVER",
+                self.mpc_thr_hover,
+                format!(
+                    "must be between MPC_THR_MIN ({}) and MPC_THR_MAX ({})",
+                    self.mpc_thr_min, self.mpc_thr_max
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The state estimate the controller works from (never ground truth).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EstimatedState {
+    /// Position in world ENU, m.
+    pub position: Vector3<f64>,
+    /// Velocity in world ENU, m/s.
+    pub velocity: Vector3<f64>,
+    /// Attitude, maps body FLU to world ENU.
+    pub world_from_body: UnitQuaternion<f64>,
+    /// Body rates in body FLU, rad/s.
+    pub body_rates: Vector3<f64>,
+    /// PX4's land-detector output: while landed the integrators are frozen.
+    pub landed: bool,
+}
+
+impl EstimatedState {
+    /// A perfect estimate (truth), for tests and for runs without estimator noise.
+    pub fn from_truth(truth: &VehicleState, landed: bool) -> Self {
+        Self {
+            position: truth.position,
+            velocity: truth.velocity,
+            world_from_body: truth.world_from_body,
+            body_rates: truth.body_rates,
+            landed,
+        }
+    }
+}
+
+/// What the vehicle should do, like PX4's trajectory setpoint: any field may
+/// be absent, per axis.
+///
+/// Position gives a P correction on top of the velocity feed-forward, which
+/// gives a PID correction on top of the acceleration feed-forward. An axis
+/// with nothing at all is braked to zero velocity (and flagged). Yaw absent
+/// holds the current heading, with the yaw rate as feed-forward if given.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Setpoint {
+    /// Position per axis in world ENU, m.
+    pub position: [Option<f64>; 3],
+    /// Velocity (feed-forward) per axis in world ENU, m/s.
+    pub velocity: [Option<f64>; 3],
+    /// Acceleration (feed-forward) per axis in world ENU, m/s^2.
+    pub acceleration: [Option<f64>; 3],
+    /// Heading, rad (ENU: 0 = east, counter-clockwise positive).
+    pub yaw: Option<f64>,
+    /// Heading rate feed-forward, rad/s (counter-clockwise positive).
+    pub yaw_rate: Option<f64>,
+}
+
+fn some3(v: &Vector3<f64>) -> [Option<f64>; 3] {
+    [Some(v.x), Some(v.y), Some(v.z)]
+}
+
+impl Setpoint {
+    /// Hold a position with a heading.
+    pub fn position(position: Vector3<f64>, yaw: f64) -> Self {
+        Self {
+            position: some3(&position),
+            yaw: Some(yaw),
+            ..Self::default()
+        }
+    }
+
+    /// Fly a velocity with an optional heading (held if absent).
+    pub fn velocity(velocity: Vector3<f64>, yaw: Option<f64>) -> Self {
+        Self {
+            velocity: some3(&velocity),
+            yaw,
+            ..Self::default()
+        }
+    }
+
+    /// Adds a velocity feed-forward on every axis.
+    pub fn with_velocity(mut self, velocity: Vector3<f64>) -> Self {
+        self.velocity = some3(&velocity);
+        self
+    }
+
+    /// Adds an acceleration feed-forward on every axis.
+    pub fn with_acceleration(mut self, acceleration: Vector3<f64>) -> Self {
+        self.acceleration = some3(&acceleration);
+        self
+    }
+}
+
+/// Flags describing how the last update coped with its inputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ControlStatus {
+    /// Some part of the estimated state was non-finite and was not used.
+    pub invalid_state: bool,
+    /// The attitude estimate was unusable: the output is level hover thrust.
+    pub attitude_lost: bool,
+    /// Some setpoint field was non-finite and was treated as absent.
+    pub invalid_setpoint: bool,
+    /// Some axis had no position, velocity or acceleration: it is braked.
+    pub incomplete_setpoint: bool,
+    /// The time step was not a finite positive number: integrators and filters held.
+    pub invalid_dt: bool,
+}
+
+impl ControlStatus {
+    /// True if anything was wrong with the inputs.
+    pub fn any(&self) -> bool {
+        self.invalid_state
+            || self.attitude_lost
+            || self.invalid_setpoint
+            || self.incomplete_setpoint
+            || self.invalid_dt
+    }
+}
+
+/// Everything the controller computed in one update (the motors plus the
+/// intermediate setpoints, for logging and tests). All values are finite.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ControlOutput {
+    /// Normalized thrust per motor in `[0, 1]`, quad X order.
+    pub motors: [f64; 4],
+    /// Velocity setpoint after limits, world ENU, m/s (zero on uncontrolled axes).
+    pub velocity_setpoint: Vector3<f64>,
+    /// Acceleration setpoint after limits, world ENU, m/s^2.
+    pub acceleration_setpoint: Vector3<f64>,
+    /// Normalized thrust vector, world ENU.
+    pub thrust_setpoint: Vector3<f64>,
+    /// Attitude setpoint, maps body to world.
+    pub attitude_setpoint: UnitQuaternion<f64>,
+    /// Body rate setpoint, FLU, rad/s.
+    pub rate_setpoint: Vector3<f64>,
+    /// Normalized torque setpoint about body x, y, z.
+    pub torque_setpoint: Vector3<f64>,
+    /// True when the mixer had to clip or desaturate a motor.
+    pub motors_saturated: bool,
+    /// How the inputs were handled.
+    pub status: ControlStatus,
+}
+
+/// Which torque directions the mixer could not deliver last time, for the
+/// rate-integrator anti-windup (PX4's control-allocator saturation feedback).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+struct TorqueSaturation {
+    positive: [bool; 3],
+    negative: [bool; 3],
+}
+
+/// A first-order low-pass filtered derivative of a 3-vector.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+struct FilteredDerivative {
+    previous: Option<Vector3<f64>>,
+    value: Vector3<f64>,
+}
+
+impl FilteredDerivative {
+    fn update(&mut self, x: &Vector3<f64>, dt: f64, cutoff_hz: f64) -> Vector3<f64> {
+        if dt > 0.0 {
+            if let Some(prev) = self.previous {
+                let raw = (x - prev) / dt;
+                let tau = 1.0 / (std::f64::consts::TAU * cutoff_hz);
+                let alpha = dt / (dt + tau);
+                self.value += (raw - self.value) * alpha;
+            }
+            self.previous = Some(*x);
+        }
+        self.value
+    }
+
+    fn reset(&mut self) {
+        *self = Self::default();
+    }
+}
+
+/// The cascaded controller with its integrators and filters.
+#[derive(Debug, Clone)]
+pub struct Autopilot {
+    params: AutopilotParams,
+    velocity_integral: Vector3<f64>,
+    rate_integral: Vector3<f64>,
+    velocity_derivative: FilteredDerivative,
+    rate_derivative: FilteredDerivative,
+    yaw_hold: Option<f64>,
+    saturation: TorqueSaturation,
+}
+
+impl Autopilot {
+    /// Builds a controller after validating its parameters.
+    pub fn new(params: AutopilotParams) -> Result<Self, ParamError> {
+        params.validate()?;
+        Ok(Self {
+            params,
+            velocity_integral: Vector3::zeros(),
+            rate_integral: Vector3::zeros(),
+            velocity_derivative: FilteredDerivative::default(),
+            rate_derivative: FilteredDerivative::default(),
+            yaw_hold: None,
+            saturation: TorqueSaturation::default(),
+        })
+    }
+
+    /// The parameters in use.
+    pub fn params(&self) -> &AutopilotParams {
+        &self.params
+    }
+
+    /// Clears integrators, derivative filters and the held heading, e.g. on
+    /// arming or after a mode switch, so no stale state is carried over.
+    pub fn reset(&mut self) {
+        self.velocity_integral = Vector3::zeros();
+        self.rate_integral = Vector3::zeros();
+        self.velocity_derivative.reset();
+        self.rate_derivative.reset();
+        self.yaw_hold = None;
+        self.saturation = TorqueSaturation::default();
+    }
+
+    /// Runs the whole cascade once over `dt_s` seconds and returns the motor
+    /// commands. Never returns non-finite numbers.
+    pub fn update(
+        &mut self,
+        dt_s: f64,
+        state: &EstimatedState,
+        setpoint: &Setpoint,
+    ) -> ControlOutput {
+        let mut status = ControlStatus::default();
+        let dt = if dt_s.is_finite() && dt_s > 0.0 && dt_s <= 1.0 {
+            dt_s
+        } else {
+            status.invalid_dt = true;
+            0.0
+        };
+        let q = state.world_from_body.into_inner();
+        if !(q.coords.iter().all(|c| c.is_finite()) && q.norm() > 0.5) {
+            status.attitude_lost = true;
+            status.invalid_state = true;
+            return self.level_hover_output(status);
+        }
+        let attitude = UnitQuaternion::new_normalize(q);
+        let position_ok = finite3(&state.position);
+        let velocity_ok = finite3(&state.velocity);
+        let rates_ok = finite3(&state.body_rates);
+        if !(position_ok && velocity_ok && rates_ok) {
+            status.invalid_state = true;
+        }
+        let integrate = !state.landed && dt > 0.0;
+
+        // --- Position and velocity control (PX4 PositionControl) ---
+        let sp = sanitize_setpoint(setpoint, &mut status);
+        let (velocity_setpoint, acceleration_setpoint, thrust_setpoint) =
+            self.position_velocity_control(dt, integrate, state, &sp, &mut status);
+
+        // --- Attitude setpoint from thrust direction and yaw ---
+        let current_yaw = yaw_of(&attitude);
+        let yaw_setpoint = match sp.yaw {
+            Some(yaw) => {
+                self.yaw_hold = None;
+                yaw
+            }
+            None if sp.yaw_rate.is_some() => {
+                self.yaw_hold = Some(current_yaw);
+                current_yaw
+            }
+            None => *self.yaw_hold.get_or_insert(current_yaw),
+        };
+        let attitude_setpoint = attitude_from_thrust(&thrust_setpoint, yaw_setpoint);
+
+        // --- Attitude control (PX4 AttitudeControl) ---
+        let rate_setpoint =
+            self.attitude_control(&attitude, &attitude_setpoint, sp.yaw_rate.unwrap_or(0.0));
+
+        // --- Rate control (PX4 RateControl) ---
+        let rates = if rates_ok {
+            state.body_rates
+        } else {
+            self.rate_derivative.reset();
+            Vector3::zeros()
+        };
+        let torque_setpoint = self.rate_control(dt, integrate, &rates, &rate_setpoint, rates_ok);
+
+        // --- Mixer (PX4 sequential desaturation, airmode disabled) ---
+        let collective = thrust_setpoint.norm();
+        let mix = mix(collective, &torque_setpoint);
+        self.saturation = mix.saturation;
+
+        let out = ControlOutput {
+            motors: mix.motors,
+            velocity_setpoint,
+            acceleration_setpoint,
+            thrust_setpoint,
+            attitude_setpoint,
+            rate_setpoint,
+            torque_setpoint,
+            motors_saturated: mix.saturated,
+            status,
+        };
+        if output_is_finite(&out) {
+            out
+        } else {
+            // Defensive: cannot happen with validated parameters and sanitized
+            // inputs, but a NaN must never reach the motors.
+            self.reset();
+            let mut status = status;
+            status.invalid_state = true;
+            self.level_hover_output(status)
+        }
+    }
+
+    /// The output used when the attitude is unknown: all motors at hover thrust.
+    fn level_hover_output(&mut self, status: ControlStatus) -> ControlOutput {
+        self.rate_derivative.reset();
+        self.velocity_derivative.reset();
+        let hover = self.params.mpc_thr_hover;
+        ControlOutput {
+            motors: [hover; 4],
+            velocity_setpoint: Vector3::zeros(),
+            acceleration_setpoint: Vector3::zeros(),
+            thrust_setpoint: Vector3::new(0.0, 0.0, hover),
+            attitude_setpoint: UnitQuaternion::identity(),
+            rate_setpoint: Vector3::zeros(),
+            torque_setpoint: Vector3::zeros(),
+            motors_saturated: false,
+            status,
+        }
+    }
+
+    /// Position P, velocity PID, acceleration to thrust, with PX4's limits
+    /// and anti-windup. Returns (velocity sp, acceleration sp, thrust vector).
+    fn position_velocity_control(
+        &mut self,
+        dt: f64,
+        integrate: bool,
+        state: &EstimatedState,
+        sp: &Setpoint,
+        status: &mut ControlStatus,
+    ) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
+        let p = &self.params;
+        let position_ok = finite3(&state.position);
+        let velocity_ok = finite3(&state.velocity);
+        let gains_pos = [p.mpc_xy_p, p.mpc_xy_p, p.mpc_z_p];
+
+        // Velocity setpoint = feed-forward + P on position, per axis.
+        let mut vel_from_position = Vector3::zeros();
+        let mut vel_ff = Vector3::zeros();
+        let mut vel_defined = [false; 3];
+        let mut acc_ff = Vector3::zeros();
+        for i in 0..3 {
+            let mut pos = sp.position[i];
+            if pos.is_some() && !position_ok {
+                pos = None;
+            }
+            let mut vel = sp.velocity[i];
+            if pos.is_none() && vel.is_none() && sp.acceleration[i].is_none() {
+                status.incomplete_setpoint = true;
+                vel = Some(0.0);
+            }
+            if let Some(a) = sp.acceleration[i] {
+                acc_ff[i] = a;
+            }
+            if let Some(target) = pos {
+                vel_from_position[i] = gains_pos[i] * (target - state.position[i]);
+                vel_defined[i] = true;
+            }
+            if let Some(v) = vel {
+                vel_ff[i] = v;
+                vel_defined[i] = true;
+            }
+        }
+        let mut vel_sp = vel_from_position + vel_ff;
+        let xy = constrain_xy(&vel_from_position.xy(), &vel_ff.xy(), p.mpc_xy_vel_max);
+        vel_sp.x = xy.x;
+        vel_sp.y = xy.y;
+        vel_sp.z = vel_sp.z.clamp(-p.mpc_z_vel_max_dn, p.mpc_z_vel_max_up);
+
+        // Velocity PID -> acceleration setpoint.
+        let vel_dot = if velocity_ok {
+            self.velocity_derivative
+                .update(&state.velocity, dt, p.mpc_veld_lp)
+        } else {
+            self.velocity_derivative.reset();
+            Vector3::zeros()
+        };
+        let gains_p = Vector3::new(p.mpc_xy_vel_p_acc, p.mpc_xy_vel_p_acc, p.mpc_z_vel_p_acc);
+        let gains_i = Vector3::new(p.mpc_xy_vel_i_acc, p.mpc_xy_vel_i_acc, p.mpc_z_vel_i_acc);
+        let gains_d = Vector3::new(p.mpc_xy_vel_d_acc, p.mpc_xy_vel_d_acc, p.mpc_z_vel_d_acc);
+        let mut vel_error = Vector3::zeros();
+        let mut acc_sp = acc_ff;
+        for i in 0..3 {
+            if vel_defined[i] && velocity_ok {
+                vel_error[i] = vel_sp[i] - state.velocity[i];
+                acc_sp[i] +=
+                    gains_p[i] * vel_error[i] + self.velocity_integral[i] - gains_d[i] * vel_dot[i];
+            }
+        }
+        for i in 0..3 {
+            if !vel_defined[i] {
+                vel_sp[i] = 0.0;
+            }
+        }
+
+        // Acceleration limits.
+        let mut acc_limited = acc_sp;
+        let hor = acc_limited.xy().norm();
+        if hor > p.mpc_acc_hor_max {
+            let s = p.mpc_acc_hor_max / hor;
+            acc_limited.x *= s;
+            acc_limited.y *= s;
+        }
+        acc_limited.z = acc_limited.z.clamp(-p.mpc_acc_down_max, p.mpc_acc_up_max);
+
+        // Acceleration -> thrust vector (PX4 _accelerationControl).
+        let hover = p.mpc_thr_hover;
+        let mut body_z = Vector3::new(acc_limited.x, acc_limited.y, GRAVITY_M_S2 + acc_limited.z);
+        body_z = if body_z.norm() > 1e-6 {
+            body_z.normalize()
+        } else {
+            Vector3::z()
+        };
+        body_z = limit_tilt(&body_z, p.mpc_tiltmax_air.to_radians());
+        let thrust_up = hover + acc_limited.z * hover / GRAVITY_M_S2;
+        let collective = (thrust_up / body_z.z).max(p.mpc_thr_min);
+        let mut thr_sp = body_z * collective;
+
+        // Integrator anti-windup in vertical direction.
+        if (thr_sp.z <= p.mpc_thr_min && vel_error.z <= 0.0)
+            || (thr_sp.z >= p.mpc_thr_max && vel_error.z >= 0.0)
+        {
+            vel_error.z = 0.0;
+        }
+        // Prioritize vertical control while keeping a horizontal margin.
+        let thr_xy_norm = thr_sp.xy().norm();
+        let thr_max_sq = p.mpc_thr_max * p.mpc_thr_max;
+        let allocated_xy = thr_xy_norm.min(p.mpc_thr_xy_marg);
+        let thr_z_max = (thr_max_sq - allocated_xy * allocated_xy).max(0.0).sqrt();
+        thr_sp.z = thr_sp.z.min(thr_z_max);
+        let thr_xy_max = (thr_max_sq - thr_sp.z * thr_sp.z).max(0.0).sqrt();
+        if thr_xy_norm > thr_xy_max && thr_xy_norm > 0.0 {
+            let s = thr_xy_max / thr_xy_norm;
+            thr_sp.x *= s;
+            thr_sp.y *= s;
+        }
+        // Tracking anti-windup in the horizontal direction (Rundqwist 1990, as PX4).
+        let acc_produced_xy = thr_sp.xy() * (GRAVITY_M_S2 / hover);
+        let acc_sp_xy = acc_sp.xy();
+        let acc_effective_xy = if acc_sp_xy.norm_squared() > acc_produced_xy.norm_squared() {
+            acc_produced_xy
+        } else {
+            acc_sp_xy
+        };
+        let arw_gain = 2.0 / p.mpc_xy_vel_p_acc;
+        vel_error.x -= arw_gain * (acc_sp_xy.x - acc_effective_xy.x);
+        vel_error.y -= arw_gain * (acc_sp_xy.y - acc_effective_xy.y);
+
+        if integrate && velocity_ok {
+            for i in 0..3 {
+                if vel_defined[i] && vel_error[i].is_finite() {
+                    self.velocity_integral[i] += vel_error[i] * gains_i[i] * dt;
+                }
+            }
+            for i in 0..3 {
+                self.velocity_integral[i] =
+                    self.velocity_integral[i].clamp(-GRAVITY_M_S2, GRAVITY_M_S2);
+            }
+        }
+        (vel_sp, acc_limited, thr_sp)
+    }
+
+    /// Quaternion attitude P with reduced yaw priority, as PX4's AttitudeControl.
+    fn attitude_control(
+        &self,
+        q: &UnitQuaternion<f64>,
+        qd: &UnitQuaternion<f64>,
+        yaw_rate_ff: f64,
+    ) -> Vector3<f64> {
+        let p = &self.params;
+        let yaw_w = p.mc_yaw_weight.clamp(0.0, 1.0);
+        let mut gain = Vector3::new(p.mc_roll_p, p.mc_pitch_p, p.mc_yaw_p);
+        if yaw_w > 1e-4 {
+            gain.z /= yaw_w;
+        }
+        let e_z = q * Vector3::z();
+        let e_z_d = qd * Vector3::z();
+        // Reduced attitude: only tilt to the desired thrust direction, keep yaw.
+        let qd_red = match UnitQuaternion::rotation_between(&e_z, &e_z_d) {
+            Some(r) => r * q,
+            None => *qd,
+        };
+        // Mix full and reduced desired attitude with the yaw weight.
+        let mut q_mix = (qd_red.inverse() * qd).into_inner();
+        if q_mix.w < 0.0 {
+            q_mix = -q_mix;
+        }
+        let w = q_mix.w.clamp(-1.0, 1.0);
+        let z = q_mix.k.clamp(-1.0, 1.0);
+        let yaw_part =
+            nalgebra::Quaternion::new((yaw_w * w.acos()).cos(), 0.0, 0.0, (yaw_w * z.asin()).sin());
+        let qd_weighted = qd_red * UnitQuaternion::new_normalize(yaw_part);
+        let mut qe = (q.inverse() * qd_weighted).into_inner();
+        if qe.w < 0.0 {
+            qe = -qe;
+        }
+        let eq = qe.imag() * 2.0;
+        let mut rate_sp = eq.component_mul(&gain);
+        // Yaw rate feed-forward: world z rate expressed in body.
+        rate_sp += q.inverse() * Vector3::z() * yaw_rate_ff;
+        let limits = Vector3::new(
+            p.mc_rollrate_max.to_radians(),
+            p.mc_pitchrate_max.to_radians(),
+            p.mc_yawrate_max.to_radians(),
+        );
+        for i in 0..3 {
+            rate_sp[i] = rate_sp[i].clamp(-limits[i], limits[i]);
+        }
+        rate_sp
+    }
+
+    /// Body-rate PID with PX4's saturation-aware integrator.
+    fn rate_control(
+        &mut self,
+        dt: f64,
+        integrate: bool,
+        rates: &Vector3<f64>,
+        rate_sp: &Vector3<f64>,
+        rates_ok: bool,
+    ) -> Vector3<f64> {
+        let p = &self.params;
+        let gain_p = Vector3::new(p.mc_rollrate_p, p.mc_pitchrate_p, p.mc_yawrate_p);
+        let gain_i = Vector3::new(p.mc_rollrate_i, p.mc_pitchrate_i, p.mc_yawrate_i);
+        let gain_d = Vector3::new(p.mc_rollrate_d, p.mc_pitchrate_d, p.mc_yawrate_d);
+        let int_lim = Vector3::new(p.mc_rr_int_lim, p.mc_pr_int_lim, p.mc_yr_int_lim);
+        let angular_accel = if rates_ok {
+            self.rate_derivative.update(rates, dt, p.imu_dgyro_cutoff)
+        } else {
+            Vector3::zeros()
+        };
+        let error = rate_sp - rates;
+        let torque = error.component_mul(&gain_p) + self.rate_integral
+            - angular_accel.component_mul(&gain_d);
+        if integrate && rates_ok {
+            for i in 0..3 {
+                let mut e = error[i];
+                if self.saturation.positive[i] {
+                    e = e.min(0.0);
+                }
+                if self.saturation.negative[i] {
+                    e = e.max(0.0);
+                }
+                // Reduce the I gain with increasing rate error (PX4: 400 deg/s).
+                let f = e / 400f64.to_radians();
+                let i_factor = (1.0 - f * f).max(0.0);
+                let next = self.rate_integral[i] + i_factor * gain_i[i] * e * dt;
+                if next.is_finite() {
+                    self.rate_integral[i] = next.clamp(-int_lim[i], int_lim[i]);
+                }
+            }
+        }
+        torque.map(|t| t.clamp(-1.0, 1.0))
+    }
+}
+
+/// Result of the mixer.
+struct Mix {
+    motors: [f64; 4],
+    saturated: bool,
+    saturation: TorqueSaturation,
+}
+
+/// Per-motor mixer columns (roll, pitch, yaw, thrust) for the quad X layout.
+fn mixer_columns() -> [[f64; 4]; 4] {
+    let mut cols = [[0.0; 4]; 4];
+    for (i, g) in QUAD_X_MOTORS.iter().enumerate() {
+        // Roll torque (+x) comes from thrust on the left (+y) motors.
+        cols[0][i] = g.y_sign * MIX_ROLL_PITCH;
+        // Pitch torque (+y, nose down) comes from thrust on the rear (-x) motors.
+        cols[1][i] = -g.x_sign * MIX_ROLL_PITCH;
+        // Yaw torque (+z) is the reaction of the clockwise (spin -1) rotors.
+        cols[2][i] = -g.spin * MIX_YAW;
+        cols[3][i] = 1.0;
+    }
+    cols
+}
+
+/// PX4's desaturation gain: how far to move along `dir` to bring outputs into `[lo, hi]`.
+fn desaturation_gain(u: &[f64; 4], dir: &[f64; 4], lo: f64, hi: f64) -> f64 {
+    let (mut k_min, mut k_max) = (0.0_f64, 0.0_f64);
+    for i in 0..4 {
+        if dir[i].abs() < f64::EPSILON {
+            continue;
+        }
+        if u[i] < lo {
+            let k = (lo - u[i]) / dir[i];
+            k_min = k_min.min(k);
+            k_max = k_max.max(k);
+        }
+        if u[i] > hi {
+            let k = (hi - u[i]) / dir[i];
+            k_min = k_min.min(k);
+            k_max = k_max.max(k);
+        }
+    }
+    k_min + k_max
+}
+
+/// Moves `u` along `dir` to unsaturate it (twice, for a symmetric result).
+/// With `decrease_only`, a positive move (e.g. raising thrust) is refused.
+fn desaturate(u: &mut [f64; 4], dir: &[f64; 4], lo: f64, hi: f64, decrease_only: bool) {
+    let gain = desaturation_gain(u, dir, lo, hi);
+    if decrease_only && gain > 0.0 {
+        return;
+    }
+    for i in 0..4 {
+        u[i] += gain * dir[i];
+    }
+    let gain = 0.5 * desaturation_gain(u, dir, lo, hi);
+    for i in 0..4 {
+        u[i] += gain * dir[i];
+    }
+}
+
+/// Normalized thrust and torques to motor outputs, as PX4's sequential
+/// desaturation with airmode disabled: thrust is never raised to unsaturate,
+/// roll and pitch are kept before yaw, yaw gets 15 % headroom.
+fn mix(thrust: f64, torque: &Vector3<f64>) -> Mix {
+    let cols = mixer_columns();
+    let mut u = [0.0; 4];
+    for i in 0..4 {
+        u[i] = cols[3][i] * thrust + cols[0][i] * torque.x + cols[1][i] * torque.y;
+    }
+    let raw_rp = u;
+    desaturate(&mut u, &cols[3], 0.0, 1.0, true);
+    desaturate(&mut u, &cols[0], 0.0, 1.0, false);
+    desaturate(&mut u, &cols[1], 0.0, 1.0, false);
+    for i in 0..4 {
+        u[i] += cols[2][i] * torque.z;
+    }
+    let before_yaw_desat = u;
+    desaturate(&mut u, &cols[2], 0.0, 1.15, false);
+    desaturate(&mut u, &cols[3], 0.0, 1.0, true);
+
+    let mut saturated = raw_rp.iter().any(|v| !(0.0..=1.0).contains(v))
+        || before_yaw_desat.iter().any(|v| !(0.0..=1.0).contains(v));
+    let mut saturation = TorqueSaturation::default();
+    for (i, ui) in u.iter().enumerate() {
+        let upper = *ui >= 1.0 - 1e-9;
+        let lower = *ui <= 1e-9;
+        if upper || lower {
+            for (axis, col) in cols.iter().enumerate().take(3) {
+                let c = col[i];
+                if c.abs() < f64::EPSILON {
+                    continue;
+                }
+                // More torque along `axis` would push this motor further out.
+                if (upper && c > 0.0) || (lower && c < 0.0) {
+                    saturation.positive[axis] = true;
+                }
+                if (upper && c < 0.0) || (lower && c > 0.0) {
+                    saturation.negative[axis] = true;
+                }
+            }
+        }
+        if *ui > 1.0 || *ui < 0.0 {
+            saturated = true;
+        }
+    }
+    let mut motors = [0.0; 4];
+    for i in 0..4 {
+        motors[i] = if u[i].is_finite() {
+            u[i].clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+    }
+    Mix {
+        motors,
+        saturated,
+        saturation,
+    }
+}
+
+fn finite3(v: &Vector3<f64>) -> bool {
+    v.iter().all(|c| c.is_finite())
+}
+
+fn output_is_finite(o: &ControlOutput) -> bool {
+    o.motors.iter().all(|m| m.is_finite())
+        && finite3(&o.velocity_setpoint)
+        && finite3(&o.acceleration_setpoint)
+        && finite3(&o.thrust_setpoint)
+        && o.attitude_setpoint.coords.iter().all(|c| c.is_finite())
+        && finite3(&o.rate_setpoint)
+        && finite3(&o.torque_setpoint)
+}
+
+/// Drops non-finite setpoint fields (flagging them).
+fn sanitize_setpoint(sp: &Setpoint, status: &mut ControlStatus) -> Setpoint {
+    let mut clean = |v: Option<f64>| match v {
+        Some(x) if !x.is_finite() => {
+            status.invalid_setpoint = true;
+            None
+        }
+        other => other,
+    };
+    let mut out = *sp;
+    for i in 0..3 {
+        out.position[i] = clean(sp.position[i]);
+        out.velocity[i] = clean(sp.velocity[i]);
+        out.acceleration[i] = clean(sp.acceleration[i]);
+    }
+    out.yaw = clean(sp.yaw);
+    out.yaw_rate = clean(sp.yaw_rate);
+    out
+}
+
+/// Limits a horizontal velocity, keeping the position-correction part `v0`
+/// first and as much of the feed-forward `v1` as fits (PX4 constrainXY).
+fn constrain_xy(
+    v0: &nalgebra::Vector2<f64>,
+    v1: &nalgebra::Vector2<f64>,
+    max: f64,
+) -> nalgebra::Vector2<f64> {
+    let sum = v0 + v1;
+    if sum.norm() <= max {
+        return sum;
+    }
+    if v0.norm() >= max {
+        return v0.normalize() * max;
+    }
+    if v1.norm() < 1e-9 {
+        return *v0;
+    }
+    // Find s in [0, 1] with |v0 + s v1| = max.
+    let a = v1.norm_squared();
+    let b = 2.0 * v0.dot(v1);
+    let c = v0.norm_squared() - max * max;
+    let disc = (b * b - 4.0 * a * c).max(0.0);
+    let s = ((-b + disc.sqrt()) / (2.0 * a)).clamp(0.0, 1.0);
+    v0 + v1 * s
+}
+
+/// Tilts `body_z` back toward up so that it is at most `max_tilt` from vertical.
+fn limit_tilt(body_z: &Vector3<f64>, max_tilt: f64) -> Vector3<f64> {
+    let tilt = body_z.z.clamp(-1.0, 1.0).acos();
+    if tilt <= max_tilt {
+        return *body_z;
+    }
+    let horizontal = Vector3::new(body_z.x, body_z.y, 0.0);
+    let n = horizontal.norm();
+    if n < 1e-9 {
+        return Vector3::z();
+    }
+    horizontal / n * max_tilt.sin() + Vector3::z() * max_tilt.cos()
+}
+
+/// Heading of an attitude (ENU: angle of body x from east, counter-clockwise).
+fn yaw_of(q: &UnitQuaternion<f64>) -> f64 {
+    let x = q * Vector3::x();
+    if x.x.abs() < 1e-9 && x.y.abs() < 1e-9 {
+        // Nose straight up or down: fall back to the body y axis.
+        let y = q * Vector3::y();
+        return (-y.x).atan2(y.y);
+    }
+    x.y.atan2(x.x)
+}
+
+/// Attitude whose body z is along the thrust vector and whose heading is `yaw`
+/// (PX4 bodyzToAttitude in ENU/FLU).
+pub fn attitude_from_thrust(thrust: &Vector3<f64>, yaw: f64) -> UnitQuaternion<f64> {
+    let z = if thrust.norm() > 1e-9 {
+        thrust.normalize()
+    } else {
+        Vector3::z()
+    };
+    let heading = Vector3::new(yaw.cos(), yaw.sin(), 0.0);
+    let mut y = z.cross(&heading);
+    if y.norm() < 1e-6 {
+        // Thrust horizontal along the heading: pick any perpendicular.
+        y = Vector3::new(-yaw.sin(), yaw.cos(), 0.0);
+    }
+    let y = y.normalize();
+    let x = y.cross(&z);
+    UnitQuaternion::from_rotation_matrix(&Rotation3::from_basis_unchecked(&[x, y, z]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn level_state(position: Vector3<f64>) -> EstimatedState {
+        EstimatedState {
+            position,
+            velocity: Vector3::zeros(),
+            world_from_body: UnitQuaternion::identity(),
+            body_rates: Vector3::zeros(),
+            landed: false,
+        }
+    }
+
+    #[test]
+    fn default_params_are_valid_and_match_px4_defaults() {
+        let p = AutopilotParams::default();
+        p.validate().unwrap();
+        assert_eq!(p.mpc_xy_p, 0.95);
+        assert_eq!(p.mc_roll_p, 6.5);
+        assert!((p.mc_rollrate_p - 0.15).abs() < 1e-12);
+        AutopilotParams::racer().validate().unwrap();
+    }
+
+    #[test]
+    fn params_parse_from_toml_with_px4_names() {
+        let p: AutopilotParams = toml::from_str("MPC_XY_P = 1.2\nMPC_TILTMAX_AIR = 30.0").unwrap();
+        assert_eq!(p.mpc_xy_p, 1.2);
+        assert_eq!(p.mpc_tiltmax_air, 30.0);
+        assert!(toml::from_str::<AutopilotParams>("MPC_XY_PP = 1.0").is_err());
+    }
+
+    #[test]
+    fn validation_rejects_a_hover_thrust_outside_the_thrust_limits() {
+        let p = AutopilotParams {
+            mpc_thr_hover: 1.5,
+            ..AutopilotParams::default()
+        };
+        let msg = p.validate().unwrap_err().to_string();
+        assert!(msg.starts_with("MPC_THR_HOVER = 1.5"), "{msg}");
+        let p = AutopilotParams {
+            mpc_tiltmax_air: 95.0,
+            ..AutopilotParams::default()
+        };
+        assert!(p.validate().is_err());
+    }
+
+    #[test]
+    fn mixer_gives_hover_thrust_on_every_motor_without_torque() {
+        let m = mix(0.4, &Vector3::zeros());
+        assert!(m.motors.iter().all(|u| (u - 0.4).abs() < 1e-12));
+        assert!(!m.saturated);
+    }
+
+    #[test]
+    fn mixer_keeps_roll_and_pitch_before_yaw_when_saturated() {
+        let torque = Vector3::new(0.3, 0.0, 0.8);
+        let m = mix(0.5, &torque);
+        let cols = mixer_columns();
+        let roll: f64 = (0..4).map(|i| cols[0][i] * m.motors[i]).sum::<f64>() / 2.0;
+        let yaw: f64 = (0..4).map(|i| cols[2][i] * m.motors[i]).sum::<f64>() / 4.0;
+        assert!((roll - 0.3).abs() < 1e-9, "roll {roll}");
+        assert!(yaw < 0.8 && yaw > 0.0, "yaw {yaw}");
+        assert!(m.saturated);
+        assert!(m.motors.iter().all(|u| (0.0..=1.0).contains(u)));
+    }
+
+    #[test]
+    fn mixer_never_raises_thrust_to_unsaturate() {
+        let m = mix(0.05, &Vector3::new(0.5, 0.0, 0.0));
+        let mean: f64 = m.motors.iter().sum::<f64>() / 4.0;
+        assert!(mean <= 0.05 + 1e-9, "mean {mean}");
+        assert!(m.saturation.positive[0]);
+    }
+
+    #[test]
+    fn attitude_from_thrust_is_level_for_vertical_thrust_and_keeps_the_heading() {
+        let q = attitude_from_thrust(&Vector3::new(0.0, 0.0, 0.5), 1.0);
+        assert!((yaw_of(&q) - 1.0).abs() < 1e-12);
+        assert!(((q * Vector3::z()) - Vector3::z()).norm() < 1e-12);
+        // Thrust toward +x (east) with heading east: nose down, pitch positive in FLU.
+        let q = attitude_from_thrust(&Vector3::new(0.2, 0.0, 0.5), 0.0);
+        let (_, pitch, yaw) = q.euler_angles();
+        assert!(pitch > 0.0 && yaw.abs() < 1e-12);
+    }
+
+    #[test]
+    fn tilt_is_limited_to_the_maximum() {
+        let z = limit_tilt(&Vector3::new(1.0, 0.0, 0.1).normalize(), 45f64.to_radians());
+        assert!((z.z.acos() - 45f64.to_radians()).abs() < 1e-12);
+        assert!((z.norm() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn constrain_xy_prefers_the_position_correction_over_feed_forward() {
+        use nalgebra::Vector2;
+        let v = constrain_xy(&Vector2::new(3.0, 0.0), &Vector2::new(0.0, 10.0), 5.0);
+        assert!((v.norm() - 5.0).abs() < 1e-9);
+        assert!((v.x - 3.0).abs() < 1e-9);
+        let v = constrain_xy(&Vector2::new(8.0, 0.0), &Vector2::new(0.0, 10.0), 5.0);
+        assert!((v - Vector2::new(5.0, 0.0)).norm() < 1e-9);
+    }
+
+    #[test]
+    fn attitude_error_produces_a_correcting_rate() {
+        let ap = Autopilot::new(AutopilotParams::default()).unwrap();
+        let q = UnitQuaternion::from_euler_angles(0.1, 0.0, 0.0);
+        let rate = ap.attitude_control(&q, &UnitQuaternion::identity(), 0.0);
+        assert!(rate.x < -0.5, "{rate:?}");
+        assert!(rate.y.abs() < 1e-9 && rate.z.abs() < 1e-9);
+    }
+
+    #[test]
+    fn yaw_error_is_corrected_with_reduced_priority() {
+        let ap = Autopilot::new(AutopilotParams::default()).unwrap();
+        let q = UnitQuaternion::from_euler_angles(0.0, 0.0, 0.1);
+        let rate = ap.attitude_control(&q, &UnitQuaternion::identity(), 0.0);
+        // Small errors: yaw weight 0.4 cancels the division of MC_YAW_P by it.
+        assert!((rate.z + 0.1 * 2.8).abs() < 0.02, "{rate:?}");
+    }
+
+    #[test]
+    fn hover_setpoint_at_the_current_position_gives_hover_thrust() {
+        let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+        let out = ap.update(
+            0.002,
+            &level_state(Vector3::new(0.0, 0.0, 2.0)),
+            &Setpoint::position(Vector3::new(0.0, 0.0, 2.0), 0.0),
+        );
+        let hover = ap.params().mpc_thr_hover;
+        assert!(
+            out.motors.iter().all(|u| (u - hover).abs() < 1e-9),
+            "{:?}",
+            out.motors
+        );
+        assert!(!out.status.any());
+    }
+
+    #[test]
+    fn an_empty_setpoint_brakes_and_is_flagged() {
+        let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+        let mut s = level_state(Vector3::new(0.0, 0.0, 2.0));
+        s.velocity = Vector3::new(2.0, 0.0, 0.0);
+        let out = ap.update(0.002, &s, &Setpoint::default());
+        assert!(out.status.incomplete_setpoint);
+        assert!(out.acceleration_setpoint.x < -1.0);
+        assert_eq!(out.velocity_setpoint, Vector3::zeros());
+    }
+
+    #[test]
+    fn the_velocity_setpoint_respects_the_speed_limits() {
+        let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+        let s = level_state(Vector3::new(0.0, 0.0, 2.0));
+        let out = ap.update(
+            0.002,
+            &s,
+            &Setpoint::position(Vector3::new(100.0, 0.0, -50.0), 0.0),
+        );
+        assert!((out.velocity_setpoint.xy().norm() - 12.0).abs() < 1e-9);
+        assert!((out.velocity_setpoint.z + 1.5).abs() < 1e-9);
+        let tilt = out.attitude_setpoint.angle();
+        assert!(tilt <= 45f64.to_radians() + 1e-9);
+    }
+
+    #[test]
+    fn landed_vehicles_do_not_wind_up_their_integrators() {
+        let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+        let mut s = level_state(Vector3::zeros());
+        s.landed = true;
+        for _ in 0..5000 {
+            ap.update(
+                0.002,
+                &s,
+                &Setpoint::position(Vector3::new(0.0, 0.0, -1.0), 0.0),
+            );
+        }
+        assert_eq!(ap.velocity_integral, Vector3::zeros());
+        assert_eq!(ap.rate_integral, Vector3::zeros());
+    }
+
+    #[test]
+    fn reset_clears_the_integrators() {
+        let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+        let s = level_state(Vector3::zeros());
+        for _ in 0..100 {
+            ap.update(
+                0.002,
+                &s,
+                &Setpoint::position(Vector3::new(1.0, 1.0, 1.0), 0.5),
+            );
+        }
+        assert_ne!(ap.velocity_integral, Vector3::zeros());
+        ap.reset();
+        assert_eq!(ap.velocity_integral, Vector3::zeros());
+        assert_eq!(ap.rate_integral, Vector3::zeros());
+        assert_eq!(ap.yaw_hold, None);
+    }
+
+    fn assert_all_finite(out: &ControlOutput) {
+        assert!(output_is_finite(out), "{out:?}");
+        assert!(out.motors.iter().all(|m| (0.0..=1.0).contains(m)));
+    }
+
+    #[test]
+    fn non_finite_inputs_never_produce_nan_outputs() {
+        let bad_values = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY];
+        let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+        let good = level_state(Vector3::new(1.0, 2.0, 3.0));
+        let sp = Setpoint::position(Vector3::new(0.0, 0.0, 3.0), 0.2)
+            .with_velocity(Vector3::new(1.0, 0.0, 0.0))
+            .with_acceleration(Vector3::new(0.0, 0.5, 0.0));
+        for bad in bad_values {
+            for field in 0..5 {
+                for axis in 0..3 {
+                    let mut s = good;
+                    match field {
+                        0 => s.position[axis] = bad,
+                        1 => s.velocity[axis] = bad,
+                        2 => s.body_rates[axis] = bad,
+                        3 => {
+                            let mut q = s.world_from_body.into_inner();
+                            q.coords[axis] = bad;
+                            s.world_from_body = UnitQuaternion::new_unchecked(q);
+                        }
+                        _ => {}
+                    }
+                    for dt in [0.002, bad, 0.0, -1.0] {
+                        let out = ap.update(dt, &s, &sp);
+                        assert_all_finite(&out);
+                        assert!(out.status.any() || field == 4 && dt == 0.002);
+                        // The controller recovers on the next good input.
+                        let out = ap.update(0.002, &good, &sp);
+                        assert_all_finite(&out);
+                    }
+                }
+            }
+            for axis in 0..3 {
+                let mut bad_sp = sp;
+                bad_sp.position[axis] = Some(bad);
+                bad_sp.velocity[(axis + 1) % 3] = Some(bad);
+                bad_sp.acceleration[(axis + 2) % 3] = Some(bad);
+                bad_sp.yaw = Some(bad);
+                bad_sp.yaw_rate = Some(bad);
+                let out = ap.update(0.002, &good, &bad_sp);
+                assert_all_finite(&out);
+                assert!(out.status.invalid_setpoint);
+            }
+        }
+    }
+
+    #[test]
+    fn a_lost_attitude_gives_level_hover_thrust_and_a_flag() {
+        let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+        let mut s = level_state(Vector3::zeros());
+        s.world_from_body =
+            UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(0.0, 0.0, 0.0, 0.0));
+        let out = ap.update(0.002, &s, &Setpoint::default());
+        assert!(out.status.attitude_lost);
+        let hover = ap.params().mpc_thr_hover;
+        assert!(out.motors.iter().all(|m| *m == hover));
+    }
+
+    #[test]
+    fn extreme_but_finite_inputs_stay_within_limits() {
+        let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+        let mut s = level_state(Vector3::new(1e12, -1e12, 1e9));
+        s.velocity = Vector3::new(1e9, 1e9, -1e9);
+        s.body_rates = Vector3::new(1e6, -1e6, 1e6);
+        s.world_from_body = UnitQuaternion::from_euler_angles(3.0, 1.0, -2.0);
+        let sp = Setpoint::position(Vector3::new(-1e12, 1e12, -1e9), 1e9)
+            .with_acceleration(Vector3::new(1e15, 0.0, -1e15));
+        for _ in 0..100 {
+            let out = ap.update(0.002, &s, &sp);
+            assert_all_finite(&out);
+        }
+    }
+}

@@ -1,0 +1,24 @@
+//! The simulator core of the landing stack: a pure library.
+//!
+//! It stands in for the world and for PX4 so the whole mission can run on a
+//! laptop: quadrotor rigid-body physics, a PX4-like cascaded controller, the
+//! noise a visual-inertial estimator adds, the ground vehicle carrying the
+//! landing pad, wind, and a [`world::World`] that ties them together and
+//! records ground-truth events (touchdown, crash, collision).
+//!
+//! Everything here is pure: inputs and time in, outputs out. There are no clock
+//! reads, sleeps, threads, IPC or printing; the caller drives fixed-step
+//! integration, so lockstep runs are deterministic for a given seed.
+//!
+//! Frames: world ENU (x east, y north, z up, origin at the take-off point),
+//! body FLU (x forward, y left, z up); transforms are named by what they map
+//! (`world_from_body * p_body = p_world`). SI units throughout.
+
+pub mod autopilot;
+pub mod estimator_noise;
+pub mod ground_vehicle;
+pub mod params;
+pub mod quadrotor;
+pub mod rng;
+pub mod wind;
+pub mod world;
