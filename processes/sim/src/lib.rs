@@ -20,5 +20,6 @@ pub mod ground_vehicle;
 pub mod params;
 pub mod quadrotor;
 pub mod rng;
+pub mod scenario;
 pub mod wind;
 pub mod world;

@@ -1,0 +1,468 @@
+//! Scenarios: one TOML file per experiment in `deploy/scenarios/`, naming the airframe,
+//! the mission's preset point, the ground vehicle's route and speed, wind, obstacles and
+//! the sensors. Unknown keys and impossible values are errors that name the key.
+//!
+//! The `[mission]` table is what an operator would give the vehicle (where to wait for
+//! the pad, when to commit to touchdown); everything else is the world, which only the
+//! simulator and the evaluator know.
+
+use std::path::{Path, PathBuf};
+
+use ipc_types::runtime::config::{self, ConfigError, Invalid, Validate, check_range};
+use serde::Deserialize;
+
+use crate::autopilot::AutopilotParams;
+use crate::estimator_noise::EstimatorNoiseParams;
+use crate::ground_vehicle::GroundVehicleParams;
+use crate::params::ParamError;
+use crate::quadrotor::AirframeParams;
+use crate::wind::WindParams;
+use crate::world::{Aabb, CrashThresholds, WorldParams};
+
+/// Names of the scenarios shipped in `deploy/scenarios/`.
+pub const SHIPPED: &[&str] = &[
+    "paper-sim",
+    "indoor-static",
+    "indoor-moving",
+    "outdoor-1",
+    "outdoor-2",
+    "obstacle-demo",
+    "highspeed-10",
+    "highspeed-20",
+    "highspeed-30",
+    "highspeed-50",
+    "highspeed-30-curve",
+];
+
+/// What the operator tells the vehicle: the mission, not the world.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MissionParams {
+    /// Where to climb to and wait for the pad, world ENU, m (the paper's preset point).
+    pub preset_m: [f64; 3],
+    /// Height above the pad below which the vehicle commits to touchdown, m (paper: 0.6).
+    #[serde(default = "default_commit_height")]
+    pub commit_height_m: f64,
+}
+
+fn default_commit_height() -> f64 {
+    0.6
+}
+
+/// The downward camera of a scenario.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CameraParams {
+    /// OpenCV calibration YAML, relative to `deploy/config/` unless absolute.
+    pub calibration: String,
+    /// Frames per second.
+    pub rate_hz: f64,
+    /// Exposure time, ms (motion blur).
+    pub exposure_ms: f64,
+    /// Time from the middle of the exposure to publication, ms.
+    pub latency_ms: f64,
+    /// Standard deviation of the sensor noise, grey levels.
+    pub noise_std: f64,
+}
+
+impl Default for CameraParams {
+    fn default() -> Self {
+        Self {
+            calibration: "camera_down_640x480.yaml".into(),
+            rate_hz: 30.0,
+            exposure_ms: 4.0,
+            latency_ms: 15.0,
+            noise_std: 2.0,
+        }
+    }
+}
+
+/// The forward depth camera of a scenario.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DepthParams {
+    /// Frames per second.
+    pub rate_hz: f64,
+    /// Depth noise grows as `noise_coefficient * z^2` (m, z in m).
+    pub noise_coefficient: f64,
+}
+
+impl Default for DepthParams {
+    fn default() -> Self {
+        Self {
+            rate_hz: 30.0,
+            noise_coefficient: 0.002,
+        }
+    }
+}
+
+/// A scenario as written in its TOML file.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Short name (the file's stem).
+    pub name: String,
+    /// One line for people.
+    pub description: String,
+    /// Seed of every random process (noise, gusts); `--seed` overrides it.
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    /// Simulated time after which the run is a timeout, s.
+    pub duration_s: f64,
+    /// Airframe profile: a name from `deploy/config/airframes/` (`p450`, `racer`).
+    pub airframe: String,
+    /// The operator's mission.
+    pub mission: MissionParams,
+    /// The ground vehicle carrying the pad.
+    pub ground_vehicle: GroundVehicleParams,
+    /// Wind (calm by default).
+    #[serde(default = "calm")]
+    pub wind: WindParams,
+    /// Noise of the autopilot's state estimate.
+    #[serde(default)]
+    pub estimator_noise: EstimatorNoiseParams,
+    /// Box obstacles.
+    #[serde(default)]
+    pub obstacles: Vec<Aabb>,
+    /// Crash criteria.
+    #[serde(default)]
+    pub crash: CrashThresholds,
+    /// The downward camera.
+    #[serde(default)]
+    pub camera: CameraParams,
+    /// The forward depth camera.
+    #[serde(default)]
+    pub depth: DepthParams,
+}
+
+fn default_seed() -> u64 {
+    1
+}
+
+fn calm() -> WindParams {
+    WindParams::constant(nalgebra::Vector3::zeros())
+}
+
+fn from_param(section: &str, e: ParamError) -> Invalid {
+    Invalid::new(
+        format!("{section}.{}", e.field),
+        format!("{} is not allowed (allowed: {})", e.value, e.allowed),
+    )
+}
+
+impl Validate for Scenario {
+    fn validate(&self) -> Result<(), Invalid> {
+        if self.name.is_empty() {
+            return Err(Invalid::new("name", "must not be empty"));
+        }
+        check_range("seed", self.seed, 0, u64::MAX)?;
+        check_range("duration_s", self.duration_s, 1.0, 3600.0)?;
+        for (i, v) in self.mission.preset_m.iter().enumerate() {
+            check_range(&format!("mission.preset_m[{i}]"), *v, -1000.0, 1000.0)?;
+        }
+        check_range("mission.preset_m[2]", self.mission.preset_m[2], 0.3, 100.0)?;
+        check_range(
+            "mission.commit_height_m",
+            self.mission.commit_height_m,
+            0.05,
+            3.0,
+        )?;
+        self.ground_vehicle
+            .validate()
+            .map_err(|e| from_param("ground_vehicle", e))?;
+        self.wind.validate().map_err(|e| from_param("wind", e))?;
+        self.estimator_noise
+            .validate()
+            .map_err(|e| from_param("estimator_noise", e))?;
+        self.crash.validate().map_err(|e| from_param("crash", e))?;
+        for (i, b) in self.obstacles.iter().enumerate() {
+            for k in 0..3 {
+                let ok =
+                    b.min_m[k].is_finite() && b.max_m[k].is_finite() && b.min_m[k] < b.max_m[k];
+                if !ok {
+                    return Err(Invalid::new(
+                        format!("obstacles[{i}]"),
+                        "min_m must be below max_m on every axis, all finite".to_string(),
+                    ));
+                }
+            }
+        }
+        check_range("camera.rate_hz", self.camera.rate_hz, 1.0, 240.0)?;
+        check_range("camera.exposure_ms", self.camera.exposure_ms, 0.0, 50.0)?;
+        check_range("camera.latency_ms", self.camera.latency_ms, 0.0, 500.0)?;
+        check_range("camera.noise_std", self.camera.noise_std, 0.0, 50.0)?;
+        check_range("depth.rate_hz", self.depth.rate_hz, 1.0, 90.0)?;
+        check_range(
+            "depth.noise_coefficient",
+            self.depth.noise_coefficient,
+            0.0,
+            0.1,
+        )?;
+        Ok(())
+    }
+}
+
+/// Why a scenario could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    /// Neither a shipped name nor a readable file.
+    #[error(
+        "unknown scenario `{0}` (allowed: a file path, or one of: {list})",
+        list = SHIPPED.join(", ")
+    )]
+    Unknown(String),
+    /// The scenario file itself is wrong.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// The airframe profile is wrong.
+    #[error("scenario {scenario}: airframe `{name}`: {message}")]
+    Airframe {
+        /// The scenario file.
+        scenario: PathBuf,
+        /// Profile name.
+        name: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// An airframe profile file: the physical `[airframe]` and the PX4 `[limits]` its
+/// autopilot flies with (the other gains are PX4's defaults tuned for the airframe).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AirframeFile {
+    airframe: AirframeParams,
+    #[serde(default)]
+    limits: Limits,
+}
+
+/// PX4 speed, acceleration and tilt limits; absent ones keep PX4's defaults.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "SCREAMING_SNAKE_CASE")]
+pub struct Limits {
+    /// Horizontal speed limit, m/s.
+    pub mpc_xy_vel_max: Option<f64>,
+    /// Climb speed limit, m/s.
+    pub mpc_z_vel_max_up: Option<f64>,
+    /// Descent speed limit, m/s.
+    pub mpc_z_vel_max_dn: Option<f64>,
+    /// Horizontal acceleration limit, m/s^2.
+    pub mpc_acc_hor_max: Option<f64>,
+    /// Upward acceleration limit, m/s^2.
+    pub mpc_acc_up_max: Option<f64>,
+    /// Downward acceleration limit, m/s^2.
+    pub mpc_acc_down_max: Option<f64>,
+    /// Tilt limit in flight, deg.
+    pub mpc_tiltmax_air: Option<f64>,
+}
+
+impl Limits {
+    fn apply(&self, a: &mut AutopilotParams) {
+        let set = |dst: &mut f64, v: Option<f64>| {
+            if let Some(v) = v {
+                *dst = v;
+            }
+        };
+        set(&mut a.mpc_xy_vel_max, self.mpc_xy_vel_max);
+        set(&mut a.mpc_z_vel_max_up, self.mpc_z_vel_max_up);
+        set(&mut a.mpc_z_vel_max_dn, self.mpc_z_vel_max_dn);
+        set(&mut a.mpc_acc_hor_max, self.mpc_acc_hor_max);
+        set(&mut a.mpc_acc_up_max, self.mpc_acc_up_max);
+        set(&mut a.mpc_acc_down_max, self.mpc_acc_down_max);
+        set(&mut a.mpc_tiltmax_air, self.mpc_tiltmax_air);
+    }
+}
+
+impl Validate for AirframeFile {
+    fn validate(&self) -> Result<(), Invalid> {
+        self.airframe
+            .validate()
+            .map_err(|e| from_param("airframe", e))?;
+        let mut a = AutopilotParams::tuned_for(&self.airframe);
+        self.limits.apply(&mut a);
+        a.validate().map_err(|e| from_param("limits", e))
+    }
+}
+
+/// A scenario with its airframe resolved: everything the simulator needs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadedScenario {
+    /// The scenario as written.
+    pub scenario: Scenario,
+    /// Where it was read from.
+    pub path: PathBuf,
+    /// The airframe's parameters.
+    pub airframe: AirframeParams,
+    /// The autopilot for this airframe (PX4 defaults tuned for it, with its limits).
+    pub autopilot: AutopilotParams,
+    /// `deploy/config/` (calibration files are resolved against it).
+    pub config_dir: PathBuf,
+}
+
+impl LoadedScenario {
+    /// The world this scenario describes, with `seed` driving every random process.
+    pub fn world_params(&self, seed: u64) -> WorldParams {
+        let s = &self.scenario;
+        let mut noise = s.estimator_noise.clone();
+        noise.seed = seed;
+        let mut wind = s.wind.clone();
+        wind.seed = seed.wrapping_add(1);
+        WorldParams {
+            airframe: self.airframe.clone(),
+            autopilot: Some(self.autopilot.clone()),
+            estimator_noise: noise,
+            wind,
+            ground_vehicle: Some(s.ground_vehicle.clone()),
+            obstacles: s.obstacles.clone(),
+            crash: s.crash.clone(),
+            initial_position_m: [0.0; 3],
+            initial_yaw_rad: 0.0,
+        }
+    }
+
+    /// The camera calibration file.
+    pub fn calibration_path(&self) -> PathBuf {
+        resolve(&self.config_dir, &self.scenario.camera.calibration)
+    }
+}
+
+fn resolve(dir: &Path, file: &str) -> PathBuf {
+    let p = Path::new(file);
+    if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        dir.join(p)
+    }
+}
+
+/// Loads a scenario by shipped name (from `deploy_dir/scenarios/NAME.toml`) or by path,
+/// and resolves its airframe from `deploy_dir/config/airframes/`.
+pub fn load(name_or_path: &str, deploy_dir: &Path) -> Result<LoadedScenario, ScenarioError> {
+    let as_path = Path::new(name_or_path);
+    let path = if as_path.is_file() {
+        as_path.to_path_buf()
+    } else if SHIPPED.contains(&name_or_path) {
+        deploy_dir
+            .join("scenarios")
+            .join(format!("{name_or_path}.toml"))
+    } else {
+        return Err(ScenarioError::Unknown(name_or_path.to_string()));
+    };
+    let scenario: Scenario = config::load(&path)?;
+    let config_dir = deploy_dir.join("config");
+    let airframe_path = config_dir
+        .join("airframes")
+        .join(format!("{}.toml", scenario.airframe));
+    if !scenario
+        .airframe
+        .bytes()
+        .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
+        || !airframe_path.is_file()
+    {
+        return Err(ScenarioError::Airframe {
+            scenario: path,
+            name: scenario.airframe.clone(),
+            message: format!(
+                "no such profile in {} (allowed: p450, racer)",
+                config_dir.join("airframes").display()
+            ),
+        });
+    }
+    let airframe: AirframeFile = config::load(&airframe_path)?;
+    let mut autopilot = AutopilotParams::tuned_for(&airframe.airframe);
+    airframe.limits.apply(&mut autopilot);
+    Ok(LoadedScenario {
+        scenario,
+        path,
+        autopilot,
+        airframe: airframe.airframe,
+        config_dir,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn deploy() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy")
+    }
+
+    #[test]
+    fn every_shipped_scenario_loads_and_builds_a_world() {
+        for name in SHIPPED {
+            let s = load(name, &deploy()).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(&s.scenario.name, name);
+            let world = crate::world::World::new(s.world_params(7));
+            assert!(world.is_ok(), "{name}: {:?}", world.err());
+        }
+    }
+
+    fn write(text: &str, tag: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("sim-scn-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let p = dir.join(format!("{tag}.toml"));
+        std::fs::write(&p, text).expect("write");
+        p
+    }
+
+    fn base() -> String {
+        std::fs::read_to_string(deploy().join("scenarios/paper-sim.toml")).expect("paper-sim")
+    }
+
+    fn error_of(text: &str, tag: &str) -> String {
+        let p = write(text, tag);
+        load(p.to_str().expect("utf-8"), &deploy())
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default()
+    }
+
+    #[test]
+    fn an_unknown_key_is_named() {
+        let e = error_of(&base().replace("duration_s", "duraton_s"), "unknown");
+        assert!(e.contains("duraton_s"), "{e}");
+        assert!(!e.contains('\n'));
+    }
+
+    #[test]
+    fn a_ground_vehicle_faster_than_60_kmh_is_refused() {
+        let text = base().replace("speed_m_s = 0.778", "speed_m_s = 20.0");
+        let e = error_of(&text, "fast");
+        assert!(e.contains("ground_vehicle.") && e.contains("20"), "{e}");
+    }
+
+    #[test]
+    fn a_negative_mass_airframe_is_refused() {
+        let dir = std::env::temp_dir().join(format!("sim-af-{}", std::process::id()));
+        let airframes = dir.join("config/airframes");
+        std::fs::create_dir_all(&airframes).expect("dir");
+        std::fs::create_dir_all(dir.join("scenarios")).expect("dir");
+        let p450 =
+            std::fs::read_to_string(deploy().join("config/airframes/p450.toml")).expect("p450");
+        std::fs::write(
+            airframes.join("p450.toml"),
+            p450.replace("mass_kg = 1.5", "mass_kg = -1.0"),
+        )
+        .expect("write");
+        let scn = dir.join("scenarios/x.toml");
+        std::fs::write(&scn, base()).expect("write");
+        let e = load(scn.to_str().expect("utf-8"), &dir)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("airframe.mass_kg") && e.contains("-1"), "{e}");
+    }
+
+    #[test]
+    fn an_unknown_scenario_name_lists_the_shipped_ones() {
+        let e = load("paper-simm", &deploy())
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            e.contains("paper-simm") && e.contains("highspeed-30-curve"),
+            "{e}"
+        );
+    }
+}
