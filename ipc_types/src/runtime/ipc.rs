@@ -807,10 +807,8 @@ pub enum Wake {
 /// Why the wait loop returned.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LoopExit {
-    /// SIGTERM (systemd stop).
-    Terminate,
-    /// SIGINT (Ctrl-C).
-    Interrupt,
+    /// SIGTERM (systemd stop) or SIGINT (Ctrl-C): shut down cleanly.
+    Signal,
     /// The callback asked to stop.
     Stopped,
 }
@@ -852,8 +850,7 @@ pub fn run_wait_loop(
         None => None,
     };
 
-    let mut stopped = false;
-    let result = waitset.wait_and_process(|id| {
+    let mut on_event = |id: WaitSetAttachmentId<Svc>| {
         let mut keep = true;
         for (i, g) in data_guards.iter().enumerate() {
             if id.has_event_from(g) {
@@ -877,19 +874,18 @@ pub fn run_wait_loop(
         if keep {
             CallbackProgression::Continue
         } else {
-            stopped = true;
             CallbackProgression::Stop
         }
-    });
-    match result {
-        Ok(WaitSetRunResult::TerminationRequest) => Ok(LoopExit::Terminate),
-        Ok(WaitSetRunResult::Interrupt) => Ok(LoopExit::Interrupt),
-        Ok(_) => Ok(LoopExit::Stopped),
-        Err(e) if stopped => {
-            tracing::debug!(error = ?e, "wait set ended after stop");
-            Ok(LoopExit::Stopped)
+    };
+    loop {
+        match waitset.wait_and_process(&mut on_event) {
+            Ok(WaitSetRunResult::TerminationRequest) => return Ok(LoopExit::Signal),
+            // Any signal interrupts the wait; the next call returns TerminationRequest if it
+            // was SIGINT or SIGTERM, and waits on otherwise (SIGCHLD must not end a process).
+            Ok(WaitSetRunResult::Interrupt) | Ok(WaitSetRunResult::AllEventsHandled) => {}
+            Ok(WaitSetRunResult::StopRequest) => return Ok(LoopExit::Stopped),
+            Err(e) => return Err(IpcError::WaitSet(format!("{e:?}"))),
         }
-        Err(e) => Err(IpcError::WaitSet(format!("{e:?}"))),
     }
 }
 
