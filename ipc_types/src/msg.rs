@@ -819,6 +819,57 @@ pub struct WatchdogView {
     pub processes: [ProcessHealth; MAX_WATCHED],
 }
 
+/// Kinds of ground-truth events.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TruthKind {
+    /// The vehicle came to rest on a surface (the pad or the ground).
+    Touchdown = 1,
+    /// It left a surface.
+    Liftoff = 2,
+    /// It hit an obstacle.
+    Collision = 3,
+    /// It crashed (hard impact, excessive tilt).
+    Crash = 4,
+}
+
+impl TruthKind {
+    /// Decodes a raw kind; `None` for an unknown one.
+    pub fn from_raw(raw: u32) -> Option<Self> {
+        Some(match raw {
+            1 => Self::Touchdown,
+            2 => Self::Liftoff,
+            3 => Self::Collision,
+            4 => Self::Crash,
+            _ => return None,
+        })
+    }
+}
+
+/// A ground-truth event from the simulator, on the evaluator-only topic
+/// ([`crate::services::SIM_TRUTH`]). No pipeline process may read it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::TruthEvent/v1")]
+pub struct TruthEvent {
+    /// Sequence, event time (`capture_ns`, simulated ns), stage stamps.
+    pub msg: Header,
+    /// Raw [`TruthKind`].
+    pub kind: u32,
+    /// 1 when the surface was the pad.
+    pub on_pad: u32,
+    /// Touchdown: position relative to the pad centre in the pad frame, m.
+    pub rel_position_pad: [f64; 2],
+    /// Touchdown/impact: velocity relative to the surface, m/s.
+    pub rel_velocity: [f64; 3],
+    /// Collision: index of the obstacle in the scenario.
+    pub obstacle_index: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+    /// Crash: why.
+    pub reason: Text,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
