@@ -17,6 +17,7 @@
 pub mod autopilot;
 pub mod estimator_noise;
 pub mod ground_vehicle;
+pub mod lockstep;
 pub mod params;
 pub mod quadrotor;
 pub mod rng;
