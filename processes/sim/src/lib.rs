@@ -18,6 +18,7 @@ pub mod autopilot;
 pub mod estimator_noise;
 pub mod ground_vehicle;
 pub mod params;
+pub mod px4;
 pub mod quadrotor;
 pub mod rng;
 pub mod wind;
