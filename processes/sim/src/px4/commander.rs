@@ -394,35 +394,33 @@ impl Commander {
     ) {
         self.crashed |= vehicle.crashed;
         match msg {
-            MavMessage::COMMAND_LONG(cmd) => {
-                if addressed_to_us(cmd.target_system, cmd.target_component) {
-                    let result = self.handle_command(now_ns, cmd, vehicle);
-                    self.outgoing.push(ack(
-                        cmd.command,
-                        result,
-                        sender.system_id,
-                        sender.component_id,
-                    ));
-                    if cmd.command == MavCmd::MAV_CMD_REQUEST_MESSAGE
-                        && result == MavResult::MAV_RESULT_ACCEPTED
-                    {
-                        let id = cmd.param1 as u32;
-                        if let Some(m) = self.telemetry(id, now_ns, vehicle) {
-                            self.outgoing.push(m);
-                        }
+            MavMessage::COMMAND_LONG(cmd)
+                if addressed_to_us(cmd.target_system, cmd.target_component) =>
+            {
+                let result = self.handle_command(now_ns, cmd, vehicle);
+                self.outgoing.push(ack(
+                    cmd.command,
+                    result,
+                    sender.system_id,
+                    sender.component_id,
+                ));
+                if cmd.command == MavCmd::MAV_CMD_REQUEST_MESSAGE
+                    && result == MavResult::MAV_RESULT_ACCEPTED
+                {
+                    let id = cmd.param1 as u32;
+                    if let Some(m) = self.telemetry(id, now_ns, vehicle) {
+                        self.outgoing.push(m);
                     }
                 }
             }
-            MavMessage::SET_MODE(m) => {
-                if m.target_system == 0 || m.target_system == 1 {
-                    let result = self.handle_set_mode_message(now_ns, m, vehicle);
-                    self.outgoing.push(ack(
-                        MavCmd::MAV_CMD_DO_SET_MODE,
-                        result,
-                        sender.system_id,
-                        sender.component_id,
-                    ));
-                }
+            MavMessage::SET_MODE(m) if m.target_system == 0 || m.target_system == 1 => {
+                let result = self.handle_set_mode_message(now_ns, m, vehicle);
+                self.outgoing.push(ack(
+                    MavCmd::MAV_CMD_DO_SET_MODE,
+                    result,
+                    sender.system_id,
+                    sender.component_id,
+                ));
             }
             MavMessage::SET_POSITION_TARGET_LOCAL_NED(sp) => {
                 if addressed_to_us(sp.target_system, sp.target_component)
@@ -1072,7 +1070,7 @@ mod tests {
     fn stream(c: &mut Commander, from: u64, dur: u64, v: &VehicleStatus) -> u64 {
         let mut t = from;
         while t < from + dur {
-            if (t - from) % (50 * MS) == 0 {
+            if (t - from).is_multiple_of(50 * MS) {
                 c.handle_message(t, &COMPANION, &pos_sp(0.0, 0.0, -2.0), v);
             }
             c.update(t, v);
