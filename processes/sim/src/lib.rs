@@ -8,7 +8,10 @@
 //!
 //! Everything here is pure: inputs and time in, outputs out. There are no clock
 //! reads, sleeps, threads, IPC or printing; the caller drives fixed-step
-//! integration, so lockstep runs are deterministic for a given seed.
+//! integration, so lockstep runs are deterministic for a given seed. The one
+//! exception is [`px4::endpoint`], the MAVLink UDP endpoint that makes the
+//! simulator look like PX4 to px4-link; its stepping still takes time as an
+//! argument.
 //!
 //! Frames: world ENU (x east, y north, z up, origin at the take-off point),
 //! body FLU (x forward, y left, z up); transforms are named by what they map
@@ -19,6 +22,7 @@ pub mod estimator_noise;
 pub mod ground_vehicle;
 pub mod lockstep;
 pub mod params;
+pub mod px4;
 pub mod quadrotor;
 pub mod rng;
 pub mod scenario;

@@ -1,0 +1,371 @@
+//! The MAVLink 2 UDP endpoint around the [`Commander`], like PX4 SITL's
+//! onboard link, and [`SimVehicle`], a world flown by it.
+//!
+//! PX4 SITL sends its onboard link to the companion at UDP 14540. Here the
+//! simulator listens on a configurable address (default 127.0.0.1:14580) and
+//! sends to the peer it last heard from, plus a configured remote (default
+//! 127.0.0.1:14540, where px4-link listens) so a companion that has not
+//! spoken yet still gets heartbeats. System id 1, component id 1
+//! (autopilot), one MAVLink 2 message per datagram.
+//!
+//! This is the only part of the crate that does I/O; [`SimVehicle::step`]
+//! still takes time as an argument and never reads a clock, so a lockstep
+//! runner can drive it. [`SimVehicle::run_realtime`] is the wall-clock loop.
+
+use std::io::ErrorKind;
+use std::net::{SocketAddr, UdpSocket};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use mavlink::dialects::common::MavMessage;
+use mavlink::error::MessageReadError;
+use mavlink::{MavHeader, MavlinkReader};
+use serde::Deserialize;
+use thiserror::Error;
+
+use super::commander::{Commander, Px4Params, VehicleStatus};
+use crate::params::ParamError;
+use crate::world::{MAX_STEP_NS, World, WorldError};
+
+/// The physics step [`SimVehicle::run_realtime`] uses: 2 ms (500 Hz).
+pub const REALTIME_STEP_NS: u64 = 2_000_000;
+
+/// Largest datagram read; MAVLink 2 frames are at most 280 bytes, but a
+/// sender may pack several into one datagram.
+const MAX_DATAGRAM: usize = 65_536;
+
+/// Where the endpoint listens and whom it talks to.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EndpointConfig {
+    /// Local address to bind (default 127.0.0.1:14580; port 0 picks a free one).
+    pub listen: SocketAddr,
+    /// Where to send even before hearing from anyone (default
+    /// 127.0.0.1:14540, the companion port of PX4 SITL); None sends only to
+    /// the last peer heard from.
+    pub remote: Option<SocketAddr>,
+    /// Our MAVLink system id (PX4: 1).
+    pub system_id: u8,
+    /// Our MAVLink component id (PX4 autopilot: 1).
+    pub component_id: u8,
+}
+
+impl Default for EndpointConfig {
+    /// Listen on 127.0.0.1:14580, send to 127.0.0.1:14540, system 1, component 1.
+    fn default() -> Self {
+        Self {
+            listen: SocketAddr::from(([127, 0, 0, 1], 14580)),
+            remote: Some(SocketAddr::from(([127, 0, 0, 1], 14540))),
+            system_id: 1,
+            component_id: 1,
+        }
+    }
+}
+
+/// Counters of what went over the link, to see parse errors and drops.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct EndpointStats {
+    /// Datagrams received.
+    pub datagrams_received: u64,
+    /// MAVLink messages decoded and handed to the commander.
+    pub messages_received: u64,
+    /// Frames that failed to decode, plus datagrams with no valid frame at all.
+    pub parse_errors: u64,
+    /// Messages sent (counted once per destination).
+    pub messages_sent: u64,
+    /// Sends or receives that failed (the link carries on).
+    pub io_errors: u64,
+}
+
+/// Why the endpoint or the simulated vehicle failed.
+#[derive(Debug, Error)]
+pub enum EndpointError {
+    /// The socket could not be set up or read.
+    #[error("UDP socket {addr}: {source}")]
+    Socket {
+        /// The address involved.
+        addr: SocketAddr,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A PX4 parameter is invalid.
+    #[error("PX4 parameter {0}")]
+    Params(#[from] ParamError),
+    /// The world failed to step.
+    #[error("world: {0}")]
+    World(#[from] WorldError),
+    /// The step length is not in (0, MAX_STEP_NS].
+    #[error("dt_ns = {0}: must be in (0, {MAX_STEP_NS}]")]
+    InvalidStep(u64),
+}
+
+/// A non-blocking UDP MAVLink 2 endpoint that owns the commander.
+#[derive(Debug)]
+pub struct Endpoint {
+    socket: UdpSocket,
+    local: SocketAddr,
+    config: EndpointConfig,
+    commander: Commander,
+    peer: Option<SocketAddr>,
+    sequence: u8,
+    stats: EndpointStats,
+    buf: Vec<u8>,
+}
+
+impl Endpoint {
+    /// Binds the socket (non-blocking) and wraps `commander`.
+    pub fn bind(config: EndpointConfig, commander: Commander) -> Result<Self, EndpointError> {
+        let err = |source| EndpointError::Socket {
+            addr: config.listen,
+            source,
+        };
+        let socket = UdpSocket::bind(config.listen).map_err(err)?;
+        socket.set_nonblocking(true).map_err(err)?;
+        let local = socket.local_addr().map_err(err)?;
+        Ok(Self {
+            socket,
+            local,
+            config,
+            commander,
+            peer: None,
+            sequence: 0,
+            stats: EndpointStats::default(),
+            buf: vec![0; MAX_DATAGRAM],
+        })
+    }
+
+    /// The bound address (useful when the configured port was 0).
+    pub fn local_addr(&self) -> SocketAddr {
+        self.local
+    }
+
+    /// The companion address we last heard from, if any.
+    pub fn peer(&self) -> Option<SocketAddr> {
+        self.peer
+    }
+
+    /// Link counters.
+    pub fn stats(&self) -> EndpointStats {
+        self.stats
+    }
+
+    /// The commander behind the link.
+    pub fn commander(&self) -> &Commander {
+        &self.commander
+    }
+
+    /// The commander, mutably (e.g. to take its events).
+    pub fn commander_mut(&mut self) -> &mut Commander {
+        &mut self.commander
+    }
+
+    /// One non-blocking round: reads every pending datagram and feeds the
+    /// commander, runs the commander for `now_ns`, sends what it produced.
+    /// Malformed input is counted and skipped, never fatal.
+    pub fn poll(&mut self, now_ns: u64, vehicle: &VehicleStatus) -> Result<(), EndpointError> {
+        for (header, msg) in self.receive()? {
+            self.commander
+                .handle_message(now_ns, &header, &msg, vehicle);
+        }
+        self.commander.update(now_ns, vehicle);
+        let outgoing = self.commander.take_outgoing();
+        self.send(&outgoing);
+        Ok(())
+    }
+
+    /// Reads and decodes every pending datagram.
+    fn receive(&mut self) -> Result<Vec<(MavHeader, MavMessage)>, EndpointError> {
+        let mut out = Vec::new();
+        loop {
+            match self.socket.recv_from(&mut self.buf) {
+                Ok((len, from)) => {
+                    self.stats.datagrams_received += 1;
+                    self.peer = Some(from);
+                    let before = out.len();
+                    let errors = decode_datagram(&self.buf[..len], &mut out);
+                    self.stats.parse_errors += errors;
+                    let decoded = (out.len() - before) as u64;
+                    self.stats.messages_received += decoded;
+                    if decoded == 0 && errors == 0 && len > 0 {
+                        self.stats.parse_errors += 1;
+                    }
+                }
+                Err(e) if e.kind() == ErrorKind::WouldBlock => break,
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        ErrorKind::ConnectionRefused
+                            | ErrorKind::ConnectionReset
+                            | ErrorKind::Interrupted
+                    ) =>
+                {
+                    // An ICMP "port unreachable" from an earlier send: the
+                    // companion is not up yet. Keep going.
+                    self.stats.io_errors += 1;
+                }
+                Err(source) => {
+                    return Err(EndpointError::Socket {
+                        addr: self.local,
+                        source,
+                    });
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Sends each message to the last peer and to the configured remote.
+    fn send(&mut self, msgs: &[MavMessage]) {
+        let mut targets: [Option<SocketAddr>; 2] = [self.peer, self.config.remote];
+        if targets[0] == targets[1] {
+            targets[1] = None;
+        }
+        if targets.iter().all(Option::is_none) {
+            return;
+        }
+        let mut frame = Vec::with_capacity(300);
+        for msg in msgs {
+            let header = MavHeader {
+                system_id: u32::from(self.config.system_id),
+                component_id: self.config.component_id,
+                sequence: self.sequence,
+            };
+            self.sequence = self.sequence.wrapping_add(1);
+            frame.clear();
+            if mavlink::write_v2_msg(&mut frame, header, msg).is_err() {
+                self.stats.io_errors += 1;
+                continue;
+            }
+            for to in targets.iter().flatten() {
+                match self.socket.send_to(&frame, to) {
+                    Ok(_) => self.stats.messages_sent += 1,
+                    Err(e) => {
+                        self.stats.io_errors += 1;
+                        tracing::trace!(%to, error = %e, "MAVLink send failed");
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Decodes every MAVLink (1 or 2) frame in one datagram into `out`; returns
+/// how many frames failed to parse. Bytes that are not a frame are skipped.
+pub fn decode_datagram(data: &[u8], out: &mut Vec<(MavHeader, MavMessage)>) -> u64 {
+    let mut reader = MavlinkReader::new(data);
+    let mut errors = 0;
+    // Each iteration consumes at least one frame or ends the datagram; the
+    // bound only guards against a decoder that would not advance.
+    for _ in 0..=data.len() {
+        match reader.read_any_message::<MavMessage>() {
+            Ok(m) => out.push(m),
+            Err(MessageReadError::Parse(e)) => {
+                errors += 1;
+                tracing::debug!(error = %e, "MAVLink parse error");
+            }
+            Err(_) => break,
+        }
+    }
+    errors
+}
+
+/// A simulated PX4 vehicle: the world, flown by the commander, reachable
+/// over UDP MAVLink.
+#[derive(Debug)]
+pub struct SimVehicle {
+    world: World,
+    endpoint: Endpoint,
+}
+
+impl SimVehicle {
+    /// Builds the vehicle: validates the PX4 parameters and binds the socket.
+    pub fn new(
+        world: World,
+        params: Px4Params,
+        config: EndpointConfig,
+    ) -> Result<Self, EndpointError> {
+        let commander = Commander::new(params)?;
+        let endpoint = Endpoint::bind(config, commander)?;
+        Ok(Self { world, endpoint })
+    }
+
+    /// The simulated world.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// The simulated world, mutably (scenario set-up, fault injection).
+    pub fn world_mut(&mut self) -> &mut World {
+        &mut self.world
+    }
+
+    /// The MAVLink endpoint (address, stats, commander).
+    pub fn endpoint(&self) -> &Endpoint {
+        &self.endpoint
+    }
+
+    /// The MAVLink endpoint, mutably.
+    pub fn endpoint_mut(&mut self) -> &mut Endpoint {
+        &mut self.endpoint
+    }
+
+    /// What the commander sees of the world now: the estimate, never truth.
+    pub fn status(&self) -> VehicleStatus {
+        VehicleStatus {
+            estimate: *self.world.estimate(),
+            crashed: self.world.crashed(),
+        }
+    }
+
+    /// One step, clock-free: handle the link and the commander at `now_ns`,
+    /// apply armed + setpoint to the world, advance the world by `dt_ns`.
+    /// A lockstep runner passes `now_ns = world().time_ns()`.
+    pub fn step(&mut self, dt_ns: u64, now_ns: u64) -> Result<(), EndpointError> {
+        if dt_ns == 0 || dt_ns > MAX_STEP_NS {
+            return Err(EndpointError::InvalidStep(dt_ns));
+        }
+        let status = self.status();
+        self.endpoint.poll(now_ns, &status)?;
+        let commander = self.endpoint.commander();
+        self.world.set_armed(commander.armed());
+        self.world.set_setpoint(commander.setpoint());
+        self.world.step(dt_ns)?;
+        Ok(())
+    }
+
+    /// Runs on the wall clock in the calling thread, stepping the world at
+    /// 500 Hz with `now_ns` = world time, until `until` or until `stop` is
+    /// set. If the thread falls more than 100 ms behind (a loaded machine),
+    /// simulated time skips ahead instead of racing to catch up.
+    pub fn run_realtime(&mut self, until: Instant, stop: &AtomicBool) -> Result<(), EndpointError> {
+        const MAX_LAG_NS: u64 = 100_000_000;
+        let start = Instant::now();
+        let world_start_ns = self.world.time_ns();
+        let mut skipped_ns: u64 = 0;
+        loop {
+            let wall = Instant::now();
+            if wall >= until || stop.load(Ordering::Relaxed) {
+                return Ok(());
+            }
+            let elapsed_ns =
+                u64::try_from(wall.duration_since(start).as_nanos()).unwrap_or(u64::MAX);
+            let target_ns = world_start_ns
+                .saturating_add(elapsed_ns)
+                .saturating_sub(skipped_ns);
+            let behind = target_ns.saturating_sub(self.world.time_ns());
+            if behind > MAX_LAG_NS {
+                skipped_ns = skipped_ns.saturating_add(behind - REALTIME_STEP_NS);
+                tracing::debug!(behind_ms = behind / 1_000_000, "real-time loop fell behind");
+            }
+            while self.world.time_ns().saturating_add(REALTIME_STEP_NS)
+                <= world_start_ns
+                    .saturating_add(elapsed_ns)
+                    .saturating_sub(skipped_ns)
+            {
+                let now = self.world.time_ns();
+                self.step(REALTIME_STEP_NS, now)?;
+            }
+            std::thread::sleep(Duration::from_micros(500));
+        }
+    }
+}

@@ -1,0 +1,13 @@
+//! The simulator's PX4 side: a PX4-like commander behind a MAVLink 2 UDP
+//! endpoint, so px4-link talks to the simulator exactly as it would to PX4
+//! SITL or a real Pixhawk.
+//!
+//! - [`commander`]: pure PX4 behaviour (modes, commands and ACKs, offboard
+//!   rules and failsafe, takeoff, land, auto-disarm, telemetry).
+//! - [`endpoint`]: the UDP socket around it, and [`endpoint::SimVehicle`]
+//!   that steps a [`crate::world::World`] with it.
+//! - [`frames`]: ENU/FLU <-> NED/FRD, used only at this boundary.
+
+pub mod commander;
+pub mod endpoint;
+pub mod frames;

@@ -1,0 +1,633 @@
+//! The simulator's MAVLink endpoint seen from a companion computer: a plain
+//! UDP socket, raw MAVLink 2 bytes, and the PX4 behaviours px4-link relies on.
+//! Each test runs a SimVehicle on the wall clock in its own thread on an
+//! ephemeral port. Timing tolerances are generous (shared 2-core machine).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::net::{SocketAddr, UdpSocket};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use mavlink::dialects::common::{
+    COMMAND_LONG_DATA, HEARTBEAT_DATA, MavAutopilot, MavCmd, MavFrame, MavLandedState, MavMessage,
+    MavModeFlag, MavResult, MavState, MavType, PositionTargetTypemask,
+    SET_POSITION_TARGET_LOCAL_NED_DATA,
+};
+use mavlink::{MavHeader, MavlinkVersion};
+use sim::px4::commander::Px4Params;
+use sim::px4::endpoint::{EndpointConfig, SimVehicle, decode_datagram};
+use sim::world::{World, WorldParams};
+
+const OFFBOARD: u32 = 6 << 16;
+const POSCTL: u32 = 3 << 16;
+const AUTO_LOITER: u32 = (3 << 24) | (4 << 16);
+const AUTO_LAND: u32 = (6 << 24) | (4 << 16);
+
+struct Sim {
+    stop: Arc<AtomicBool>,
+    handle: Option<JoinHandle<SimVehicle>>,
+    addr: SocketAddr,
+}
+
+impl Sim {
+    fn start() -> Self {
+        let world = World::new(WorldParams::default()).unwrap();
+        let config = EndpointConfig {
+            listen: "127.0.0.1:0".parse().unwrap(),
+            remote: None,
+            ..EndpointConfig::default()
+        };
+        let mut vehicle = SimVehicle::new(world, Px4Params::default(), config).unwrap();
+        let addr = vehicle.endpoint().local_addr();
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        let handle = std::thread::spawn(move || {
+            let until = Instant::now() + Duration::from_secs(120);
+            vehicle.run_realtime(until, &flag).unwrap();
+            vehicle
+        });
+        Self {
+            stop,
+            handle: Some(handle),
+            addr,
+        }
+    }
+
+    fn finish(mut self) -> SimVehicle {
+        self.stop.store(true, Ordering::Relaxed);
+        self.handle.take().unwrap().join().unwrap()
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+/// A companion computer: system 1, component 191, like px4-link.
+struct Companion {
+    sock: UdpSocket,
+    sim: SocketAddr,
+    seq: u8,
+    start: Instant,
+}
+
+impl Companion {
+    fn connect(sim: &Sim) -> Self {
+        let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+        sock.set_read_timeout(Some(Duration::from_millis(20)))
+            .unwrap();
+        let mut c = Self {
+            sock,
+            sim: sim.addr,
+            seq: 0,
+            start: Instant::now(),
+        };
+        c.send(&MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 0,
+            mavtype: MavType::MAV_TYPE_ONBOARD_CONTROLLER,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+            base_mode: MavModeFlag::empty(),
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        }));
+        c
+    }
+
+    fn send(&mut self, msg: &MavMessage) {
+        let header = MavHeader {
+            system_id: 1,
+            component_id: 191,
+            sequence: self.seq,
+        };
+        self.seq = self.seq.wrapping_add(1);
+        let mut buf = Vec::new();
+        mavlink::write_v2_msg(&mut buf, header, msg).unwrap();
+        self.sock.send_to(&buf, self.sim).unwrap();
+    }
+
+    fn send_raw(&self, bytes: &[u8]) {
+        self.sock.send_to(bytes, self.sim).unwrap();
+    }
+
+    /// Everything received within `d`, with receive times.
+    fn collect(&mut self, d: Duration) -> Vec<(Instant, MavMessage)> {
+        let end = Instant::now() + d;
+        let mut out = Vec::new();
+        while Instant::now() < end {
+            self.recv_into(&mut out);
+        }
+        out
+    }
+
+    fn recv_into(&mut self, out: &mut Vec<(Instant, MavMessage)>) {
+        let mut buf = [0u8; 2048];
+        if let Ok((n, _)) = self.sock.recv_from(&mut buf) {
+            let mut msgs = Vec::new();
+            decode_datagram(&buf[..n], &mut msgs);
+            let now = Instant::now();
+            for (h, m) in msgs {
+                assert_eq!((h.system_id, h.component_id), (1, 1));
+                out.push((now, m));
+            }
+        }
+    }
+
+    /// Waits up to `timeout` for a message matching `pred`, calling `tick`
+    /// between receives (to keep a setpoint stream going).
+    fn wait_for<T>(
+        &mut self,
+        timeout: Duration,
+        mut tick: impl FnMut(&mut Self),
+        mut pred: impl FnMut(&MavMessage) -> Option<T>,
+    ) -> Option<T> {
+        let end = Instant::now() + timeout;
+        while Instant::now() < end {
+            tick(self);
+            let mut got = Vec::new();
+            self.recv_into(&mut got);
+            for (_, m) in &got {
+                if let Some(t) = pred(m) {
+                    return Some(t);
+                }
+            }
+        }
+        None
+    }
+
+    fn command(&mut self, command: MavCmd, params: [f32; 7]) -> MavResult {
+        self.command_with(command, params, |_| {})
+    }
+
+    fn command_with(
+        &mut self,
+        command: MavCmd,
+        p: [f32; 7],
+        mut tick: impl FnMut(&mut Self),
+    ) -> MavResult {
+        self.send(&MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            param1: p[0],
+            param2: p[1],
+            param3: p[2],
+            param4: p[3],
+            param5: p[4],
+            param6: p[5],
+            param7: p[6],
+            command,
+            target_system: 1,
+            target_component: 1,
+            confirmation: 0,
+        }));
+        self.wait_for(Duration::from_secs(3), &mut tick, |m| match m {
+            MavMessage::COMMAND_ACK(a) if a.command == command => {
+                assert_eq!((a.target_system, a.target_component), (1, 191));
+                Some(a.result)
+            }
+            _ => None,
+        })
+        .expect("no COMMAND_ACK")
+    }
+
+    fn heartbeat(&mut self, pred: impl Fn(&HEARTBEAT_DATA) -> bool, timeout: Duration) -> bool {
+        self.heartbeat_with(pred, timeout, |_| {})
+    }
+
+    fn heartbeat_with(
+        &mut self,
+        pred: impl Fn(&HEARTBEAT_DATA) -> bool,
+        timeout: Duration,
+        tick: impl FnMut(&mut Self),
+    ) -> bool {
+        self.wait_for(timeout, tick, |m| match m {
+            MavMessage::HEARTBEAT(h) if pred(h) => Some(()),
+            _ => None,
+        })
+        .is_some()
+    }
+
+    /// NED position from LOCAL_POSITION_NED once `pred` holds.
+    fn position_until(
+        &mut self,
+        timeout: Duration,
+        tick: impl FnMut(&mut Self),
+        pred: impl Fn([f32; 3]) -> bool,
+    ) -> Option<[f32; 3]> {
+        self.wait_for(timeout, tick, |m| match m {
+            MavMessage::LOCAL_POSITION_NED(p) if pred([p.x, p.y, p.z]) => Some([p.x, p.y, p.z]),
+            _ => None,
+        })
+    }
+
+    fn landed_state(&mut self, want: MavLandedState, timeout: Duration) -> bool {
+        self.wait_for(
+            timeout,
+            |_| {},
+            |m| match m {
+                MavMessage::EXTENDED_SYS_STATE(s) if s.landed_state == want => Some(()),
+                _ => None,
+            },
+        )
+        .is_some()
+    }
+
+    fn position_setpoint(&mut self, ned: [f32; 3]) {
+        // Position + yaw; velocity, acceleration and yaw rate ignored.
+        let ignore = PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AY_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE;
+        let t = self.start.elapsed().as_millis() as u32;
+        self.send(&MavMessage::SET_POSITION_TARGET_LOCAL_NED(
+            SET_POSITION_TARGET_LOCAL_NED_DATA {
+                time_boot_ms: t,
+                x: ned[0],
+                y: ned[1],
+                z: ned[2],
+                vx: 0.0,
+                vy: 0.0,
+                vz: 0.0,
+                afx: 0.0,
+                afy: 0.0,
+                afz: 0.0,
+                yaw: std::f32::consts::FRAC_PI_2,
+                yaw_rate: 0.0,
+                type_mask: ignore,
+                target_system: 1,
+                target_component: 1,
+                coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+            },
+        ));
+    }
+
+    fn arm(&mut self) {
+        assert_eq!(
+            self.command(
+                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+            ),
+            MavResult::MAV_RESULT_ACCEPTED
+        );
+    }
+
+    fn takeoff(&mut self, alt: f32) {
+        assert_eq!(
+            self.command(
+                MavCmd::MAV_CMD_NAV_TAKEOFF,
+                [0.0, 0.0, 0.0, f32::NAN, f32::NAN, f32::NAN, alt]
+            ),
+            MavResult::MAV_RESULT_ACCEPTED
+        );
+    }
+}
+
+/// A setpoint streamer at ~20 Hz for `wait_for` ticks.
+fn streamer(target: [f32; 3]) -> impl FnMut(&mut Companion) {
+    let mut last: Option<Instant> = None;
+    move |c: &mut Companion| {
+        if last.is_none_or(|t| t.elapsed() >= Duration::from_millis(50)) {
+            last = Some(Instant::now());
+            c.position_setpoint(target);
+        }
+    }
+}
+
+fn armed(h: &HEARTBEAT_DATA) -> bool {
+    h.base_mode
+        .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED)
+}
+
+fn secs(s: u64) -> Duration {
+    Duration::from_secs(s)
+}
+
+#[test]
+fn heartbeat_reports_px4_custom_mode_at_1_hz() {
+    let sim = Sim::start();
+    let mut c = Companion::connect(&sim);
+    let msgs = c.collect(Duration::from_millis(3500));
+    let beats: Vec<_> = msgs
+        .iter()
+        .filter_map(|(t, m)| match m {
+            MavMessage::HEARTBEAT(h) => Some((*t, h.clone())),
+            _ => None,
+        })
+        .collect();
+    assert!(
+        (3..=5).contains(&beats.len()),
+        "{} heartbeats in 3.5 s",
+        beats.len()
+    );
+    for w in beats.windows(2) {
+        let dt = w[1].0.duration_since(w[0].0).as_secs_f64();
+        assert!((0.6..=1.4).contains(&dt), "heartbeat gap {dt} s");
+    }
+    let h = &beats[0].1;
+    assert_eq!(h.mavtype, MavType::MAV_TYPE_QUADROTOR);
+    assert_eq!(h.autopilot, MavAutopilot::MAV_AUTOPILOT_PX4);
+    assert!(
+        h.base_mode
+            .contains(MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
+    );
+    assert!(!armed(h));
+    assert_eq!(h.custom_mode, POSCTL);
+    assert_eq!(h.system_status, MavState::MAV_STATE_STANDBY);
+    // Default telemetry is flowing too.
+    let count = |id: u32| {
+        msgs.iter()
+            .filter(|(_, m)| mavlink::Message::message_id(m) == id)
+            .count()
+    };
+    assert!(count(32) > 60, "LOCAL_POSITION_NED {}", count(32));
+    assert!(count(31) > 100, "ATTITUDE_QUATERNION {}", count(31));
+    assert!(count(245) > 8, "EXTENDED_SYS_STATE {}", count(245));
+    sim.finish();
+}
+
+#[test]
+fn arm_is_acked_and_heartbeat_shows_armed_unknown_command_unsupported() {
+    let sim = Sim::start();
+    let mut c = Companion::connect(&sim);
+    c.arm();
+    assert!(c.heartbeat(
+        |h| armed(h) && h.system_status == MavState::MAV_STATE_ACTIVE,
+        secs(3)
+    ));
+    assert_eq!(
+        c.command(MavCmd::MAV_CMD_DO_REPOSITION, [0.0; 7]),
+        MavResult::MAV_RESULT_UNSUPPORTED
+    );
+    assert_eq!(
+        c.command(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert!(c.heartbeat(|h| !armed(h), secs(3)));
+    sim.finish();
+}
+
+#[test]
+fn takeoff_climbs_to_takeoff_altitude_then_loiters() {
+    let sim = Sim::start();
+    let mut c = Companion::connect(&sim);
+    c.arm();
+    c.takeoff(f32::NAN); // MIS_TAKEOFF_ALT = 2.5 m
+    assert!(c.landed_state(MavLandedState::MAV_LANDED_STATE_TAKEOFF, secs(3)));
+    let p = c.position_until(secs(10), |_| {}, |p| p[2] < -2.3);
+    assert!(p.is_some(), "did not climb to 2.5 m");
+    assert!(c.heartbeat(|h| h.custom_mode == AUTO_LOITER && armed(h), secs(5)));
+    // It holds there (z negative is up), without overshooting far.
+    let msgs = c.collect(Duration::from_millis(1500));
+    for (_, m) in &msgs {
+        if let MavMessage::LOCAL_POSITION_NED(p) = m {
+            assert!((p.z + 2.5).abs() < 0.5, "z {}", p.z);
+            assert!(p.x.abs() < 0.5 && p.y.abs() < 0.5, "drift {} {}", p.x, p.y);
+        }
+    }
+    assert!(c.landed_state(MavLandedState::MAV_LANDED_STATE_IN_AIR, secs(2)));
+    sim.finish();
+}
+
+#[test]
+fn offboard_refused_without_setpoint_stream() {
+    let sim = Sim::start();
+    let mut c = Companion::connect(&sim);
+    let r = c.command(
+        MavCmd::MAV_CMD_DO_SET_MODE,
+        [1.0, 6.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    assert!(
+        matches!(
+            r,
+            MavResult::MAV_RESULT_TEMPORARILY_REJECTED | MavResult::MAV_RESULT_DENIED
+        ),
+        "{r:?}"
+    );
+    // Half a second of setpoints is not enough either.
+    let mut tick = streamer([0.0, 0.0, -2.0]);
+    let end = Instant::now() + Duration::from_millis(400);
+    while Instant::now() < end {
+        tick(&mut c);
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let r = c.command_with(
+        MavCmd::MAV_CMD_DO_SET_MODE,
+        [1.0, 6.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        &mut tick,
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
+    // The mode stays POSCTL.
+    let msgs = c.collect(Duration::from_millis(1200));
+    let modes: Vec<u32> = msgs
+        .iter()
+        .filter_map(|(_, m)| match m {
+            MavMessage::HEARTBEAT(h) => Some(h.custom_mode),
+            _ => None,
+        })
+        .collect();
+    assert!(!modes.is_empty());
+    assert!(modes.iter().all(|&m| m == POSCTL), "{modes:?}");
+    sim.finish();
+}
+
+#[test]
+fn offboard_move_then_stream_loss_lands_and_disarms() {
+    let sim = Sim::start();
+    let mut c = Companion::connect(&sim);
+    c.arm();
+    c.takeoff(2.0);
+    assert!(
+        c.heartbeat(|h| h.custom_mode == AUTO_LOITER, secs(10)),
+        "takeoff did not finish"
+    );
+
+    // Stream the current hover point for > 1 s at 20 Hz, then switch.
+    let hover = [0.0, 0.0, -2.0];
+    let mut tick = streamer(hover);
+    let end = Instant::now() + Duration::from_millis(1300);
+    while Instant::now() < end {
+        tick(&mut c);
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let r = c.command_with(
+        MavCmd::MAV_CMD_DO_SET_MODE,
+        [1.0, 6.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        &mut tick,
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
+    assert!(c.heartbeat_with(
+        |h| h.custom_mode == OFFBOARD && armed(h),
+        secs(3),
+        &mut tick
+    ));
+
+    // 5 m north (NED x), same altitude.
+    let target = [5.0, 0.0, -2.0];
+    let mut tick = streamer(target);
+    let p = c.position_until(secs(12), &mut tick, |p| {
+        (p[0] - 5.0).abs() < 0.3 && p[1].abs() < 0.3 && (p[2] + 2.0).abs() < 0.3
+    });
+    assert!(p.is_some(), "did not reach (5, 0, -2) NED");
+
+    // Stop streaming: COM_OF_LOSS_T later PX4 lands (COM_OBL_RC_ACT = 4).
+    let stopped = Instant::now();
+    assert!(
+        c.heartbeat(|h| h.custom_mode == AUTO_LAND, secs(4)),
+        "no AUTO.LAND after loss"
+    );
+    assert!(stopped.elapsed() >= Duration::from_millis(900));
+    assert!(c.landed_state(MavLandedState::MAV_LANDED_STATE_LANDING, secs(2)));
+    assert!(
+        c.landed_state(MavLandedState::MAV_LANDED_STATE_ON_GROUND, secs(10)),
+        "did not land"
+    );
+    assert!(
+        c.heartbeat(|h| !armed(h) && h.custom_mode == AUTO_LAND, secs(5)),
+        "did not disarm"
+    );
+    // It landed where it was, not back home.
+    let p = c.position_until(secs(2), |_| {}, |_| true).unwrap();
+    assert!((p[0] - 5.0).abs() < 0.7 && p[2].abs() < 0.3, "{p:?}");
+    sim.finish();
+}
+
+#[test]
+fn land_command_lands_and_disarms() {
+    let sim = Sim::start();
+    let mut c = Companion::connect(&sim);
+    c.arm();
+    c.takeoff(1.5);
+    assert!(c.position_until(secs(8), |_| {}, |p| p[2] < -1.3).is_some());
+    assert_eq!(
+        c.command(
+            MavCmd::MAV_CMD_NAV_LAND,
+            [0.0, 0.0, 0.0, f32::NAN, f32::NAN, f32::NAN, f32::NAN]
+        ),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert!(c.heartbeat(|h| h.custom_mode == AUTO_LAND && armed(h), secs(3)));
+    // Descends at about MPC_LAND_SPEED.
+    let v = c
+        .wait_for(
+            secs(3),
+            |_| {},
+            |m| match m {
+                MavMessage::LOCAL_POSITION_NED(p) if p.z < -0.5 && p.vz > 0.4 => Some(p.vz),
+                _ => None,
+            },
+        )
+        .expect("not descending");
+    assert!((0.4..1.0).contains(&v), "vz {v}");
+    assert!(c.landed_state(MavLandedState::MAV_LANDED_STATE_ON_GROUND, secs(8)));
+    assert!(
+        c.heartbeat(|h| !armed(h), secs(5)),
+        "did not disarm after landing"
+    );
+    sim.finish();
+}
+
+#[test]
+fn set_message_interval_changes_local_position_rate() {
+    let sim = Sim::start();
+    let mut c = Companion::connect(&sim);
+    let count = |msgs: &[(Instant, MavMessage)]| {
+        msgs.iter()
+            .filter(|(_, m)| matches!(m, MavMessage::LOCAL_POSITION_NED(_)))
+            .count()
+    };
+    // 10 Hz.
+    let r = c.command(
+        MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+        [32.0, 100_000.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
+    let n = count(&c.collect(secs(2)));
+    assert!(
+        (14..=26).contains(&n),
+        "{n} LOCAL_POSITION_NED in 2 s at 10 Hz"
+    );
+    // Disabled.
+    let r = c.command(
+        MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+        [32.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
+    c.collect(Duration::from_millis(200));
+    assert_eq!(count(&c.collect(secs(1))), 0);
+    // Back to the default (30 Hz).
+    let r = c.command(
+        MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+        [32.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
+    let n = count(&c.collect(secs(2)));
+    assert!(
+        (45..=75).contains(&n),
+        "{n} LOCAL_POSITION_NED in 2 s at 30 Hz"
+    );
+    // A message it cannot stream.
+    let r = c.command(
+        MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+        [12345.0, 1000.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_FAILED);
+    sim.finish();
+}
+
+#[test]
+fn garbage_datagrams_do_not_crash_it() {
+    let sim = Sim::start();
+    let mut c = Companion::connect(&sim);
+    c.send_raw(b"hello, not mavlink");
+    c.send_raw(&[0xFD; 300]);
+    c.send_raw(&[0xFD, 9, 0, 0, 1, 1, 1, 0, 0]); // truncated header
+    // A valid frame with its CRC broken.
+    let mut buf = Vec::new();
+    let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: MavType::MAV_TYPE_ONBOARD_CONTROLLER,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+        base_mode: MavModeFlag::empty(),
+        system_status: MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+    });
+    mavlink::write_v2_msg(
+        &mut buf,
+        MavHeader {
+            system_id: 1,
+            component_id: 191,
+            sequence: 0,
+        },
+        &hb,
+    )
+    .unwrap();
+    let n = buf.len();
+    buf[n - 1] ^= 0xFF;
+    c.send_raw(&buf);
+    c.send_raw(&[]);
+    // MAVLink 1 framing is still understood.
+    let mut v1 = Vec::new();
+    mavlink::write_versioned_msg(
+        &mut v1,
+        MavlinkVersion::V1,
+        MavHeader {
+            system_id: 1,
+            component_id: 191,
+            sequence: 1,
+        },
+        &hb,
+    )
+    .unwrap();
+    c.send_raw(&v1);
+    // Still alive and answering.
+    assert!(c.heartbeat(|_| true, secs(3)));
+    c.arm();
+    let vehicle = sim.finish();
+    let stats = vehicle.endpoint().stats();
+    assert!(stats.parse_errors >= 3, "{stats:?}");
+    assert!(stats.messages_received >= 3, "{stats:?}");
+}
