@@ -8,6 +8,11 @@
 
 use ipc_types::msg::{Header, Text, TruthEvent, TruthKind};
 
+use mavlink::MavHeader;
+use mavlink::dialects::common::MavMessage;
+
+use crate::params::ParamError;
+use crate::px4::commander::{Commander, Px4Params, VehicleStatus};
 use crate::scenario::LoadedScenario;
 use crate::world::{Event, TimedEvent, World, WorldError};
 
@@ -65,10 +70,22 @@ impl Schedule {
     }
 }
 
-/// The world plus its sensor schedule.
+/// Why a simulator could not be built or stepped.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// The world.
+    #[error(transparent)]
+    World(#[from] WorldError),
+    /// A PX4 parameter.
+    #[error("PX4 parameter {0}")]
+    Px4(#[from] ParamError),
+}
+
+/// The world, the PX4 commander that flies it, and the sensor schedule.
 #[derive(Debug, Clone)]
 pub struct Simulator {
     world: World,
+    commander: Commander,
     camera: Schedule,
     depth: Schedule,
     events_seen: usize,
@@ -77,26 +94,74 @@ pub struct Simulator {
 
 impl Simulator {
     /// A simulator for `scenario` with every random process seeded from `seed`.
-    pub fn new(scenario: &LoadedScenario, seed: u64) -> Result<Self, WorldError> {
+    pub fn new(scenario: &LoadedScenario, seed: u64) -> Result<Self, SimError> {
         let world = World::new(scenario.world_params(seed))?;
-        Ok(Self {
+        let commander = Commander::new(Px4Params::default())?;
+        Ok(Self::from_world(
             world,
-            camera: Schedule::new(
-                scenario.scenario.camera.rate_hz,
-                (1e9 / scenario.scenario.camera.rate_hz.max(1.0)) as u64,
-            ),
-            // Offset by half a period so camera and depth work do not land on one step.
-            depth: Schedule::new(
-                scenario.scenario.depth.rate_hz,
-                (1.5e9 / scenario.scenario.depth.rate_hz.max(1.0)) as u64,
-            ),
-            events_seen: 0,
+            commander,
+            scenario.scenario.camera.rate_hz,
+            scenario.scenario.depth.rate_hz,
             seed,
-        })
+        ))
     }
 
-    /// Advances physics by one step and reports what is due.
-    pub fn step(&mut self) -> Result<StepReport, WorldError> {
+    /// A simulator around an existing world and commander (tests, custom set-ups).
+    pub fn from_world(
+        world: World,
+        commander: Commander,
+        camera_hz: f64,
+        depth_hz: f64,
+        seed: u64,
+    ) -> Self {
+        Self {
+            world,
+            commander,
+            camera: Schedule::new(camera_hz, (1e9 / camera_hz.max(1.0)) as u64),
+            // Offset by half a period so camera and depth work do not land on one step.
+            depth: Schedule::new(depth_hz, (1.5e9 / depth_hz.max(1.0)) as u64),
+            events_seen: 0,
+            seed,
+        }
+    }
+
+    /// What the commander sees of the world: the estimate, never truth.
+    pub fn status(&self) -> VehicleStatus {
+        VehicleStatus {
+            estimate: *self.world.estimate(),
+            crashed: self.world.crashed(),
+        }
+    }
+
+    /// A MAVLink message from the companion (px4-link), at the current simulated time.
+    pub fn handle_mavlink(&mut self, header: &MavHeader, msg: &MavMessage) {
+        let status = self.status();
+        self.commander
+            .handle_message(self.world.time_ns(), header, msg, &status);
+    }
+
+    /// MAVLink messages the autopilot has produced since the last call.
+    pub fn take_mavlink(&mut self) -> Vec<MavMessage> {
+        self.commander.take_outgoing()
+    }
+
+    /// The PX4 commander (mode, arming).
+    pub fn commander(&self) -> &Commander {
+        &self.commander
+    }
+
+    /// The PX4 commander, mutably (events, fault injection).
+    pub fn commander_mut(&mut self) -> &mut Commander {
+        &mut self.commander
+    }
+
+    /// Runs the commander, applies its arming and setpoint, advances physics by one step,
+    /// and reports what is due.
+    pub fn step(&mut self) -> Result<StepReport, SimError> {
+        let status = self.status();
+        self.commander.update(self.world.time_ns(), &status);
+        self.world.set_armed(self.commander.armed());
+        self.world.set_setpoint(self.commander.setpoint());
         self.world.step(PHYSICS_STEP_NS)?;
         let now = self.world.time_ns();
         let events = self.world.events();

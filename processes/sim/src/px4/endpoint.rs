@@ -24,6 +24,7 @@ use serde::Deserialize;
 use thiserror::Error;
 
 use super::commander::{Commander, Px4Params, VehicleStatus};
+use crate::lockstep::{Simulator, StepReport};
 use crate::params::ParamError;
 use crate::world::{MAX_STEP_NS, World, WorldError};
 
@@ -94,18 +95,20 @@ pub enum EndpointError {
     /// The world failed to step.
     #[error("world: {0}")]
     World(#[from] WorldError),
+    /// The simulator failed to step.
+    #[error("simulator: {0}")]
+    Sim(#[from] crate::lockstep::SimError),
     /// The step length is not in (0, MAX_STEP_NS].
     #[error("dt_ns = {0}: must be in (0, {MAX_STEP_NS}]")]
     InvalidStep(u64),
 }
 
-/// A non-blocking UDP MAVLink 2 endpoint that owns the commander.
+/// A non-blocking UDP MAVLink 2 endpoint: pure I/O; the [`Simulator`] owns the commander.
 #[derive(Debug)]
 pub struct Endpoint {
     socket: UdpSocket,
     local: SocketAddr,
     config: EndpointConfig,
-    commander: Commander,
     peer: Option<SocketAddr>,
     sequence: u8,
     stats: EndpointStats,
@@ -113,8 +116,8 @@ pub struct Endpoint {
 }
 
 impl Endpoint {
-    /// Binds the socket (non-blocking) and wraps `commander`.
-    pub fn bind(config: EndpointConfig, commander: Commander) -> Result<Self, EndpointError> {
+    /// Binds the socket (non-blocking).
+    pub fn bind(config: EndpointConfig) -> Result<Self, EndpointError> {
         let err = |source| EndpointError::Socket {
             addr: config.listen,
             source,
@@ -126,7 +129,6 @@ impl Endpoint {
             socket,
             local,
             config,
-            commander,
             peer: None,
             sequence: 0,
             stats: EndpointStats::default(),
@@ -149,32 +151,9 @@ impl Endpoint {
         self.stats
     }
 
-    /// The commander behind the link.
-    pub fn commander(&self) -> &Commander {
-        &self.commander
-    }
-
-    /// The commander, mutably (e.g. to take its events).
-    pub fn commander_mut(&mut self) -> &mut Commander {
-        &mut self.commander
-    }
-
-    /// One non-blocking round: reads every pending datagram and feeds the
-    /// commander, runs the commander for `now_ns`, sends what it produced.
-    /// Malformed input is counted and skipped, never fatal.
-    pub fn poll(&mut self, now_ns: u64, vehicle: &VehicleStatus) -> Result<(), EndpointError> {
-        for (header, msg) in self.receive()? {
-            self.commander
-                .handle_message(now_ns, &header, &msg, vehicle);
-        }
-        self.commander.update(now_ns, vehicle);
-        let outgoing = self.commander.take_outgoing();
-        self.send(&outgoing);
-        Ok(())
-    }
-
-    /// Reads and decodes every pending datagram.
-    fn receive(&mut self) -> Result<Vec<(MavHeader, MavMessage)>, EndpointError> {
+    /// Every message that arrived since the last call (non-blocking); parse errors are
+    /// counted and skipped.
+    pub fn receive(&mut self) -> Result<Vec<(MavHeader, MavMessage)>, EndpointError> {
         let mut out = Vec::new();
         loop {
             match self.socket.recv_from(&mut self.buf) {
@@ -215,7 +194,8 @@ impl Endpoint {
     }
 
     /// Sends each message to the last peer and to the configured remote.
-    fn send(&mut self, msgs: &[MavMessage]) {
+    /// Sends `msgs` to the last peer and to the configured remote.
+    pub fn send(&mut self, msgs: &[MavMessage]) {
         let mut targets: [Option<SocketAddr>; 2] = [self.peer, self.config.remote];
         if targets[0] == targets[1] {
             targets[1] = None;
@@ -269,37 +249,54 @@ pub fn decode_datagram(data: &[u8], out: &mut Vec<(MavHeader, MavMessage)>) -> u
     errors
 }
 
-/// A simulated PX4 vehicle: the world, flown by the commander, reachable
-/// over UDP MAVLink.
+/// A simulated PX4 vehicle reachable over UDP: the lockstep [`Simulator`] (world +
+/// commander + sensor schedules) behind an [`Endpoint`].
 #[derive(Debug)]
 pub struct SimVehicle {
-    world: World,
+    sim: Simulator,
     endpoint: Endpoint,
 }
 
 impl SimVehicle {
-    /// Builds the vehicle: validates the PX4 parameters and binds the socket.
+    /// Builds the vehicle around `world`, validates the PX4 parameters, binds the socket.
     pub fn new(
         world: World,
         params: Px4Params,
         config: EndpointConfig,
     ) -> Result<Self, EndpointError> {
-        let commander = Commander::new(params)?;
-        let endpoint = Endpoint::bind(config, commander)?;
-        Ok(Self { world, endpoint })
+        let sim = Simulator::from_world(world, Commander::new(params)?, 30.0, 30.0, 0);
+        Self::with_simulator(sim, config)
+    }
+
+    /// Puts an existing simulator behind a new endpoint.
+    pub fn with_simulator(sim: Simulator, config: EndpointConfig) -> Result<Self, EndpointError> {
+        Ok(Self {
+            sim,
+            endpoint: Endpoint::bind(config)?,
+        })
     }
 
     /// The simulated world.
     pub fn world(&self) -> &World {
-        &self.world
+        self.sim.world()
     }
 
     /// The simulated world, mutably (scenario set-up, fault injection).
     pub fn world_mut(&mut self) -> &mut World {
-        &mut self.world
+        self.sim.world_mut()
     }
 
-    /// The MAVLink endpoint (address, stats, commander).
+    /// The simulator.
+    pub fn simulator(&self) -> &Simulator {
+        &self.sim
+    }
+
+    /// The simulator, mutably (sensors, commander).
+    pub fn simulator_mut(&mut self) -> &mut Simulator {
+        &mut self.sim
+    }
+
+    /// The MAVLink endpoint (address, stats).
     pub fn endpoint(&self) -> &Endpoint {
         &self.endpoint
     }
@@ -311,26 +308,19 @@ impl SimVehicle {
 
     /// What the commander sees of the world now: the estimate, never truth.
     pub fn status(&self) -> VehicleStatus {
-        VehicleStatus {
-            estimate: *self.world.estimate(),
-            crashed: self.world.crashed(),
-        }
+        self.sim.status()
     }
 
-    /// One step, clock-free: handle the link and the commander at `now_ns`,
-    /// apply armed + setpoint to the world, advance the world by `dt_ns`.
-    /// A lockstep runner passes `now_ns = world().time_ns()`.
-    pub fn step(&mut self, dt_ns: u64, now_ns: u64) -> Result<(), EndpointError> {
-        if dt_ns == 0 || dt_ns > MAX_STEP_NS {
-            return Err(EndpointError::InvalidStep(dt_ns));
+    /// One physics step, clock-free: what arrived on the link goes to the commander, the
+    /// simulator steps, what the commander produced goes out.
+    pub fn step(&mut self) -> Result<StepReport, EndpointError> {
+        for (header, msg) in self.endpoint.receive()? {
+            self.sim.handle_mavlink(&header, &msg);
         }
-        let status = self.status();
-        self.endpoint.poll(now_ns, &status)?;
-        let commander = self.endpoint.commander();
-        self.world.set_armed(commander.armed());
-        self.world.set_setpoint(commander.setpoint());
-        self.world.step(dt_ns)?;
-        Ok(())
+        let report = self.sim.step()?;
+        let out = self.sim.take_mavlink();
+        self.endpoint.send(&out);
+        Ok(report)
     }
 
     /// Runs on the wall clock in the calling thread, stepping the world at
@@ -340,7 +330,7 @@ impl SimVehicle {
     pub fn run_realtime(&mut self, until: Instant, stop: &AtomicBool) -> Result<(), EndpointError> {
         const MAX_LAG_NS: u64 = 100_000_000;
         let start = Instant::now();
-        let world_start_ns = self.world.time_ns();
+        let world_start_ns = self.sim.time_ns();
         let mut skipped_ns: u64 = 0;
         loop {
             let wall = Instant::now();
@@ -352,18 +342,17 @@ impl SimVehicle {
             let target_ns = world_start_ns
                 .saturating_add(elapsed_ns)
                 .saturating_sub(skipped_ns);
-            let behind = target_ns.saturating_sub(self.world.time_ns());
+            let behind = target_ns.saturating_sub(self.sim.time_ns());
             if behind > MAX_LAG_NS {
                 skipped_ns = skipped_ns.saturating_add(behind - REALTIME_STEP_NS);
                 tracing::debug!(behind_ms = behind / 1_000_000, "real-time loop fell behind");
             }
-            while self.world.time_ns().saturating_add(REALTIME_STEP_NS)
+            while self.sim.time_ns().saturating_add(REALTIME_STEP_NS)
                 <= world_start_ns
                     .saturating_add(elapsed_ns)
                     .saturating_sub(skipped_ns)
             {
-                let now = self.world.time_ns();
-                self.step(REALTIME_STEP_NS, now)?;
+                self.step()?;
             }
             std::thread::sleep(Duration::from_micros(500));
         }
