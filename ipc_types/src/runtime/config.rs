@@ -194,6 +194,38 @@ impl Validate for IpcConfig {
     }
 }
 
+/// Environment variable naming the deploy directory (scenarios, config, calibration).
+pub const DEPLOY_DIR_ENV: &str = "LANDING_DEPLOY_DIR";
+
+/// Where `deploy/` is: `LANDING_DEPLOY_DIR`, else the nearest `deploy/` above the current
+/// directory, else above the executable (a checkout's `target/release/`), else
+/// `/etc/landing` (an installed system).
+pub fn deploy_dir() -> PathBuf {
+    if let Ok(d) = std::env::var(DEPLOY_DIR_ENV) {
+        return PathBuf::from(d);
+    }
+    let has_deploy = |dir: &Path| dir.join("deploy").join("config").is_dir();
+    let mut starts = Vec::new();
+    if let Ok(cwd) = std::env::current_dir() {
+        starts.push(cwd);
+    }
+    if let Ok(exe) = std::env::current_exe()
+        && let Some(dir) = exe.parent()
+    {
+        starts.push(dir.to_path_buf());
+    }
+    for start in starts {
+        let mut dir = Some(start.as_path());
+        while let Some(d) = dir {
+            if has_deploy(d) {
+                return d.join("deploy");
+            }
+            dir = d.parent();
+        }
+    }
+    PathBuf::from("/etc/landing")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -45,7 +45,9 @@ impl Sim {
         let flag = stop.clone();
         let handle = std::thread::spawn(move || {
             let until = Instant::now() + Duration::from_secs(120);
-            vehicle.run_realtime(until, &flag).unwrap();
+            vehicle
+                .run_realtime(until, &flag, 1.0, |_, _| true)
+                .unwrap();
             vehicle
         });
         Self {

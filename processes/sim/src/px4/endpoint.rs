@@ -323,12 +323,23 @@ impl SimVehicle {
         Ok(report)
     }
 
-    /// Runs on the wall clock in the calling thread, stepping the world at
-    /// 500 Hz with `now_ns` = world time, until `until` or until `stop` is
-    /// set. If the thread falls more than 100 ms behind (a loaded machine),
+    /// Runs on the wall clock (times `speed`) in the calling thread, stepping the world
+    /// at 500 Hz, calling `on_step` after each step (sensors, truth), until `until`, until
+    /// `stop` is set, or until `on_step` returns false. If the thread falls more than 100 ms behind (a loaded machine),
     /// simulated time skips ahead instead of racing to catch up.
-    pub fn run_realtime(&mut self, until: Instant, stop: &AtomicBool) -> Result<(), EndpointError> {
+    pub fn run_realtime(
+        &mut self,
+        until: Instant,
+        stop: &AtomicBool,
+        speed: f64,
+        mut on_step: impl FnMut(&mut Simulator, &StepReport) -> bool,
+    ) -> Result<(), EndpointError> {
         const MAX_LAG_NS: u64 = 100_000_000;
+        let speed = if speed.is_finite() && speed > 0.0 {
+            speed
+        } else {
+            1.0
+        };
         let start = Instant::now();
         let world_start_ns = self.sim.time_ns();
         let mut skipped_ns: u64 = 0;
@@ -337,8 +348,7 @@ impl SimVehicle {
             if wall >= until || stop.load(Ordering::Relaxed) {
                 return Ok(());
             }
-            let elapsed_ns =
-                u64::try_from(wall.duration_since(start).as_nanos()).unwrap_or(u64::MAX);
+            let elapsed_ns = (wall.duration_since(start).as_nanos() as f64 * speed) as u64;
             let target_ns = world_start_ns
                 .saturating_add(elapsed_ns)
                 .saturating_sub(skipped_ns);
@@ -352,7 +362,10 @@ impl SimVehicle {
                     .saturating_add(elapsed_ns)
                     .saturating_sub(skipped_ns)
             {
-                self.step()?;
+                let report = self.step()?;
+                if !on_step(&mut self.sim, &report) {
+                    return Ok(());
+                }
             }
             std::thread::sleep(Duration::from_micros(500));
         }

@@ -1,0 +1,58 @@
+//! The pipeline never sees ground truth: no process crate but the simulator may name the
+//! evaluator-only truth topic or its message, and the simulator's library must not hand
+//! its truth to the MAVLink side (it reports the estimate).
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a panic is a failed test
+
+use std::path::{Path, PathBuf};
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            rust_files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
+
+#[test]
+fn no_pipeline_process_opens_the_truth_topic() {
+    let processes = Path::new(env!("CARGO_MANIFEST_DIR")).join("../processes");
+    let mut offenders = Vec::new();
+    for entry in std::fs::read_dir(&processes).expect("processes/") {
+        let dir = entry.expect("entry").path();
+        if dir.file_name().is_some_and(|n| n == "sim") {
+            continue;
+        }
+        let mut files = Vec::new();
+        rust_files(&dir.join("src"), &mut files);
+        for f in files {
+            let text = std::fs::read_to_string(&f).expect("read");
+            if text.contains("SIM_TRUTH") || text.contains("TruthEvent") {
+                offenders.push(f);
+            }
+        }
+    }
+    assert!(offenders.is_empty(), "ground truth used in: {offenders:?}");
+}
+
+#[test]
+fn the_simulated_autopilot_reports_the_estimate_not_the_truth() {
+    let px4 = Path::new(env!("CARGO_MANIFEST_DIR")).join("../processes/sim/src/px4");
+    let mut files = Vec::new();
+    rust_files(&px4, &mut files);
+    assert!(!files.is_empty());
+    for f in files {
+        let text = std::fs::read_to_string(&f).expect("read");
+        assert!(
+            !text.contains(".truth()"),
+            "{} reads the world's truth",
+            f.display()
+        );
+    }
+}
