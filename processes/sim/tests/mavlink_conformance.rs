@@ -79,12 +79,16 @@ struct Companion {
 
 impl Companion {
     fn connect(sim: &Sim) -> Self {
+        Self::connect_to(sim.addr)
+    }
+
+    fn connect_to(addr: SocketAddr) -> Self {
         let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
         sock.set_read_timeout(Some(Duration::from_millis(20)))
             .unwrap();
         let mut c = Self {
             sock,
-            sim: sim.addr,
+            sim: addr,
             seq: 0,
             start: Instant::now(),
         };
@@ -632,4 +636,59 @@ fn garbage_datagrams_do_not_crash_it() {
     let stats = vehicle.endpoint().stats();
     assert!(stats.parse_errors >= 3, "{stats:?}");
     assert!(stats.messages_received >= 3, "{stats:?}");
+}
+
+/// The `sim` binary as systemd would start it: a companion flies it over UDP, and the
+/// evaluator-only truth topic reports the liftoff and the touchdown over iceoryx2.
+#[test]
+fn the_sim_process_flies_over_mavlink_and_publishes_ground_truth() {
+    use ipc_types::msg::{TruthEvent, TruthKind};
+    use ipc_types::runtime::{Ipc, IpcPrefix};
+
+    let port = UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let addr: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
+    let prefix = IpcPrefix::unique("simproc");
+    let ipc = Ipc::open("evaluator", &prefix).unwrap();
+    let truth = ipc
+        .subscriber::<TruthEvent>(ipc_types::services::SIM_TRUTH)
+        .unwrap();
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sim"))
+        .args(["--scenario", "indoor-static", "--duration-s", "60"])
+        .args(["--mavlink-listen", &addr.to_string()])
+        .args(["--mavlink-remote", "127.0.0.1:9"])
+        .args(["--ipc-prefix", prefix.as_str()])
+        .env("LANDING_LOG", "warn")
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    let mut c = Companion::connect_to(addr);
+    assert!(
+        c.heartbeat(|_| true, secs(5)),
+        "no heartbeat from the sim process"
+    );
+    c.arm();
+    c.takeoff(1.5);
+    assert!(c.position_until(secs(8), |_| {}, |p| p[2] < -1.3).is_some());
+    assert_eq!(
+        c.command(
+            MavCmd::MAV_CMD_NAV_LAND,
+            [0.0, 0.0, 0.0, f32::NAN, f32::NAN, f32::NAN, f32::NAN]
+        ),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert!(c.landed_state(MavLandedState::MAV_LANDED_STATE_ON_GROUND, secs(10)));
+    let mut kinds = Vec::new();
+    while let Ok(Some(t)) = truth.receive() {
+        kinds.push(TruthKind::from_raw(t.kind));
+    }
+    // SAFETY: signalling our own child process.
+    unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    let status = child.wait().unwrap();
+    assert!(status.success(), "sim exited with {status}");
+    assert!(kinds.contains(&Some(TruthKind::Liftoff)), "{kinds:?}");
+    assert!(kinds.contains(&Some(TruthKind::Touchdown)), "{kinds:?}");
 }
