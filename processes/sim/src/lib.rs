@@ -15,8 +15,11 @@
 //! (`world_from_body * p_body = p_world`). SI units throughout.
 
 pub mod autopilot;
+pub mod camera;
+pub mod depth;
 pub mod estimator_noise;
 pub mod ground_vehicle;
+pub mod noise;
 pub mod params;
 pub mod quadrotor;
 pub mod rng;

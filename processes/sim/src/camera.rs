@@ -1,0 +1,607 @@
+//! The downward camera: renders what the quadrotor's pad camera sees.
+//!
+//! Pinhole + OpenCV distortion (the calibration the detector will use), the
+//! pad board textured with OpenCV's own ArUco markers, a procedural asphalt
+//! ground, motion blur over the exposure, and seeded Gaussian sensor noise.
+//!
+//! Speed comes from doing the expensive part once: the undistorted ray of every
+//! pixel is fixed by the calibration, so it is computed at construction. Per
+//! frame each ray is intersected with the pad plane (kept if it lands on the
+//! board) or else the ground plane z = 0, and the texture is sampled
+//! bilinearly from a mip level chosen by the distance, so far markers do not
+//! alias. Only the ground and the pad board are drawn (no vehicle body, no
+//! shadows, no sky model).
+
+use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
+use opencv::core::{CV_8UC1, CV_8UC3, Mat, Scalar};
+use opencv::prelude::*;
+use optics::{CameraCalibration, PadModel};
+use serde::Deserialize;
+use thiserror::Error;
+
+use crate::ground_vehicle::PadState;
+use crate::noise::PixelNoise;
+use crate::params::{self, ParamError};
+use crate::rng::Pcg32;
+
+/// Why a camera could not be built or used.
+#[derive(Debug, Error)]
+pub enum CameraError {
+    /// A configuration value is out of range.
+    #[error("camera: {0}")]
+    Param(#[from] ParamError),
+    /// The pad could not be drawn.
+    #[error("camera: {0}")]
+    Pad(#[from] optics::PadError),
+    /// OpenCV failed (only when converting to a `Mat`).
+    #[error("camera: {0}")]
+    OpenCv(#[from] opencv::Error),
+}
+
+/// Pixel layout of a rendered frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum PixelFormat {
+    /// One byte per pixel, grey (what the detector consumes).
+    #[default]
+    Mono8,
+    /// Three bytes per pixel, OpenCV's B, G, R order (grey replicated).
+    Bgr8,
+}
+
+/// Configuration of the downward camera (the `[camera_down]` section).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DownCameraParams {
+    /// Position of the camera's optical centre in the body frame (FLU), m.
+    /// The camera looks straight down: optical z = -body z, image up = body
+    /// forward (optical x = -body y, optical y = -body x).
+    pub position_in_body_m: [f64; 3],
+    /// Exposure time, s: the motion during it blurs the image.
+    pub exposure_time_s: f64,
+    /// Time from the middle of the exposure to the frame being published, s.
+    /// Metadata only: the caller applies it when timestamping and publishing.
+    pub latency_s: f64,
+    /// Standard deviation of the additive Gaussian sensor noise, grey levels.
+    pub noise_sigma: f64,
+    /// Most sub-exposure renders blended for motion blur (1 disables blur).
+    pub max_blur_samples: u32,
+    /// Output pixel layout.
+    pub format: PixelFormat,
+    /// Seed of the noise and of the ground texture.
+    pub seed: u64,
+    /// Resolution of the pad texture, px per metre (2000 = 0.5 mm texels,
+    /// fine enough for the 2.5 cm marker at 0.1 m on a 1280x720 camera).
+    pub pad_texture_px_per_m: f64,
+    /// Grey level of the markers' black.
+    pub black_level: u8,
+    /// Grey level of the board's white.
+    pub white_level: u8,
+}
+
+impl Default for DownCameraParams {
+    fn default() -> Self {
+        Self {
+            position_in_body_m: [0.05, 0.0, -0.05],
+            exposure_time_s: 0.004,
+            latency_s: 0.030,
+            noise_sigma: 2.0,
+            max_blur_samples: 8,
+            format: PixelFormat::Mono8,
+            seed: 1,
+            pad_texture_px_per_m: 2000.0,
+            black_level: 25,
+            white_level: 230,
+        }
+    }
+}
+
+impl DownCameraParams {
+    /// Checks every field; the error names the field.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        for (i, v) in self.position_in_body_m.iter().enumerate() {
+            params::in_range(&format!("position_in_body_m[{i}]"), *v, -2.0, 2.0)?;
+        }
+        params::in_range("exposure_time_s", self.exposure_time_s, 0.0, 0.1)?;
+        params::in_range("latency_s", self.latency_s, 0.0, 1.0)?;
+        params::in_range("noise_sigma", self.noise_sigma, 0.0, 64.0)?;
+        if !(1..=64).contains(&self.max_blur_samples) {
+            return Err(ParamError::new(
+                "max_blur_samples",
+                self.max_blur_samples,
+                "must be in [1, 64]",
+            ));
+        }
+        params::in_range("pad_texture_px_per_m", self.pad_texture_px_per_m, 200.0, 8000.0)?;
+        if self.black_level >= self.white_level {
+            return Err(ParamError::new(
+                "black_level",
+                self.black_level,
+                format!("must be < white_level ({})", self.white_level),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The mount: maps body-frame points into the optical frame.
+    pub fn camera_from_body(&self) -> Isometry3<f64> {
+        body_from_down_camera(self.position_in_body_m).inverse()
+    }
+}
+
+/// Pose of a downward-looking optical frame at `position` in the body frame:
+/// optical x = -body y, optical y = -body x, optical z = -body z.
+fn body_from_down_camera(position: [f64; 3]) -> Isometry3<f64> {
+    let r = nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::new(
+        0.0, -1.0, 0.0, //
+        -1.0, 0.0, 0.0, //
+        0.0, 0.0, -1.0,
+    ));
+    Isometry3::from_parts(
+        Translation3::new(position[0], position[1], position[2]),
+        UnitQuaternion::from_rotation_matrix(&r),
+    )
+}
+
+/// The body's true motion at the middle of the exposure.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BodyMotion {
+    /// Body pose in world ENU.
+    pub world_from_body: Isometry3<f64>,
+    /// Velocity of the body origin in world ENU, m/s.
+    pub linear_velocity: Vector3<f64>,
+    /// Angular rates in the body frame, rad/s.
+    pub angular_velocity_body: Vector3<f64>,
+}
+
+impl BodyMotion {
+    /// A body at rest at `world_from_body` (no blur).
+    pub fn at_rest(world_from_body: Isometry3<f64>) -> Self {
+        Self {
+            world_from_body,
+            linear_velocity: Vector3::zeros(),
+            angular_velocity_body: Vector3::zeros(),
+        }
+    }
+
+    fn at(&self, dt: f64) -> Isometry3<f64> {
+        let rot = self.world_from_body.rotation
+            * UnitQuaternion::from_scaled_axis(self.angular_velocity_body * dt);
+        Isometry3::from_parts(
+            Translation3::from(self.world_from_body.translation.vector + self.linear_velocity * dt),
+            rot,
+        )
+    }
+}
+
+fn pad_at(pad: &PadState, dt: f64) -> Isometry3<f64> {
+    let rot = UnitQuaternion::from_scaled_axis(pad.angular_velocity * dt) * pad.world_from_pad.rotation;
+    Isometry3::from_parts(
+        Translation3::from(pad.world_from_pad.translation.vector + pad.linear_velocity * dt),
+        rot,
+    )
+}
+
+/// One rendered image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    /// Width, px.
+    pub width: u32,
+    /// Height, px.
+    pub height: u32,
+    /// Pixel layout of `data`.
+    pub format: PixelFormat,
+    /// Row-major pixels, no padding.
+    pub data: Vec<u8>,
+    /// Exposure-to-publish latency the caller should apply, s.
+    pub latency_s: f64,
+    /// Sub-exposures blended for motion blur (1 = no visible motion).
+    pub blur_samples: u32,
+}
+
+impl Frame {
+    /// Copies the frame into an OpenCV `Mat` (CV_8UC1 or CV_8UC3), e.g. for the detector.
+    pub fn to_mat(&self) -> Result<Mat, CameraError> {
+        let typ = match self.format {
+            PixelFormat::Mono8 => CV_8UC1,
+            PixelFormat::Bgr8 => CV_8UC3,
+        };
+        let mut m =
+            Mat::new_rows_cols_with_default(self.height as i32, self.width as i32, typ, Scalar::all(0.0))?;
+        m.data_bytes_mut()?.copy_from_slice(&self.data);
+        Ok(m)
+    }
+}
+
+/// A mono texture with a mip chain, sampled bilinearly.
+#[derive(Debug, Clone)]
+struct Texture {
+    w: usize,
+    h: usize,
+    data: Vec<u8>,
+}
+
+impl Texture {
+    fn downsample(&self) -> Texture {
+        let (w, h) = (self.w / 2, self.h / 2);
+        let mut data = Vec::with_capacity(w * h);
+        for r in 0..h {
+            let a = &self.data[(2 * r) * self.w..(2 * r + 1) * self.w];
+            let b = &self.data[(2 * r + 1) * self.w..(2 * r + 2) * self.w];
+            for c in 0..w {
+                let s = u16::from(a[2 * c]) + u16::from(a[2 * c + 1]) + u16::from(b[2 * c]) + u16::from(b[2 * c + 1]);
+                data.push(((s + 2) / 4) as u8);
+            }
+        }
+        Texture { w, h, data }
+    }
+
+    fn mip_chain(self) -> Vec<Texture> {
+        let mut levels = vec![self];
+        while let Some(last) = levels.last() {
+            if last.w < 16 || last.h < 16 {
+                break;
+            }
+            let next = last.downsample();
+            levels.push(next);
+        }
+        levels
+    }
+
+    /// Bilinear sample at continuous texel coordinates (integers at texel
+    /// centres), clamped to the edge.
+    #[inline]
+    fn sample_clamped(&self, u: f32, v: f32) -> f32 {
+        let u = u.clamp(0.0, (self.w - 1) as f32 - 1e-3);
+        let v = v.clamp(0.0, (self.h - 1) as f32 - 1e-3);
+        let (c, r) = (u as usize, v as usize);
+        let (fu, fv) = (u - c as f32, v - r as f32);
+        let i = r * self.w + c;
+        let d = &self.data;
+        let (p00, p01) = (f32::from(d[i]), f32::from(d[i + 1]));
+        let (p10, p11) = (f32::from(d[i + self.w]), f32::from(d[i + self.w + 1]));
+        let top = p00 + (p01 - p00) * fu;
+        let bottom = p10 + (p11 - p10) * fu;
+        top + (bottom - top) * fv
+    }
+
+    /// Bilinear sample on a texture tiled over the plane (power-of-two size).
+    #[inline]
+    fn sample_wrapped(&self, u: f32, v: f32) -> f32 {
+        let (fc, fr) = (u.floor(), v.floor());
+        let (fu, fv) = (u - fc, v - fr);
+        let (mw, mh) = (self.w - 1, self.h - 1);
+        let c0 = (fc as i64 as usize) & mw;
+        let r0 = (fr as i64 as usize) & mh;
+        let c1 = (c0 + 1) & mw;
+        let r1 = (r0 + 1) & mh;
+        let d = &self.data;
+        let (p00, p01) = (f32::from(d[r0 * self.w + c0]), f32::from(d[r0 * self.w + c1]));
+        let (p10, p11) = (f32::from(d[r1 * self.w + c0]), f32::from(d[r1 * self.w + c1]));
+        let top = p00 + (p01 - p00) * fu;
+        let bottom = p10 + (p11 - p10) * fu;
+        top + (bottom - top) * fv
+    }
+}
+
+/// Ground texture: 1024 x 1024 texels of 2 cm, tiled (20.48 m period).
+const GROUND_SIZE: usize = 1024;
+const GROUND_PX_PER_M: f64 = 50.0;
+/// Grey level where a ray misses both planes (looking above the horizon).
+const SKY_LEVEL: f32 = 200.0;
+
+/// Procedural asphalt: multi-octave value noise, speckle, expansion joints
+/// every 2.56 m and a few dark stains, so the ground has texture a detector
+/// must reject (and optical flow could track) without looking like a marker.
+fn ground_texture(seed: u64) -> Texture {
+    let n = GROUND_SIZE;
+    let mut rng = Pcg32::with_stream(seed, 0x6772_6f75_6e64);
+    let mut acc = vec![0.0f32; n * n];
+    for (cell, amp) in [(128usize, 14.0f32), (32, 10.0), (8, 8.0), (2, 6.0)] {
+        let g = n / cell;
+        let lattice: Vec<f32> = (0..g * g).map(|_| rng.uniform() as f32 * 2.0 - 1.0).collect();
+        for r in 0..n {
+            let (gr, fr) = (r / cell, (r % cell) as f32 / cell as f32);
+            let sr = fr * fr * (3.0 - 2.0 * fr);
+            for c in 0..n {
+                let (gc, fc) = (c / cell, (c % cell) as f32 / cell as f32);
+                let sc = fc * fc * (3.0 - 2.0 * fc);
+                let l = |a: usize, b: usize| lattice[(a % g) * g + (b % g)];
+                let top = l(gr, gc) + (l(gr, gc + 1) - l(gr, gc)) * sc;
+                let bot = l(gr + 1, gc) + (l(gr + 1, gc + 1) - l(gr + 1, gc)) * sc;
+                acc[r * n + c] += amp * (top + (bot - top) * sr);
+            }
+        }
+    }
+    let stains: Vec<(f32, f32, f32)> = (0..12)
+        .map(|_| {
+            (
+                rng.uniform() as f32 * n as f32,
+                rng.uniform() as f32 * n as f32,
+                10.0 + rng.uniform() as f32 * 30.0,
+            )
+        })
+        .collect();
+    let mut data = Vec::with_capacity(n * n);
+    for r in 0..n {
+        for c in 0..n {
+            let mut v = 105.0 + acc[r * n + c] + (rng.uniform() as f32 - 0.5) * 16.0;
+            if r % 128 < 2 || c % 128 < 2 {
+                v -= 35.0;
+            }
+            for &(sx, sy, rad) in &stains {
+                let dx = (c as f32 - sx).abs().min(n as f32 - (c as f32 - sx).abs());
+                let dy = (r as f32 - sy).abs().min(n as f32 - (r as f32 - sy).abs());
+                if dx * dx + dy * dy < rad * rad {
+                    v -= 25.0;
+                }
+            }
+            data.push(v.clamp(0.0, 255.0) as u8);
+        }
+    }
+    Texture { w: n, h: n, data }
+}
+
+/// Mip level whose texels are about one pixel wide at `depth_m` along the
+/// optical axis (finer rather than coarser).
+fn mip_level(depth_m: f64, focal_px: f64, texels_per_m: f64, levels: usize) -> usize {
+    let texels_per_px = depth_m / focal_px * texels_per_m;
+    if !(texels_per_px.is_finite() && texels_per_px > 1.0) {
+        return 0;
+    }
+    (texels_per_px.log2().floor() as usize).min(levels.saturating_sub(1))
+}
+
+/// A rigid transform in f32 for the per-pixel loop.
+#[derive(Debug, Clone, Copy)]
+struct PlaneMap {
+    r: [[f32; 3]; 3],
+    t: [f32; 3],
+}
+
+impl PlaneMap {
+    fn new(plane_from_camera: &Isometry3<f64>) -> Self {
+        let m = plane_from_camera.rotation.to_rotation_matrix();
+        let m = m.matrix();
+        let t = plane_from_camera.translation.vector;
+        let mut r = [[0.0f32; 3]; 3];
+        for (i, row) in r.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = m[(i, j)] as f32;
+            }
+        }
+        Self {
+            r,
+            t: [t.x as f32, t.y as f32, t.z as f32],
+        }
+    }
+
+    /// Where the ray (rx, ry, 1) meets the plane z = 0, if in front.
+    #[inline]
+    fn hit(&self, rx: f32, ry: f32) -> Option<(f32, f32)> {
+        let r = &self.r;
+        let az = r[2][0] * rx + r[2][1] * ry + r[2][2];
+        let s = -self.t[2] / az;
+        if !(s > 0.0) {
+            return None;
+        }
+        let ax = r[0][0] * rx + r[0][1] * ry + r[0][2];
+        let ay = r[1][0] * rx + r[1][1] * ry + r[1][2];
+        Some((self.t[0] + s * ax, self.t[1] + s * ay))
+    }
+}
+
+/// The downward camera renderer. Build once (rays, textures), render per frame.
+#[derive(Debug, Clone)]
+pub struct DownCamera {
+    params: DownCameraParams,
+    calibration: CameraCalibration,
+    camera_from_body: Isometry3<f64>,
+    rays: Vec<[f32; 2]>,
+    pad_levels: Vec<Texture>,
+    pad_min: [f64; 2],
+    pad_max: [f64; 2],
+    ground_levels: Vec<Texture>,
+    noise: PixelNoise,
+    accum: Vec<f32>,
+}
+
+impl DownCamera {
+    /// Precomputes the per-pixel rays from the calibration, draws the pad
+    /// texture from the pad model and generates the ground from the seed.
+    pub fn new(
+        params: DownCameraParams,
+        calibration: CameraCalibration,
+        pad: &PadModel,
+    ) -> Result<Self, CameraError> {
+        params.validate()?;
+        let (w, h) = (calibration.width as usize, calibration.height as usize);
+        let mut rays = Vec::with_capacity(w * h);
+        for v in 0..h {
+            for u in 0..w {
+                let n = calibration.undistort_pixel(&Point2::new(u as f64, v as f64));
+                rays.push([n.x as f32, n.y as f32]);
+            }
+        }
+        let mat = pad.render_texture(params.pad_texture_px_per_m)?;
+        let bytes = mat.data_bytes()?;
+        let (black, white) = (f32::from(params.black_level), f32::from(params.white_level));
+        let texture = Texture {
+            w: mat.cols() as usize,
+            h: mat.rows() as usize,
+            data: bytes
+                .iter()
+                .map(|&b| (black + (white - black) * f32::from(b) / 255.0).round() as u8)
+                .collect(),
+        };
+        Ok(Self {
+            camera_from_body: params.camera_from_body(),
+            noise: PixelNoise::new(params.seed),
+            ground_levels: ground_texture(params.seed).mip_chain(),
+            pad_levels: texture.mip_chain(),
+            pad_min: pad.board.min_m,
+            pad_max: pad.board.max_m,
+            accum: vec![0.0; w * h],
+            rays,
+            calibration,
+            params,
+        })
+    }
+
+    /// The configuration in use.
+    pub fn params(&self) -> &DownCameraParams {
+        &self.params
+    }
+
+    /// The calibration images are rendered with (what the detector should load).
+    pub fn calibration(&self) -> &CameraCalibration {
+        &self.calibration
+    }
+
+    /// The camera mount (body to optical frame).
+    pub fn camera_from_body(&self) -> Isometry3<f64> {
+        self.camera_from_body
+    }
+
+    /// Renders one frame. `body` is the true motion at the middle of the
+    /// exposure, `pad` the pad at the same instant (`None`: no pad in the world).
+    pub fn render(&mut self, body: &BodyMotion, pad: Option<&PadState>) -> Frame {
+        let half = self.params.exposure_time_s / 2.0;
+        let samples = self.blur_samples(body, pad);
+        self.accum.iter_mut().for_each(|a| *a = 0.0);
+        let weight = 1.0 / samples as f32;
+        let body_from_camera = self.camera_from_body.inverse();
+        for k in 0..samples {
+            let dt = if samples == 1 {
+                0.0
+            } else {
+                2.0 * half * ((k as f64 + 0.5) / samples as f64 - 0.5)
+            };
+            let world_from_camera = body.at(dt) * body_from_camera;
+            let pad_from_camera = pad.map(|p| pad_at(p, dt).inverse() * world_from_camera);
+            self.render_pass(&world_from_camera, pad_from_camera.as_ref(), weight);
+        }
+        self.finish(samples)
+    }
+
+    /// How many sub-exposures keep the blur smooth: about one per pixel of
+    /// image motion of the pad centre or the ground under the camera.
+    fn blur_samples(&self, body: &BodyMotion, pad: Option<&PadState>) -> u32 {
+        let half = self.params.exposure_time_s / 2.0;
+        if self.params.max_blur_samples <= 1 || half <= 0.0 {
+            return 1;
+        }
+        let body_from_camera = self.camera_from_body.inverse();
+        let cam = |dt: f64| body.at(dt) * body_from_camera;
+        let (c0, c1) = (cam(-half), cam(half));
+        let mut motion: f64 = 0.0;
+        let mut track = |p0: Point3<f64>, p1: Point3<f64>| {
+            let a = self.calibration.project(&c0.inverse_transform_point(&p0));
+            let b = self.calibration.project(&c1.inverse_transform_point(&p1));
+            if let (Some(a), Some(b)) = (a, b) {
+                motion = motion.max((a - b).norm());
+            }
+        };
+        if let Some(p) = pad {
+            track(
+                pad_at(p, -half).transform_point(&Point3::origin()),
+                pad_at(p, half).transform_point(&Point3::origin()),
+            );
+        }
+        let mid = body.at(0.0) * body_from_camera;
+        let axis = mid.rotation * Vector3::z();
+        if axis.z < -1e-6 {
+            let s = -mid.translation.vector.z / axis.z;
+            let g = Point3::from(mid.translation.vector + axis * s);
+            track(g, g);
+        }
+        (motion.ceil() as u32).clamp(1, self.params.max_blur_samples)
+    }
+
+    fn render_pass(
+        &mut self,
+        world_from_camera: &Isometry3<f64>,
+        pad_from_camera: Option<&Isometry3<f64>>,
+        weight: f32,
+    ) {
+        let focal = self.calibration.fx.max(self.calibration.fy);
+        let depth_to = |plane_from_camera: &Isometry3<f64>| {
+            let axis = plane_from_camera.rotation * Vector3::z();
+            let tz = plane_from_camera.translation.vector.z;
+            if axis.z < -1e-6 { -tz / axis.z } else { tz.abs() }
+        };
+        let pad = pad_from_camera
+            .filter(|p| p.translation.vector.z > 0.0)
+            .map(|p| {
+                let ppm = self.params.pad_texture_px_per_m;
+                let level = mip_level(depth_to(p), focal, ppm, self.pad_levels.len());
+                (PlaneMap::new(p), level, (ppm / f64::from(1u32 << level)) as f32)
+            });
+        let ground = (world_from_camera.translation.vector.z > 0.0).then(|| {
+            let level = mip_level(
+                depth_to(world_from_camera),
+                focal,
+                GROUND_PX_PER_M,
+                self.ground_levels.len(),
+            );
+            (
+                PlaneMap::new(world_from_camera),
+                level,
+                (GROUND_PX_PER_M / f64::from(1u32 << level)) as f32,
+            )
+        });
+        let (minx, miny) = (self.pad_min[0] as f32, self.pad_min[1] as f32);
+        let (maxx, maxy) = (self.pad_max[0] as f32, self.pad_max[1] as f32);
+        let pad_tex = pad.as_ref().and_then(|(_, l, _)| self.pad_levels.get(*l));
+        let ground_tex = ground.as_ref().and_then(|(_, l, _)| self.ground_levels.get(*l));
+        for (acc, &[rx, ry]) in self.accum.iter_mut().zip(&self.rays) {
+            let mut value = None;
+            if let (Some((map, _, scale)), Some(tex)) = (&pad, pad_tex) {
+                if let Some((x, y)) = map.hit(rx, ry) {
+                    if x >= minx && x <= maxx && y >= miny && y <= maxy {
+                        value = Some(tex.sample_clamped((x - minx) * scale - 0.5, (maxy - y) * scale - 0.5));
+                    }
+                }
+            }
+            if value.is_none() {
+                if let (Some((map, _, scale)), Some(tex)) = (&ground, ground_tex) {
+                    if let Some((x, y)) = map.hit(rx, ry) {
+                        value = Some(tex.sample_wrapped(x * scale - 0.5, -y * scale - 0.5));
+                    }
+                }
+            }
+            *acc += weight * value.unwrap_or(SKY_LEVEL);
+        }
+    }
+
+    fn finish(&mut self, samples: u32) -> Frame {
+        let sigma = self.params.noise_sigma as f32;
+        let channels = match self.params.format {
+            PixelFormat::Mono8 => 1,
+            PixelFormat::Bgr8 => 3,
+        };
+        let mut data = vec![0u8; self.accum.len() * channels];
+        let to_u8 = |v: f32| (v + 0.5).clamp(0.0, 255.0) as u8;
+        for (out, acc) in data.chunks_exact_mut(2 * channels).zip(self.accum.chunks_exact(2)) {
+            let (na, nb) = self.noise.pair();
+            let a = to_u8(acc[0] + sigma * na);
+            let b = to_u8(acc[1] + sigma * nb);
+            let (oa, ob) = out.split_at_mut(channels);
+            oa.fill(a);
+            ob.fill(b);
+        }
+        if self.accum.len() % 2 == 1 {
+            if let (Some(last), Some(acc)) = (data.chunks_exact_mut(channels).last(), self.accum.last()) {
+                last.fill(to_u8(*acc + sigma * self.noise.pair().0));
+            }
+        }
+        Frame {
+            width: self.calibration.width,
+            height: self.calibration.height,
+            format: self.params.format,
+            data,
+            latency_s: self.params.latency_s,
+            blur_samples: samples,
+        }
+    }
+}
