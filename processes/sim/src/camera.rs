@@ -112,7 +112,12 @@ impl DownCameraParams {
                 "must be in [1, 64]",
             ));
         }
-        params::in_range("pad_texture_px_per_m", self.pad_texture_px_per_m, 200.0, 8000.0)?;
+        params::in_range(
+            "pad_texture_px_per_m",
+            self.pad_texture_px_per_m,
+            200.0,
+            8000.0,
+        )?;
         if self.black_level >= self.white_level {
             return Err(ParamError::new(
                 "black_level",
@@ -175,7 +180,8 @@ impl BodyMotion {
 }
 
 fn pad_at(pad: &PadState, dt: f64) -> Isometry3<f64> {
-    let rot = UnitQuaternion::from_scaled_axis(pad.angular_velocity * dt) * pad.world_from_pad.rotation;
+    let rot =
+        UnitQuaternion::from_scaled_axis(pad.angular_velocity * dt) * pad.world_from_pad.rotation;
     Isometry3::from_parts(
         Translation3::from(pad.world_from_pad.translation.vector + pad.linear_velocity * dt),
         rot,
@@ -206,8 +212,12 @@ impl Frame {
             PixelFormat::Mono8 => CV_8UC1,
             PixelFormat::Bgr8 => CV_8UC3,
         };
-        let mut m =
-            Mat::new_rows_cols_with_default(self.height as i32, self.width as i32, typ, Scalar::all(0.0))?;
+        let mut m = Mat::new_rows_cols_with_default(
+            self.height as i32,
+            self.width as i32,
+            typ,
+            Scalar::all(0.0),
+        )?;
         m.data_bytes_mut()?.copy_from_slice(&self.data);
         Ok(m)
     }
@@ -229,7 +239,10 @@ impl Texture {
             let a = &self.data[(2 * r) * self.w..(2 * r + 1) * self.w];
             let b = &self.data[(2 * r + 1) * self.w..(2 * r + 2) * self.w];
             for c in 0..w {
-                let s = u16::from(a[2 * c]) + u16::from(a[2 * c + 1]) + u16::from(b[2 * c]) + u16::from(b[2 * c + 1]);
+                let s = u16::from(a[2 * c])
+                    + u16::from(a[2 * c + 1])
+                    + u16::from(b[2 * c])
+                    + u16::from(b[2 * c + 1]);
                 data.push(((s + 2) / 4) as u8);
             }
         }
@@ -276,8 +289,14 @@ impl Texture {
         let c1 = (c0 + 1) & mw;
         let r1 = (r0 + 1) & mh;
         let d = &self.data;
-        let (p00, p01) = (f32::from(d[r0 * self.w + c0]), f32::from(d[r0 * self.w + c1]));
-        let (p10, p11) = (f32::from(d[r1 * self.w + c0]), f32::from(d[r1 * self.w + c1]));
+        let (p00, p01) = (
+            f32::from(d[r0 * self.w + c0]),
+            f32::from(d[r0 * self.w + c1]),
+        );
+        let (p10, p11) = (
+            f32::from(d[r1 * self.w + c0]),
+            f32::from(d[r1 * self.w + c1]),
+        );
         let top = p00 + (p01 - p00) * fu;
         let bottom = p10 + (p11 - p10) * fu;
         top + (bottom - top) * fv
@@ -299,7 +318,9 @@ fn ground_texture(seed: u64) -> Texture {
     let mut acc = vec![0.0f32; n * n];
     for (cell, amp) in [(128usize, 14.0f32), (32, 10.0), (8, 8.0), (2, 6.0)] {
         let g = n / cell;
-        let lattice: Vec<f32> = (0..g * g).map(|_| rng.uniform() as f32 * 2.0 - 1.0).collect();
+        let lattice: Vec<f32> = (0..g * g)
+            .map(|_| rng.uniform() as f32 * 2.0 - 1.0)
+            .collect();
         for r in 0..n {
             let (gr, fr) = (r / cell, (r % cell) as f32 / cell as f32);
             let sr = fr * fr * (3.0 - 2.0 * fr);
@@ -342,14 +363,22 @@ fn ground_texture(seed: u64) -> Texture {
     Texture { w: n, h: n, data }
 }
 
-/// Mip level whose texels are about one pixel wide at `depth_m` along the
-/// optical axis (finer rather than coarser).
-fn mip_level(depth_m: f64, focal_px: f64, texels_per_m: f64, levels: usize) -> usize {
+/// Mip level of detail at `depth_m` along the optical axis: the finer level
+/// whose texels are at most one pixel wide, and how far (0..1) the pixel
+/// footprint is toward the next coarser level, for trilinear blending.
+fn mip_level(depth_m: f64, focal_px: f64, texels_per_m: f64, levels: usize) -> (usize, f32) {
     let texels_per_px = depth_m / focal_px * texels_per_m;
     if !(texels_per_px.is_finite() && texels_per_px > 1.0) {
-        return 0;
+        return (0, 0.0);
     }
-    (texels_per_px.log2().floor() as usize).min(levels.saturating_sub(1))
+    let lod = texels_per_px.log2();
+    let top = levels.saturating_sub(1);
+    let level = lod.floor() as usize;
+    if level >= top {
+        (top, 0.0)
+    } else {
+        (level, lod.fract() as f32)
+    }
 }
 
 /// A rigid transform in f32 for the per-pixel loop.
@@ -528,17 +557,26 @@ impl DownCamera {
         let depth_to = |plane_from_camera: &Isometry3<f64>| {
             let axis = plane_from_camera.rotation * Vector3::z();
             let tz = plane_from_camera.translation.vector.z;
-            if axis.z < -1e-6 { -tz / axis.z } else { tz.abs() }
+            if axis.z < -1e-6 {
+                -tz / axis.z
+            } else {
+                tz.abs()
+            }
         };
         let pad = pad_from_camera
             .filter(|p| p.translation.vector.z > 0.0)
             .map(|p| {
                 let ppm = self.params.pad_texture_px_per_m;
-                let level = mip_level(depth_to(p), focal, ppm, self.pad_levels.len());
-                (PlaneMap::new(p), level, (ppm / f64::from(1u32 << level)) as f32)
+                let (level, blend) = mip_level(depth_to(p), focal, ppm, self.pad_levels.len());
+                (
+                    PlaneMap::new(p),
+                    level,
+                    (ppm / f64::from(1u32 << level)) as f32,
+                    blend,
+                )
             });
         let ground = (world_from_camera.translation.vector.z > 0.0).then(|| {
-            let level = mip_level(
+            let (level, _) = mip_level(
                 depth_to(world_from_camera),
                 focal,
                 GROUND_PX_PER_M,
@@ -552,14 +590,30 @@ impl DownCamera {
         });
         let (minx, miny) = (self.pad_min[0] as f32, self.pad_min[1] as f32);
         let (maxx, maxy) = (self.pad_max[0] as f32, self.pad_max[1] as f32);
-        let pad_tex = pad.as_ref().and_then(|(_, l, _)| self.pad_levels.get(*l));
-        let ground_tex = ground.as_ref().and_then(|(_, l, _)| self.ground_levels.get(*l));
+        let pad_tex = pad
+            .as_ref()
+            .and_then(|(_, l, _, _)| self.pad_levels.get(*l));
+        // The next coarser level for trilinear blending (absent at the top).
+        let pad_tex_coarse = pad
+            .as_ref()
+            .and_then(|(_, l, _, b)| (*b > 0.0).then(|| self.pad_levels.get(*l + 1)).flatten());
+        let ground_tex = ground
+            .as_ref()
+            .and_then(|(_, l, _)| self.ground_levels.get(*l));
         for (acc, &[rx, ry]) in self.accum.iter_mut().zip(&self.rays) {
             let mut value = None;
-            if let (Some((map, _, scale)), Some(tex)) = (&pad, pad_tex) {
+            if let (Some((map, _, scale, blend)), Some(tex)) = (&pad, pad_tex) {
                 if let Some((x, y)) = map.hit(rx, ry) {
                     if x >= minx && x <= maxx && y >= miny && y <= maxy {
-                        value = Some(tex.sample_clamped((x - minx) * scale - 0.5, (maxy - y) * scale - 0.5));
+                        let (u, v) = ((x - minx) * scale, (maxy - y) * scale);
+                        let fine = tex.sample_clamped(u - 0.5, v - 0.5);
+                        value = Some(match pad_tex_coarse {
+                            Some(coarse) => {
+                                let c = coarse.sample_clamped(u * 0.5 - 0.5, v * 0.5 - 0.5);
+                                fine + (c - fine) * blend
+                            }
+                            None => fine,
+                        });
                     }
                 }
             }
@@ -582,7 +636,10 @@ impl DownCamera {
         };
         let mut data = vec![0u8; self.accum.len() * channels];
         let to_u8 = |v: f32| (v + 0.5).clamp(0.0, 255.0) as u8;
-        for (out, acc) in data.chunks_exact_mut(2 * channels).zip(self.accum.chunks_exact(2)) {
+        for (out, acc) in data
+            .chunks_exact_mut(2 * channels)
+            .zip(self.accum.chunks_exact(2))
+        {
             let (na, nb) = self.noise.pair();
             let a = to_u8(acc[0] + sigma * na);
             let b = to_u8(acc[1] + sigma * nb);
@@ -591,7 +648,9 @@ impl DownCamera {
             ob.fill(b);
         }
         if self.accum.len() % 2 == 1 {
-            if let (Some(last), Some(acc)) = (data.chunks_exact_mut(channels).last(), self.accum.last()) {
+            if let (Some(last), Some(acc)) =
+                (data.chunks_exact_mut(channels).last(), self.accum.last())
+            {
                 last.fill(to_u8(*acc + sigma * self.noise.pair().0));
             }
         }

@@ -73,11 +73,17 @@ impl DepthCameraParams {
         params::in_range("hfov_deg", self.hfov_deg, 10.0, 170.0)?;
         params::in_range("vfov_deg", self.vfov_deg, 10.0, 170.0)?;
         params::in_range("min_depth_m", self.min_depth_m, 0.0, 100.0)?;
-        if !(self.max_depth_m.is_finite() && self.max_depth_m > self.min_depth_m && self.max_depth_m <= 65.0) {
+        if !(self.max_depth_m.is_finite()
+            && self.max_depth_m > self.min_depth_m
+            && self.max_depth_m <= 65.0)
+        {
             return Err(ParamError::new(
                 "max_depth_m",
                 self.max_depth_m,
-                format!("must be > min_depth_m ({}) and <= 65 (u16 mm)", self.min_depth_m),
+                format!(
+                    "must be > min_depth_m ({}) and <= 65 (u16 mm)",
+                    self.min_depth_m
+                ),
             ));
         }
         params::in_range("noise_k_per_m", self.noise_k_per_m, 0.0, 0.1)?;
@@ -235,7 +241,8 @@ impl DepthCamera {
             for v in v0..=v1 {
                 for u in u0..=u1 {
                     let i = v * w + u;
-                    let (Some(&[rx, ry]), Some(d)) = (self.rays.get(i), self.depth.get_mut(i)) else {
+                    let (Some(&[rx, ry]), Some(d)) = (self.rays.get(i), self.depth.get_mut(i))
+                    else {
                         continue;
                     };
                     let dir = PVec::new(
@@ -250,7 +257,10 @@ impl DepthCamera {
                 }
             }
         }
-        let (lo, hi) = (self.params.min_depth_m as f32, self.params.max_depth_m as f32);
+        let (lo, hi) = (
+            self.params.min_depth_m as f32,
+            self.params.max_depth_m as f32,
+        );
         let k = self.params.noise_k_per_m as f32;
         let mut out = vec![0u16; self.depth.len()];
         let to_mm = |z: f32, n: f32| {
