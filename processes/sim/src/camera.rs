@@ -223,30 +223,56 @@ impl Frame {
     }
 }
 
-/// A mono texture with a mip chain, sampled bilinearly.
+/// A mono texture with a mip chain, sampled bilinearly. Stored with one extra
+/// column and row (edge-replicated, or wrapped for a tiled texture) so the
+/// four texels of a bilinear sample are always two adjacent pairs.
 #[derive(Debug, Clone)]
 struct Texture {
     w: usize,
     h: usize,
+    stride: usize,
+    wrap: bool,
     data: Vec<u8>,
 }
 
 impl Texture {
+    /// From `w x h` row-major pixels; `wrap` for a texture tiled over the plane
+    /// (then `w` and `h` must be powers of two).
+    fn new(w: usize, h: usize, pixels: &[u8], wrap: bool) -> Texture {
+        let stride = w + 1;
+        let mut data = Vec::with_capacity(stride * (h + 1));
+        for r in 0..=h {
+            let src = if r < h { r } else if wrap { 0 } else { h - 1 };
+            let row = &pixels[src * w..(src + 1) * w];
+            data.extend_from_slice(row);
+            data.push(if wrap { row[0] } else { row[w - 1] });
+        }
+        Texture {
+            w,
+            h,
+            stride,
+            wrap,
+            data,
+        }
+    }
+
+    fn at(&self, c: usize, r: usize) -> u8 {
+        self.data[r * self.stride + c]
+    }
+
     fn downsample(&self) -> Texture {
         let (w, h) = (self.w / 2, self.h / 2);
-        let mut data = Vec::with_capacity(w * h);
+        let mut px = Vec::with_capacity(w * h);
         for r in 0..h {
-            let a = &self.data[(2 * r) * self.w..(2 * r + 1) * self.w];
-            let b = &self.data[(2 * r + 1) * self.w..(2 * r + 2) * self.w];
             for c in 0..w {
-                let s = u16::from(a[2 * c])
-                    + u16::from(a[2 * c + 1])
-                    + u16::from(b[2 * c])
-                    + u16::from(b[2 * c + 1]);
-                data.push(((s + 2) / 4) as u8);
+                let s = u16::from(self.at(2 * c, 2 * r))
+                    + u16::from(self.at(2 * c + 1, 2 * r))
+                    + u16::from(self.at(2 * c, 2 * r + 1))
+                    + u16::from(self.at(2 * c + 1, 2 * r + 1));
+                px.push(((s + 2) / 4) as u8);
             }
         }
-        Texture { w, h, data }
+        Texture::new(w, h, &px, self.wrap)
     }
 
     fn mip_chain(self) -> Vec<Texture> {
@@ -261,45 +287,45 @@ impl Texture {
         levels
     }
 
-    /// Bilinear sample at continuous texel coordinates (integers at texel
-    /// centres), clamped to the edge.
-    #[inline]
-    fn sample_clamped(&self, u: f32, v: f32) -> f32 {
-        let u = u.clamp(0.0, (self.w - 1) as f32 - 1e-3);
-        let v = v.clamp(0.0, (self.h - 1) as f32 - 1e-3);
-        let (c, r) = (u as usize, v as usize);
-        let (fu, fv) = (u - c as f32, v - r as f32);
-        let i = r * self.w + c;
-        let d = &self.data;
-        let (p00, p01) = (f32::from(d[i]), f32::from(d[i + 1]));
-        let (p10, p11) = (f32::from(d[i + self.w]), f32::from(d[i + self.w + 1]));
+    /// Bilinear blend of texels (c, r) .. (c + 1, r + 1); c < w and r < h.
+    #[inline(always)]
+    fn bilerp(&self, c: usize, r: usize, fu: f32, fv: f32) -> f32 {
+        let i = r * self.stride + c;
+        let Some(p) = self.data.get(i..i + self.stride + 2) else {
+            return 0.0;
+        };
+        let (p00, p01) = (f32::from(p[0]), f32::from(p[1]));
+        let (p10, p11) = (f32::from(p[self.stride]), f32::from(p[self.stride + 1]));
         let top = p00 + (p01 - p00) * fu;
         let bottom = p10 + (p11 - p10) * fu;
         top + (bottom - top) * fv
     }
 
+    /// Bilinear sample at continuous texel coordinates (integers at texel
+    /// centres), clamped to the edge.
+    #[inline(always)]
+    fn sample_clamped(&self, u: f32, v: f32) -> f32 {
+        let u = u.clamp(0.0, (self.w - 1) as f32);
+        let v = v.clamp(0.0, (self.h - 1) as f32);
+        let (c, r) = (u as i32, v as i32);
+        self.bilerp(c as usize, r as usize, u - c as f32, v - r as f32)
+    }
+
     /// Bilinear sample on a texture tiled over the plane (power-of-two size).
-    #[inline]
+    #[inline(always)]
     fn sample_wrapped(&self, u: f32, v: f32) -> f32 {
-        let (fc, fr) = (u.floor(), v.floor());
-        let (fu, fv) = (u - fc, v - fr);
-        let (mw, mh) = (self.w - 1, self.h - 1);
-        let c0 = (fc as i64 as usize) & mw;
-        let r0 = (fr as i64 as usize) & mh;
-        let c1 = (c0 + 1) & mw;
-        let r1 = (r0 + 1) & mh;
-        let d = &self.data;
-        let (p00, p01) = (
-            f32::from(d[r0 * self.w + c0]),
-            f32::from(d[r0 * self.w + c1]),
-        );
-        let (p10, p11) = (
-            f32::from(d[r1 * self.w + c0]),
-            f32::from(d[r1 * self.w + c1]),
-        );
-        let top = p00 + (p01 - p00) * fu;
-        let bottom = p10 + (p11 - p10) * fu;
-        top + (bottom - top) * fv
+        // floor without a libm call: truncate, then step down for negatives.
+        let c = u as i32;
+        let c = c - i32::from((c as f32) > u);
+        let r = v as i32;
+        let r = r - i32::from((r as f32) > v);
+        let (fu, fv) = (u - c as f32, v - r as f32);
+        self.bilerp(
+            (c as usize) & (self.w - 1),
+            (r as usize) & (self.h - 1),
+            fu,
+            fv,
+        )
     }
 }
 
@@ -360,7 +386,7 @@ fn ground_texture(seed: u64) -> Texture {
             data.push(v.clamp(0.0, 255.0) as u8);
         }
     }
-    Texture { w: n, h: n, data }
+    Texture::new(n, n, &data, true)
 }
 
 /// Mip level of detail at `depth_m` along the optical axis: the finer level
@@ -455,14 +481,11 @@ impl DownCamera {
         let mat = pad.render_texture(params.pad_texture_px_per_m)?;
         let bytes = mat.data_bytes()?;
         let (black, white) = (f32::from(params.black_level), f32::from(params.white_level));
-        let texture = Texture {
-            w: mat.cols() as usize,
-            h: mat.rows() as usize,
-            data: bytes
-                .iter()
-                .map(|&b| (black + (white - black) * f32::from(b) / 255.0).round() as u8)
-                .collect(),
-        };
+        let pixels: Vec<u8> = bytes
+            .iter()
+            .map(|&b| (black + (white - black) * f32::from(b) / 255.0).round() as u8)
+            .collect();
+        let texture = Texture::new(mat.cols() as usize, mat.rows() as usize, &pixels, false);
         Ok(Self {
             camera_from_body: params.camera_from_body(),
             noise: PixelNoise::new(params.seed),
