@@ -13,7 +13,8 @@
 //! shadows, no sky model).
 
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
-use opencv::core::{CV_8UC1, CV_8UC3, Mat, Scalar};
+use opencv::core::{BORDER_REPLICATE, CV_8UC1, CV_8UC3, CV_32FC1, Mat, Scalar};
+use opencv::imgproc;
 use opencv::prelude::*;
 use optics::{CameraCalibration, PadModel};
 use serde::Deserialize;
@@ -223,9 +224,9 @@ impl Frame {
     }
 }
 
-/// A mono texture with a mip chain, sampled bilinearly. Stored with one extra
-/// column and row (edge-replicated, or wrapped for a tiled texture) so the
-/// four texels of a bilinear sample are always two adjacent pairs.
+/// A mono texture level, stored with one extra column and row
+/// (edge-replicated, or wrapped for a tiled texture) so a bilinear sample at
+/// the last texel, or across the tile seam, reads the right neighbour.
 #[derive(Debug, Clone)]
 struct Texture {
     w: usize,
@@ -242,7 +243,13 @@ impl Texture {
         let stride = w + 1;
         let mut data = Vec::with_capacity(stride * (h + 1));
         for r in 0..=h {
-            let src = if r < h { r } else if wrap { 0 } else { h - 1 };
+            let src = if r < h {
+                r
+            } else if wrap {
+                0
+            } else {
+                h - 1
+            };
             let row = &pixels[src * w..(src + 1) * w];
             data.extend_from_slice(row);
             data.push(if wrap { row[0] } else { row[w - 1] });
@@ -285,47 +292,6 @@ impl Texture {
             levels.push(next);
         }
         levels
-    }
-
-    /// Bilinear blend of texels (c, r) .. (c + 1, r + 1); c < w and r < h.
-    #[inline(always)]
-    fn bilerp(&self, c: usize, r: usize, fu: f32, fv: f32) -> f32 {
-        let i = r * self.stride + c;
-        let Some(p) = self.data.get(i..i + self.stride + 2) else {
-            return 0.0;
-        };
-        let (p00, p01) = (f32::from(p[0]), f32::from(p[1]));
-        let (p10, p11) = (f32::from(p[self.stride]), f32::from(p[self.stride + 1]));
-        let top = p00 + (p01 - p00) * fu;
-        let bottom = p10 + (p11 - p10) * fu;
-        top + (bottom - top) * fv
-    }
-
-    /// Bilinear sample at continuous texel coordinates (integers at texel
-    /// centres), clamped to the edge.
-    #[inline(always)]
-    fn sample_clamped(&self, u: f32, v: f32) -> f32 {
-        let u = u.clamp(0.0, (self.w - 1) as f32);
-        let v = v.clamp(0.0, (self.h - 1) as f32);
-        let (c, r) = (u as i32, v as i32);
-        self.bilerp(c as usize, r as usize, u - c as f32, v - r as f32)
-    }
-
-    /// Bilinear sample on a texture tiled over the plane (power-of-two size).
-    #[inline(always)]
-    fn sample_wrapped(&self, u: f32, v: f32) -> f32 {
-        // floor without a libm call: truncate, then step down for negatives.
-        let c = u as i32;
-        let c = c - i32::from((c as f32) > u);
-        let r = v as i32;
-        let r = r - i32::from((r as f32) > v);
-        let (fu, fv) = (u - c as f32, v - r as f32);
-        self.bilerp(
-            (c as usize) & (self.w - 1),
-            (r as usize) & (self.h - 1),
-            fu,
-            fv,
-        )
     }
 }
 
@@ -453,12 +419,87 @@ pub struct DownCamera {
     calibration: CameraCalibration,
     camera_from_body: Isometry3<f64>,
     rays: Vec<[f32; 2]>,
-    pad_levels: Vec<Texture>,
+    atlas: Atlas,
     pad_min: [f64; 2],
     pad_max: [f64; 2],
-    ground_levels: Vec<Texture>,
     noise: PixelNoise,
+    /// Sub-exposure sum of the current band.
     accum: Vec<f32>,
+    tile: Tile,
+}
+
+/// Where one mip level sits in the atlas.
+#[derive(Debug, Clone, Copy)]
+struct Block {
+    x0: f32,
+    y0: f32,
+    w: usize,
+    h: usize,
+}
+
+/// Every texture level in one OpenCV image, so one `remap` call samples the
+/// pad, the ground and the sky for all pixels at once.
+#[derive(Debug, Clone)]
+struct Atlas {
+    mat: Mat,
+    pad: Vec<Block>,
+    ground: Vec<Block>,
+    /// Centre of a 2x2 block of sky grey.
+    sky: (f32, f32),
+}
+
+impl Atlas {
+    /// Packs the pad levels in one column and the ground levels in the next
+    /// (each with its extra border row and column), plus a sky block.
+    fn new(pad: &[Texture], ground: &[Texture]) -> Result<Self, CameraError> {
+        let column = |levels: &[Texture]| -> (usize, usize) {
+            let w = levels.iter().map(|t| t.stride).max().unwrap_or(0);
+            let h = levels.iter().map(|t| t.h + 2).sum();
+            (w, h)
+        };
+        let (pw, ph) = column(pad);
+        let (gw, gh) = column(ground);
+        let width = pw + gw + 4;
+        let height = ph.max(gh + 4);
+        let mut mat = Mat::new_rows_cols_with_default(
+            height as i32,
+            width as i32,
+            CV_8UC1,
+            Scalar::all(0.0),
+        )?;
+        let data = mat.data_bytes_mut()?;
+        let place = |levels: &[Texture], x0: usize, y_start: usize, data: &mut [u8]| {
+            let mut y = y_start;
+            let mut blocks = Vec::new();
+            for t in levels {
+                for r in 0..=t.h {
+                    let dst = (y + r) * width + x0;
+                    data[dst..dst + t.stride]
+                        .copy_from_slice(&t.data[r * t.stride..(r + 1) * t.stride]);
+                }
+                blocks.push(Block {
+                    x0: x0 as f32,
+                    y0: y as f32,
+                    w: t.w,
+                    h: t.h,
+                });
+                y += t.h + 2;
+            }
+            blocks
+        };
+        let pad_blocks = place(pad, 0, 0, data);
+        let ground_blocks = place(ground, pw + 1, 0, data);
+        let (sx, sy) = (pw + gw + 1, 0);
+        for (r, c) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+            data[(sy + r) * width + sx + c] = SKY_LEVEL as u8;
+        }
+        Ok(Self {
+            mat,
+            pad: pad_blocks,
+            ground: ground_blocks,
+            sky: (sx as f32 + 0.5, sy as f32 + 0.5),
+        })
+    }
 }
 
 impl DownCamera {
@@ -486,14 +527,18 @@ impl DownCamera {
             .map(|&b| (black + (white - black) * f32::from(b) / 255.0).round() as u8)
             .collect();
         let texture = Texture::new(mat.cols() as usize, mat.rows() as usize, &pixels, false);
+        let atlas = Atlas::new(
+            &texture.mip_chain(),
+            &ground_texture(params.seed).mip_chain(),
+        )?;
         Ok(Self {
             camera_from_body: params.camera_from_body(),
             noise: PixelNoise::new(params.seed),
-            ground_levels: ground_texture(params.seed).mip_chain(),
-            pad_levels: texture.mip_chain(),
+            atlas,
+            tile: Tile::new(),
             pad_min: pad.board.min_m,
             pad_max: pad.board.max_m,
-            accum: vec![0.0; w * h],
+            accum: Vec::new(),
             rays,
             calibration,
             params,
@@ -517,23 +562,66 @@ impl DownCamera {
 
     /// Renders one frame. `body` is the true motion at the middle of the
     /// exposure, `pad` the pad at the same instant (`None`: no pad in the world).
-    pub fn render(&mut self, body: &BodyMotion, pad: Option<&PadState>) -> Frame {
+    ///
+    /// The image is produced in bands of [`TILE_ROWS`] rows so that the
+    /// coordinate maps, the sampled band and the accumulator stay in cache;
+    /// each band blends every sub-exposure before moving on.
+    pub fn render(
+        &mut self,
+        body: &BodyMotion,
+        pad: Option<&PadState>,
+    ) -> Result<Frame, CameraError> {
         let half = self.params.exposure_time_s / 2.0;
         let samples = self.blur_samples(body, pad);
-        self.accum.iter_mut().for_each(|a| *a = 0.0);
-        let weight = 1.0 / samples as f32;
         let body_from_camera = self.camera_from_body.inverse();
-        for k in 0..samples {
-            let dt = if samples == 1 {
-                0.0
-            } else {
-                2.0 * half * ((k as f64 + 0.5) / samples as f64 - 0.5)
-            };
-            let world_from_camera = body.at(dt) * body_from_camera;
-            let pad_from_camera = pad.map(|p| pad_at(p, dt).inverse() * world_from_camera);
-            self.render_pass(&world_from_camera, pad_from_camera.as_ref(), weight);
+        let passes: Vec<Pass> = (0..samples)
+            .map(|k| {
+                let dt = if samples == 1 {
+                    0.0
+                } else {
+                    2.0 * half * ((f64::from(k) + 0.5) / f64::from(samples) - 0.5)
+                };
+                let world_from_camera = body.at(dt) * body_from_camera;
+                let pad_from_camera = pad.map(|p| pad_at(p, dt).inverse() * world_from_camera);
+                self.pass(&world_from_camera, pad_from_camera.as_ref())
+            })
+            .collect();
+        let weight = 1.0 / samples as f32;
+        let (w, h) = (
+            self.calibration.width as usize,
+            self.calibration.height as usize,
+        );
+        let channels = match self.params.format {
+            PixelFormat::Mono8 => 1,
+            PixelFormat::Bgr8 => 3,
+        };
+        let mut data = vec![0u8; w * h * channels];
+        let mut row = 0;
+        while row < h {
+            let rows = TILE_ROWS.min(h - row);
+            let range = row * w..(row + rows) * w;
+            self.tile.resize(rows, w)?;
+            self.accum.clear();
+            self.accum.resize(rows * w, 0.0);
+            for pass in &passes {
+                let rays = self.rays.get(range.clone()).unwrap_or(&[]);
+                self.tile
+                    .sample(&self.atlas, pass, rays, weight, &mut self.accum)?;
+            }
+            let out = data
+                .get_mut(range.start * channels..range.end * channels)
+                .unwrap_or(&mut []);
+            self.finish_tile(out, channels);
+            row += rows;
         }
-        self.finish(samples)
+        Ok(Frame {
+            width: self.calibration.width,
+            height: self.calibration.height,
+            format: self.params.format,
+            data,
+            latency_s: self.params.latency_s,
+            blur_samples: samples,
+        })
     }
 
     /// How many sub-exposures keep the blur smooth: about one per pixel of
@@ -570,12 +658,12 @@ impl DownCamera {
         (motion.ceil() as u32).clamp(1, self.params.max_blur_samples)
     }
 
-    fn render_pass(
-        &mut self,
+    /// Per-sub-exposure constants: the plane maps and the mip levels to use.
+    fn pass(
+        &self,
         world_from_camera: &Isometry3<f64>,
         pad_from_camera: Option<&Isometry3<f64>>,
-        weight: f32,
-    ) {
+    ) -> Pass {
         let focal = self.calibration.fx.max(self.calibration.fy);
         let depth_to = |plane_from_camera: &Isometry3<f64>| {
             let axis = plane_from_camera.rotation * Vector3::z();
@@ -586,104 +674,207 @@ impl DownCamera {
                 tz.abs()
             }
         };
+        let atlas = &self.atlas;
+        let ppm = self.params.pad_texture_px_per_m;
         let pad = pad_from_camera
             .filter(|p| p.translation.vector.z > 0.0)
-            .map(|p| {
-                let ppm = self.params.pad_texture_px_per_m;
-                let (level, blend) = mip_level(depth_to(p), focal, ppm, self.pad_levels.len());
-                (
-                    PlaneMap::new(p),
-                    level,
-                    (ppm / f64::from(1u32 << level)) as f32,
+            .and_then(|p| {
+                let (level, blend) = mip_level(depth_to(p), focal, ppm, atlas.pad.len());
+                let fine = *atlas.pad.get(level)?;
+                let coarse = *atlas.pad.get(level + 1).unwrap_or(&fine);
+                Some(PadPass {
+                    map: PlaneMap::new(p),
+                    fine,
+                    coarse,
+                    scale: (ppm / f64::from(1u32 << level)) as f32,
                     blend,
-                )
+                    min: [self.pad_min[0] as f32, self.pad_min[1] as f32],
+                    max: [self.pad_max[0] as f32, self.pad_max[1] as f32],
+                })
             });
-        let ground = (world_from_camera.translation.vector.z > 0.0).then(|| {
-            let (level, _) = mip_level(
-                depth_to(world_from_camera),
-                focal,
-                GROUND_PX_PER_M,
-                self.ground_levels.len(),
-            );
-            (
-                PlaneMap::new(world_from_camera),
-                level,
-                (GROUND_PX_PER_M / f64::from(1u32 << level)) as f32,
-            )
-        });
-        let (minx, miny) = (self.pad_min[0] as f32, self.pad_min[1] as f32);
-        let (maxx, maxy) = (self.pad_max[0] as f32, self.pad_max[1] as f32);
-        let pad_tex = pad
-            .as_ref()
-            .and_then(|(_, l, _, _)| self.pad_levels.get(*l));
-        // The next coarser level for trilinear blending (absent at the top).
-        let pad_tex_coarse = pad
-            .as_ref()
-            .and_then(|(_, l, _, b)| (*b > 0.0).then(|| self.pad_levels.get(*l + 1)).flatten());
-        let ground_tex = ground
-            .as_ref()
-            .and_then(|(_, l, _)| self.ground_levels.get(*l));
-        for (acc, &[rx, ry]) in self.accum.iter_mut().zip(&self.rays) {
-            let mut value = None;
-            if let (Some((map, _, scale, blend)), Some(tex)) = (&pad, pad_tex) {
-                if let Some((x, y)) = map.hit(rx, ry) {
-                    if x >= minx && x <= maxx && y >= miny && y <= maxy {
-                        let (u, v) = ((x - minx) * scale, (maxy - y) * scale);
-                        let fine = tex.sample_clamped(u - 0.5, v - 0.5);
-                        value = Some(match pad_tex_coarse {
-                            Some(coarse) => {
-                                let c = coarse.sample_clamped(u * 0.5 - 0.5, v * 0.5 - 0.5);
-                                fine + (c - fine) * blend
-                            }
-                            None => fine,
-                        });
-                    }
-                }
-            }
-            if value.is_none() {
-                if let (Some((map, _, scale)), Some(tex)) = (&ground, ground_tex) {
-                    if let Some((x, y)) = map.hit(rx, ry) {
-                        value = Some(tex.sample_wrapped(x * scale - 0.5, -y * scale - 0.5));
-                    }
-                }
-            }
-            *acc += weight * value.unwrap_or(SKY_LEVEL);
-        }
+        let ground = (world_from_camera.translation.vector.z > 0.0)
+            .then(|| {
+                let (level, _) = mip_level(
+                    depth_to(world_from_camera),
+                    focal,
+                    GROUND_PX_PER_M,
+                    atlas.ground.len(),
+                );
+                let block = *atlas.ground.get(level)?;
+                Some((
+                    PlaneMap::new(world_from_camera),
+                    block,
+                    (GROUND_PX_PER_M / f64::from(1u32 << level)) as f32,
+                ))
+            })
+            .flatten();
+        Pass { pad, ground }
     }
 
-    fn finish(&mut self, samples: u32) -> Frame {
+    /// Adds sensor noise and quantizes one band into `out`.
+    fn finish_tile(&mut self, out: &mut [u8], channels: usize) {
         let sigma = self.params.noise_sigma as f32;
-        let channels = match self.params.format {
-            PixelFormat::Mono8 => 1,
-            PixelFormat::Bgr8 => 3,
-        };
-        let mut data = vec![0u8; self.accum.len() * channels];
         let to_u8 = |v: f32| (v + 0.5).clamp(0.0, 255.0) as u8;
-        for (out, acc) in data
+        for (out, acc) in out
             .chunks_exact_mut(2 * channels)
             .zip(self.accum.chunks_exact(2))
         {
             let (na, nb) = self.noise.pair();
-            let a = to_u8(acc[0] + sigma * na);
-            let b = to_u8(acc[1] + sigma * nb);
             let (oa, ob) = out.split_at_mut(channels);
-            oa.fill(a);
-            ob.fill(b);
+            oa.fill(to_u8(acc[0] + sigma * na));
+            ob.fill(to_u8(acc[1] + sigma * nb));
         }
         if self.accum.len() % 2 == 1 {
             if let (Some(last), Some(acc)) =
-                (data.chunks_exact_mut(channels).last(), self.accum.last())
+                (out.chunks_exact_mut(channels).last(), self.accum.last())
             {
                 last.fill(to_u8(*acc + sigma * self.noise.pair().0));
             }
         }
-        Frame {
-            width: self.calibration.width,
-            height: self.calibration.height,
-            format: self.params.format,
-            data,
-            latency_s: self.params.latency_s,
-            blur_samples: samples,
+    }
+}
+
+/// Rows rendered together: small enough that a band's maps and samples stay in cache.
+pub const TILE_ROWS: usize = 16;
+
+/// What one sub-exposure needs to map a pixel's ray to atlas coordinates.
+#[derive(Debug, Clone, Copy)]
+struct Pass {
+    pad: Option<PadPass>,
+    ground: Option<(PlaneMap, Block, f32)>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct PadPass {
+    map: PlaneMap,
+    fine: Block,
+    coarse: Block,
+    /// Texels per metre at the fine level.
+    scale: f32,
+    /// Weight of the coarse level (trilinear filtering).
+    blend: f32,
+    min: [f32; 2],
+    max: [f32; 2],
+}
+
+/// Scratch OpenCV images for one band: atlas coordinates at the fine and the
+/// coarse pad level, and what `remap` sampled there.
+#[derive(Debug, Clone)]
+struct Tile {
+    rows: usize,
+    cols: usize,
+    maps: [Mat; 4],
+    sampled: [Mat; 2],
+}
+
+impl Tile {
+    fn new() -> Self {
+        Self {
+            rows: 0,
+            cols: 0,
+            maps: [
+                Mat::default(),
+                Mat::default(),
+                Mat::default(),
+                Mat::default(),
+            ],
+            sampled: [Mat::default(), Mat::default()],
         }
+    }
+
+    fn resize(&mut self, rows: usize, cols: usize) -> Result<(), CameraError> {
+        if (rows, cols) != (self.rows, self.cols) {
+            for m in &mut self.maps {
+                *m = Mat::new_rows_cols_with_default(
+                    rows as i32,
+                    cols as i32,
+                    CV_32FC1,
+                    Scalar::all(0.0),
+                )?;
+            }
+            (self.rows, self.cols) = (rows, cols);
+        }
+        Ok(())
+    }
+
+    /// Maps every ray of the band into the atlas, samples it with one `remap`
+    /// per pad level, and adds `weight` times the result to `accum`.
+    fn sample(
+        &mut self,
+        atlas: &Atlas,
+        pass: &Pass,
+        rays: &[[f32; 2]],
+        weight: f32,
+        accum: &mut [f32],
+    ) -> Result<(), CameraError> {
+        let sky = atlas.sky;
+        let [mfx, mfy, mcx, mcy] = &mut self.maps;
+        let (fx, fy) = (mfx.data_typed_mut::<f32>()?, mfy.data_typed_mut::<f32>()?);
+        let (cx, cy) = (mcx.data_typed_mut::<f32>()?, mcy.data_typed_mut::<f32>()?);
+        let pixels = fx
+            .iter_mut()
+            .zip(fy.iter_mut())
+            .zip(cx.iter_mut().zip(cy.iter_mut()));
+        for (((fx, fy), (cx, cy)), &[rx, ry]) in pixels.zip(rays) {
+            if let Some(p) = &pass.pad {
+                if let Some((x, y)) = p.map.hit(rx, ry) {
+                    if x >= p.min[0] && x <= p.max[0] && y >= p.min[1] && y <= p.max[1] {
+                        let (u, v) = ((x - p.min[0]) * p.scale, (p.max[1] - y) * p.scale);
+                        let uf = (u - 0.5).clamp(0.0, (p.fine.w - 1) as f32);
+                        let vf = (v - 0.5).clamp(0.0, (p.fine.h - 1) as f32);
+                        let uc = (u * 0.5 - 0.5).clamp(0.0, (p.coarse.w - 1) as f32);
+                        let vc = (v * 0.5 - 0.5).clamp(0.0, (p.coarse.h - 1) as f32);
+                        (*fx, *fy) = (p.fine.x0 + uf, p.fine.y0 + vf);
+                        (*cx, *cy) = (p.coarse.x0 + uc, p.coarse.y0 + vc);
+                        continue;
+                    }
+                }
+            }
+            let (mut u, mut v) = sky;
+            if let Some((map, block, scale)) = &pass.ground {
+                if let Some((x, y)) = map.hit(rx, ry) {
+                    let size = block.w as f32;
+                    let inv = 1.0 / size;
+                    let wrap = |t: f32| {
+                        let q = t * inv;
+                        let k = q as i32;
+                        let k = k - i32::from((k as f32) > q);
+                        (t - k as f32 * size).clamp(0.0, size)
+                    };
+                    u = block.x0 + wrap(x * scale - 0.5);
+                    v = block.y0 + wrap(-y * scale - 0.5);
+                }
+            }
+            (*fx, *fy) = (u, v);
+            (*cx, *cy) = (u, v);
+        }
+        let blend = pass.pad.map_or(0.0, |p| p.blend);
+        let [fine, coarse] = &mut self.sampled;
+        let remap = |mx: &Mat, my: &Mat, dst: &mut Mat| {
+            imgproc::remap(
+                &atlas.mat,
+                dst,
+                mx,
+                my,
+                imgproc::INTER_LINEAR,
+                BORDER_REPLICATE,
+                Scalar::all(0.0),
+            )
+        };
+        remap(&self.maps[0], &self.maps[1], fine)?;
+        let fine = fine.data_bytes()?;
+        if blend > 0.0 {
+            remap(&self.maps[2], &self.maps[3], coarse)?;
+            let coarse = coarse.data_bytes()?;
+            for ((acc, &a), &b) in accum.iter_mut().zip(fine).zip(coarse) {
+                let (a, b) = (f32::from(a), f32::from(b));
+                *acc += weight * (a + (b - a) * blend);
+            }
+        } else {
+            for (acc, &a) in accum.iter_mut().zip(fine) {
+                *acc += weight * f32::from(a);
+            }
+        }
+        Ok(())
     }
 }

@@ -167,7 +167,7 @@ fn a_pad_rendered_at_1_m_decodes_to_the_right_ids_and_pnp_recovers_the_pose() {
     for file in CAMERAS {
         let mut cam = camera(file, DownCameraParams::default());
         let body = body_over_pad(&cam, &pad, 1.0);
-        let frame = cam.render(&BodyMotion::at_rest(body), Some(&pad));
+        let frame = cam.render(&BodyMotion::at_rest(body), Some(&pad)).unwrap();
         let det = detect(&frame);
         let mut ids = det.ids.clone();
         ids.sort_unstable();
@@ -226,7 +226,7 @@ fn the_layout_keeps_a_marker_fully_visible_and_detected_from_3_m_to_touchdown() 
         let mut cam = camera(file, DownCameraParams::default());
         for height in [3.0, 2.0, 1.0, 0.5, 0.3, 0.2, 0.15, 0.1] {
             let body = body_over_pad(&cam, &pad, height);
-            let frame = cam.render(&BodyMotion::at_rest(body), Some(&pad));
+            let frame = cam.render(&BodyMotion::at_rest(body), Some(&pad)).unwrap();
             let det = detect(&frame);
             let mut ids = det.ids.clone();
             ids.sort_unstable();
@@ -251,14 +251,14 @@ fn a_blurred_frame_blends_several_sub_exposures_and_still_decodes() {
         },
     );
     let body = body_over_pad(&cam, &pad, 1.0);
-    let still = cam.render(&BodyMotion::at_rest(body), Some(&pad));
+    let still = cam.render(&BodyMotion::at_rest(body), Some(&pad)).unwrap();
     assert_eq!(still.blur_samples, 1);
     let moving = BodyMotion {
         world_from_body: body,
         linear_velocity: Vector3::new(1.0, 0.0, 0.0),
         angular_velocity_body: Vector3::new(0.0, 0.0, 0.5),
     };
-    let blurred = cam.render(&moving, Some(&pad));
+    let blurred = cam.render(&moving, Some(&pad)).unwrap();
     assert!(blurred.blur_samples > 1, "{}", blurred.blur_samples);
     assert_ne!(still.data, blurred.data);
     assert!(detect(&blurred).ids.contains(&68));
@@ -270,8 +270,8 @@ fn the_same_seed_renders_the_same_image_and_bgr_replicates_grey() {
     let mut a = camera("camera_down_640x480.yaml", DownCameraParams::default());
     let mut b = camera("camera_down_640x480.yaml", DownCameraParams::default());
     let body = BodyMotion::at_rest(body_over_pad(&a, &pad, 2.0));
-    let fa = a.render(&body, Some(&pad));
-    assert_eq!(fa, b.render(&body, Some(&pad)));
+    let fa = a.render(&body, Some(&pad)).unwrap();
+    assert_eq!(fa, b.render(&body, Some(&pad)).unwrap());
     assert_eq!(fa.data.len(), 640 * 480);
     let mut c = camera(
         "camera_down_640x480.yaml",
@@ -281,7 +281,7 @@ fn the_same_seed_renders_the_same_image_and_bgr_replicates_grey() {
             ..DownCameraParams::default()
         },
     );
-    let fc = c.render(&body, Some(&pad));
+    let fc = c.render(&body, Some(&pad)).unwrap();
     assert_eq!(fc.data.len(), 640 * 480 * 3);
     assert!(
         fc.data
@@ -301,7 +301,7 @@ fn without_a_pad_the_camera_sees_textured_ground() {
     );
     let pad = pad_state();
     let body = body_over_pad(&cam, &pad, 2.0);
-    let frame = cam.render(&BodyMotion::at_rest(body), None);
+    let frame = cam.render(&BodyMotion::at_rest(body), None).unwrap();
     let mean = frame.data.iter().map(|&v| f64::from(v)).sum::<f64>() / frame.data.len() as f64;
     let var = frame
         .data
@@ -433,7 +433,7 @@ fn render_bench() {
         let mut times = Vec::new();
         for _ in 0..100 {
             let t = Instant::now();
-            let f = cam.render(&body, Some(&pad));
+            let f = cam.render(&body, Some(&pad)).unwrap();
             times.push(t.elapsed().as_secs_f64() * 1e3);
             std::hint::black_box(f);
         }
@@ -449,7 +449,7 @@ fn render_bench() {
         let mut samples = 0;
         for _ in 0..100 {
             let t = Instant::now();
-            let f = cam.render(&moving, Some(&pad));
+            let f = cam.render(&moving, Some(&pad)).unwrap();
             times.push(t.elapsed().as_secs_f64() * 1e3);
             samples = f.blur_samples;
         }
