@@ -25,6 +25,29 @@ use crate::noise::PixelNoise;
 use crate::params::{self, ParamError};
 use crate::rng::Pcg32;
 
+/// Calls `$generic` through an AVX2 build when the CPU has AVX2 (checked at
+/// run time). Only the vector width changes, so results are bit-identical.
+macro_rules! avx2_dispatch {
+    ($(#[$doc:meta])* fn $name:ident => $avx2:ident, $generic:ident ($($arg:ident: $ty:ty),*) -> $ret:ty) => {
+        $(#[$doc])*
+        fn $name($($arg: $ty),*) -> $ret {
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above), which
+                // is all the target_feature function requires.
+                return unsafe { $avx2($($arg),*) };
+            }
+            $generic($($arg),*)
+        }
+
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        fn $avx2($($arg: $ty),*) -> $ret {
+            $generic($($arg),*)
+        }
+    };
+}
+
 /// Why a camera could not be built or used.
 #[derive(Debug, Error)]
 pub enum CameraError {
@@ -396,20 +419,6 @@ impl PlaneMap {
             t: [t.x as f32, t.y as f32, t.z as f32],
         }
     }
-
-    /// Where the ray (rx, ry, 1) meets the plane z = 0, if in front.
-    #[inline]
-    fn hit(&self, rx: f32, ry: f32) -> Option<(f32, f32)> {
-        let r = &self.r;
-        let az = r[2][0] * rx + r[2][1] * ry + r[2][2];
-        let s = -self.t[2] / az;
-        if !(s > 0.0) {
-            return None;
-        }
-        let ax = r[0][0] * rx + r[0][1] * ry + r[0][2];
-        let ay = r[1][0] * rx + r[1][1] * ry + r[1][2];
-        Some((self.t[0] + s * ax, self.t[1] + s * ay))
-    }
 }
 
 /// The downward camera renderer. Build once (rays, textures), render per frame.
@@ -596,6 +605,7 @@ impl DownCamera {
             PixelFormat::Bgr8 => 3,
         };
         let mut data = vec![0u8; w * h * channels];
+        self.noise.new_frame();
         let mut row = 0;
         while row < h {
             let rows = TILE_ROWS.min(h - row);
@@ -714,21 +724,12 @@ impl DownCamera {
     /// Adds sensor noise and quantizes one band into `out`.
     fn finish_tile(&mut self, out: &mut [u8], channels: usize) {
         let sigma = self.params.noise_sigma as f32;
-        let to_u8 = |v: f32| (v + 0.5).clamp(0.0, 255.0) as u8;
-        for (out, acc) in out
-            .chunks_exact_mut(2 * channels)
-            .zip(self.accum.chunks_exact(2))
-        {
-            let (na, nb) = self.noise.pair();
-            let (oa, ob) = out.split_at_mut(channels);
-            oa.fill(to_u8(acc[0] + sigma * na));
-            ob.fill(to_u8(acc[1] + sigma * nb));
-        }
-        if self.accum.len() % 2 == 1 {
-            if let (Some(last), Some(acc)) =
-                (out.chunks_exact_mut(channels).last(), self.accum.last())
-            {
-                last.fill(to_u8(*acc + sigma * self.noise.pair().0));
+        let noise = self.noise.slice(self.accum.len());
+        if channels == 1 {
+            quantize(out, &self.accum, noise, sigma);
+        } else {
+            for ((o, &a), &n) in out.chunks_exact_mut(channels).zip(&self.accum).zip(noise) {
+                o.fill(to_u8(a + sigma * n));
             }
         }
     }
@@ -807,48 +808,15 @@ impl Tile {
         weight: f32,
         accum: &mut [f32],
     ) -> Result<(), CameraError> {
-        let sky = atlas.sky;
         let [mfx, mfy, mcx, mcy] = &mut self.maps;
         let (fx, fy) = (mfx.data_typed_mut::<f32>()?, mfy.data_typed_mut::<f32>()?);
         let (cx, cy) = (mcx.data_typed_mut::<f32>()?, mcy.data_typed_mut::<f32>()?);
-        let pixels = fx
-            .iter_mut()
-            .zip(fy.iter_mut())
-            .zip(cx.iter_mut().zip(cy.iter_mut()));
-        for (((fx, fy), (cx, cy)), &[rx, ry]) in pixels.zip(rays) {
-            if let Some(p) = &pass.pad {
-                if let Some((x, y)) = p.map.hit(rx, ry) {
-                    if x >= p.min[0] && x <= p.max[0] && y >= p.min[1] && y <= p.max[1] {
-                        let (u, v) = ((x - p.min[0]) * p.scale, (p.max[1] - y) * p.scale);
-                        let uf = (u - 0.5).clamp(0.0, (p.fine.w - 1) as f32);
-                        let vf = (v - 0.5).clamp(0.0, (p.fine.h - 1) as f32);
-                        let uc = (u * 0.5 - 0.5).clamp(0.0, (p.coarse.w - 1) as f32);
-                        let vc = (v * 0.5 - 0.5).clamp(0.0, (p.coarse.h - 1) as f32);
-                        (*fx, *fy) = (p.fine.x0 + uf, p.fine.y0 + vf);
-                        (*cx, *cy) = (p.coarse.x0 + uc, p.coarse.y0 + vc);
-                        continue;
-                    }
-                }
-            }
-            let (mut u, mut v) = sky;
-            if let Some((map, block, scale)) = &pass.ground {
-                if let Some((x, y)) = map.hit(rx, ry) {
-                    let size = block.w as f32;
-                    let inv = 1.0 / size;
-                    let wrap = |t: f32| {
-                        let q = t * inv;
-                        let k = q as i32;
-                        let k = k - i32::from((k as f32) > q);
-                        (t - k as f32 * size).clamp(0.0, size)
-                    };
-                    u = block.x0 + wrap(x * scale - 0.5);
-                    v = block.y0 + wrap(-y * scale - 0.5);
-                }
-            }
-            (*fx, *fy) = (u, v);
-            (*cx, *cy) = (u, v);
-        }
-        let blend = pass.pad.map_or(0.0, |p| p.blend);
+        let any_pad = fill_maps(atlas, pass, rays, [fx, fy, cx, cy]);
+        let blend = if any_pad {
+            pass.pad.map_or(0.0, |p| p.blend)
+        } else {
+            0.0
+        };
         let [fine, coarse] = &mut self.sampled;
         let remap = |mx: &Mat, my: &Mat, dst: &mut Mat| {
             imgproc::remap(
@@ -866,15 +834,146 @@ impl Tile {
         if blend > 0.0 {
             remap(&self.maps[2], &self.maps[3], coarse)?;
             let coarse = coarse.data_bytes()?;
-            for ((acc, &a), &b) in accum.iter_mut().zip(fine).zip(coarse) {
-                let (a, b) = (f32::from(a), f32::from(b));
-                *acc += weight * (a + (b - a) * blend);
-            }
+            accumulate(accum, fine, coarse, weight, blend);
         } else {
-            for (acc, &a) in accum.iter_mut().zip(fine) {
-                *acc += weight * f32::from(a);
-            }
+            accumulate(accum, fine, fine, weight, 0.0);
         }
         Ok(())
+    }
+}
+
+avx2_dispatch!(
+    /// [`fill_maps_generic`], in an AVX2 build when the CPU has it.
+    fn fill_maps => fill_maps_avx2, fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
+);
+
+/// Atlas coordinates of every ray of a band, written branch-free so the
+/// compiler can vectorize it: both planes are intersected for every pixel and
+/// the result selected (pad if the ray lands on the board, else ground, else
+/// sky). Outputs: fine-level x, y and coarse-level x, y (equal off the pad).
+/// Returns whether any ray of the band landed on the pad.
+#[inline(always)]
+fn fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool {
+    let [fx, fy, cx, cy] = maps;
+    let n = rays
+        .len()
+        .min(fx.len())
+        .min(fy.len())
+        .min(cx.len())
+        .min(cy.len());
+    let (rays, fx, fy, cx, cy) = (
+        &rays[..n],
+        &mut fx[..n],
+        &mut fy[..n],
+        &mut cx[..n],
+        &mut cy[..n],
+    );
+    // A plane the rays never hit stands in for an absent pad or ground.
+    let never = PlaneMap {
+        r: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        t: [0.0, 0.0, -1.0],
+    };
+    let no_block = Block {
+        x0: atlas.sky.0,
+        y0: atlas.sky.1,
+        w: 1,
+        h: 1,
+    };
+    let p = pass.pad.unwrap_or(PadPass {
+        map: never,
+        fine: no_block,
+        coarse: no_block,
+        scale: 1.0,
+        blend: 0.0,
+        min: [1.0, 1.0],
+        max: [-1.0, -1.0],
+    });
+    let (gmap, gblock, gscale) = pass.ground.unwrap_or((never, no_block, 1.0));
+    let (pr, pt) = (p.map.r, p.map.t);
+    let (gr, gt) = (gmap.r, gmap.t);
+    let (fw, fh) = ((p.fine.w - 1) as f32, (p.fine.h - 1) as f32);
+    let (cw, ch) = ((p.coarse.w - 1) as f32, (p.coarse.h - 1) as f32);
+    let size = gblock.w as f32;
+    let inv = 1.0 / size;
+    let (skyx, skyy) = atlas.sky;
+    // floor(q) by the 1.5 * 2^23 rounding trick (no libm call, no float to
+    // int conversion, so the loop vectorizes); exact for |q| < 2^22 tiles.
+    const ROUND: f32 = 12_582_912.0;
+    let wrap = |t: f32| {
+        let q = (t * inv).max(-4.0e6).min(4.0e6);
+        let k = (q + ROUND) - ROUND;
+        let k = if k > q { k - 1.0 } else { k };
+        (t - k * size).max(0.0).min(size)
+    };
+    let mut any_pad = false;
+    for i in 0..n {
+        let [rx, ry] = rays[i];
+        // Pad plane.
+        let az = pr[2][0] * rx + pr[2][1] * ry + pr[2][2];
+        let s = -pt[2] / az;
+        let x = pt[0] + s * (pr[0][0] * rx + pr[0][1] * ry + pr[0][2]);
+        let y = pt[1] + s * (pr[1][0] * rx + pr[1][1] * ry + pr[1][2]);
+        let on_pad =
+            (s > 0.0) & (x >= p.min[0]) & (x <= p.max[0]) & (y >= p.min[1]) & (y <= p.max[1]);
+        let u = (x - p.min[0]) * p.scale;
+        let v = (p.max[1] - y) * p.scale;
+        let ufine = p.fine.x0 + (u - 0.5).max(0.0).min(fw);
+        let vfine = p.fine.y0 + (v - 0.5).max(0.0).min(fh);
+        let ucoarse = p.coarse.x0 + (u * 0.5 - 0.5).max(0.0).min(cw);
+        let vcoarse = p.coarse.y0 + (v * 0.5 - 0.5).max(0.0).min(ch);
+        // Ground plane.
+        let gaz = gr[2][0] * rx + gr[2][1] * ry + gr[2][2];
+        let gs = -gt[2] / gaz;
+        let gx = gt[0] + gs * (gr[0][0] * rx + gr[0][1] * ry + gr[0][2]);
+        let gy = gt[1] + gs * (gr[1][0] * rx + gr[1][1] * ry + gr[1][2]);
+        let on_ground = gs > 0.0;
+        let ug = if on_ground {
+            gblock.x0 + wrap(gx * gscale - 0.5)
+        } else {
+            skyx
+        };
+        let vg = if on_ground {
+            gblock.y0 + wrap(-gy * gscale - 0.5)
+        } else {
+            skyy
+        };
+        fx[i] = if on_pad { ufine } else { ug };
+        fy[i] = if on_pad { vfine } else { vg };
+        cx[i] = if on_pad { ucoarse } else { ug };
+        cy[i] = if on_pad { vcoarse } else { vg };
+        any_pad |= on_pad;
+    }
+    any_pad
+}
+
+/// Rounds and saturates a grey level to a byte (vectorizes, unlike `as u8`
+/// on a float).
+#[inline(always)]
+fn to_u8(v: f32) -> u8 {
+    (v + 0.5).max(0.0).min(255.0) as i32 as u8
+}
+
+avx2_dispatch!(
+    /// `accum += weight * lerp(fine, coarse, blend)` over a band.
+    fn accumulate => accumulate_avx2, accumulate_generic(accum: &mut [f32], fine: &[u8], coarse: &[u8], weight: f32, blend: f32) -> ()
+);
+
+#[inline(always)]
+fn accumulate_generic(accum: &mut [f32], fine: &[u8], coarse: &[u8], weight: f32, blend: f32) {
+    for ((acc, &a), &b) in accum.iter_mut().zip(fine).zip(coarse) {
+        let (a, b) = (f32::from(a), f32::from(b));
+        *acc += weight * (a + (b - a) * blend);
+    }
+}
+
+avx2_dispatch!(
+    /// `out = to_u8(accum + sigma * noise)` over a band (mono).
+    fn quantize => quantize_avx2, quantize_generic(out: &mut [u8], accum: &[f32], noise: &[f32], sigma: f32) -> ()
+);
+
+#[inline(always)]
+fn quantize_generic(out: &mut [u8], accum: &[f32], noise: &[f32], sigma: f32) {
+    for ((o, &a), &n) in out.iter_mut().zip(accum).zip(noise) {
+        *o = to_u8(a + sigma * n);
     }
 }

@@ -14,7 +14,7 @@ use parry3d::query::{Ray, RayCast};
 use parry3d::shape::Cuboid;
 use serde::Deserialize;
 
-use crate::noise::PixelNoise;
+use crate::noise::{MAX_SLICE, PixelNoise};
 use crate::params::{self, ParamError};
 use crate::world::Aabb;
 
@@ -265,19 +265,16 @@ impl DepthCamera {
         let mut out = vec![0u16; self.depth.len()];
         let to_mm = |z: f32, n: f32| {
             if z >= lo && z <= hi {
-                ((z + k * z * z * n) * 1000.0).round().clamp(1.0, 65535.0) as u16
+                ((z + k * z * z * n) * 1000.0 + 0.5).max(1.0).min(65535.0) as i32 as u16
             } else {
                 0
             }
         };
-        for (o, d) in out.chunks_exact_mut(2).zip(self.depth.chunks_exact(2)) {
-            let (na, nb) = self.noise.pair();
-            o[0] = to_mm(d[0], na);
-            o[1] = to_mm(d[1], nb);
-        }
-        if self.depth.len() % 2 == 1 {
-            if let (Some(o), Some(d)) = (out.last_mut(), self.depth.last()) {
-                *o = to_mm(*d, self.noise.pair().0);
+        self.noise.new_frame();
+        for (o, d) in out.chunks_mut(MAX_SLICE).zip(self.depth.chunks(MAX_SLICE)) {
+            let noise = self.noise.slice(d.len());
+            for ((o, &d), &n) in o.iter_mut().zip(d).zip(noise) {
+                *o = to_mm(d, n);
             }
         }
         DepthFrame {
