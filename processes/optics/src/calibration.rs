@@ -343,7 +343,7 @@ impl CameraCalibration {
     /// Projects a point in the camera's optical frame (x right, y down, z
     /// forward) to a pixel; `None` if it is not in front of the camera.
     pub fn project(&self, point_camera: &Point3<f64>) -> Option<Point2<f64>> {
-        if !(point_camera.z > 0.0) {
+        if point_camera.z.is_nan() || point_camera.z <= 0.0 {
             return None;
         }
         let n = Vector2::new(

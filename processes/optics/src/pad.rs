@@ -276,10 +276,7 @@ impl PadModel {
     /// row 0 its max y; texel (c, r) covers pad x = min_x + (c .. c+1) / ppm,
     /// y = max_y - (r .. r+1) / ppm. Used to print the pad and to render it.
     pub fn render_texture(&self, pixels_per_metre: f64) -> Result<Mat, PadError> {
-        if !(pixels_per_metre.is_finite()
-            && pixels_per_metre >= 100.0
-            && pixels_per_metre <= 20000.0)
-        {
+        if !(100.0..=20000.0).contains(&pixels_per_metre) {
             return Err(invalid(
                 "pixels_per_metre",
                 pixels_per_metre,

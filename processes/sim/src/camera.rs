@@ -21,7 +21,7 @@ use serde::Deserialize;
 use thiserror::Error;
 
 use crate::ground_vehicle::PadState;
-use crate::noise::PixelNoise;
+use crate::noise::{MAX_SLICE, PixelNoise};
 use crate::params::{self, ParamError};
 use crate::rng::Pcg32;
 
@@ -57,9 +57,12 @@ pub enum CameraError {
     /// The pad could not be drawn.
     #[error("camera: {0}")]
     Pad(#[from] optics::PadError),
-    /// OpenCV failed (only when converting to a `Mat`).
+    /// OpenCV failed (building the texture atlas, sampling, converting).
     #[error("camera: {0}")]
     OpenCv(#[from] opencv::Error),
+    /// The image is wider than the renderer's bands allow.
+    #[error("camera: image width {0} px is above the supported 4096 px")]
+    TooWide(u32),
 }
 
 /// Pixel layout of a rendered frame.
@@ -521,6 +524,9 @@ impl DownCamera {
     ) -> Result<Self, CameraError> {
         params.validate()?;
         let (w, h) = (calibration.width as usize, calibration.height as usize);
+        if w * TILE_ROWS > MAX_SLICE {
+            return Err(CameraError::TooWide(calibration.width));
+        }
         let mut rays = Vec::with_capacity(w * h);
         for v in 0..h {
             for u in 0..w {
@@ -900,7 +906,7 @@ fn fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut 
     // int conversion, so the loop vectorizes); exact for |q| < 2^22 tiles.
     const ROUND: f32 = 12_582_912.0;
     let wrap = |t: f32| {
-        let q = (t * inv).max(-4.0e6).min(4.0e6);
+        let q = (t * inv).clamp(-4.0e6, 4.0e6);
         let k = (q + ROUND) - ROUND;
         let k = if k > q { k - 1.0 } else { k };
         (t - k * size).max(0.0).min(size)
@@ -950,7 +956,7 @@ fn fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut 
 /// on a float).
 #[inline(always)]
 fn to_u8(v: f32) -> u8 {
-    (v + 0.5).max(0.0).min(255.0) as i32 as u8
+    (v + 0.5).clamp(0.0, 255.0) as i32 as u8
 }
 
 avx2_dispatch!(

@@ -265,7 +265,7 @@ impl DepthCamera {
         let mut out = vec![0u16; self.depth.len()];
         let to_mm = |z: f32, n: f32| {
             if z >= lo && z <= hi {
-                ((z + k * z * z * n) * 1000.0 + 0.5).max(1.0).min(65535.0) as i32 as u16
+                ((z + k * z * z * n) * 1000.0 + 0.5).clamp(1.0, 65535.0) as i32 as u16
             } else {
                 0
             }
