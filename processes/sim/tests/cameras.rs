@@ -427,36 +427,44 @@ fn depth_noise_grows_with_range() {
 #[ignore = "benchmark: prints timings, asserts nothing"]
 fn render_bench() {
     let pad = pad_state();
-    for file in CAMERAS {
-        let mut cam = camera(file, DownCameraParams::default());
-        let body = BodyMotion::at_rest(body_over_pad(&cam, &pad, 1.0));
-        let mut times = Vec::new();
-        for _ in 0..100 {
-            let t = Instant::now();
-            let f = cam.render(&body, Some(&pad)).unwrap();
-            times.push(t.elapsed().as_secs_f64() * 1e3);
-            std::hint::black_box(f);
+    let time = |f: &mut dyn FnMut()| {
+        let mut times: Vec<f64> = (0..100)
+            .map(|_| {
+                let t = Instant::now();
+                f();
+                t.elapsed().as_secs_f64() * 1e3
+            })
+            .collect();
+        median(std::mem::take(&mut times))
+    };
+    for threads in [None, Some(1)] {
+        if let Some(n) = threads {
+            opencv::core::set_num_threads(n).unwrap();
         }
-        println!(
-            "down camera {file}: median {:.3} ms (static)",
-            median(times)
-        );
-        let moving = BodyMotion {
-            linear_velocity: Vector3::new(1.0, 0.0, 0.0),
-            ..body
-        };
-        let mut times = Vec::new();
-        let mut samples = 0;
-        for _ in 0..100 {
-            let t = Instant::now();
-            let f = cam.render(&moving, Some(&pad)).unwrap();
-            times.push(t.elapsed().as_secs_f64() * 1e3);
-            samples = f.blur_samples;
+        let label = threads.map_or("OpenCV default threads".to_string(), |n| {
+            format!("OpenCV {n} thread")
+        });
+        for file in CAMERAS {
+            let mut cam = camera(file, DownCameraParams::default());
+            for height in [3.0, 1.0, 0.2] {
+                let body = BodyMotion::at_rest(body_over_pad(&cam, &pad, height));
+                let ms = time(&mut || {
+                    std::hint::black_box(cam.render(&body, Some(&pad)).unwrap());
+                });
+                println!("down camera {file} at {height} m, static ({label}): median {ms:.3} ms");
+            }
+            let moving = BodyMotion {
+                linear_velocity: Vector3::new(3.0, 0.0, 0.0),
+                ..BodyMotion::at_rest(body_over_pad(&cam, &pad, 1.0))
+            };
+            let samples = cam.render(&moving, Some(&pad)).unwrap().blur_samples;
+            let ms = time(&mut || {
+                std::hint::black_box(cam.render(&moving, Some(&pad)).unwrap());
+            });
+            println!(
+                "down camera {file} at 1 m, 3 m/s, {samples} sub-exposures ({label}): median {ms:.3} ms"
+            );
         }
-        println!(
-            "down camera {file}: median {:.3} ms (1 m/s at 1 m, {samples} sub-exposures)",
-            median(times)
-        );
     }
     let mut depth = DepthCamera::new(DepthCameraParams::default()).unwrap();
     let body = level_body(0.0, 0.0, 1.5, 0.0);
