@@ -494,3 +494,46 @@ fn render_bench() {
         median(times)
     );
 }
+
+#[test]
+fn camera_parameters_parse_from_toml_and_bad_values_name_the_field() {
+    let p: DownCameraParams = toml::from_str(
+        "exposure_time_s = 0.008\nformat = \"bgr8\"\nposition_in_body_m = [0.0, 0.0, -0.1]",
+    )
+    .unwrap();
+    assert_eq!(p.exposure_time_s, 0.008);
+    assert_eq!(p.format, PixelFormat::Bgr8);
+    assert!(toml::from_str::<DownCameraParams>("exposure = 0.008").is_err());
+    let bad = DownCameraParams {
+        exposure_time_s: -1.0,
+        ..DownCameraParams::default()
+    };
+    assert!(
+        bad.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("exposure_time_s")
+    );
+    let bad = DownCameraParams {
+        black_level: 240,
+        ..DownCameraParams::default()
+    };
+    assert!(
+        bad.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("black_level")
+    );
+    let d: DepthCameraParams = toml::from_str("max_depth_m = 6.0\nnoise_k_per_m = 0.0").unwrap();
+    assert_eq!(d.max_depth_m, 6.0);
+    let bad = DepthCameraParams {
+        max_depth_m: 0.1,
+        ..DepthCameraParams::default()
+    };
+    assert!(
+        DepthCamera::new(bad)
+            .unwrap_err()
+            .to_string()
+            .contains("max_depth_m")
+    );
+}
