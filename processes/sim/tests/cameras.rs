@@ -236,6 +236,14 @@ fn the_layout_keeps_a_marker_fully_visible_and_detected_from_3_m_to_touchdown() 
                 "{file} at {height} m: {ids:?}"
             );
             assert!(!ids.is_empty(), "{file} at {height} m: no marker detected");
+            // The layout's intent: a marker meant for this distance is among them.
+            assert!(
+                ids.iter().any(|id| {
+                    let [lo, hi] = pad_model.marker(*id as u32).unwrap().active_range_m;
+                    (lo..=hi).contains(&height)
+                }),
+                "{file} at {height} m: no detected marker is active at this distance ({ids:?})"
+            );
         }
     }
 }
