@@ -874,10 +874,11 @@ fn fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut 
         &mut cx[..n],
         &mut cy[..n],
     );
-    // A plane the rays never hit stands in for an absent pad or ground.
+    // A plane the rays never hit stands in for an absent pad or ground: the
+    // camera 1 m above it, looking straight up (every ray has s < 0).
     let never = PlaneMap {
         r: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-        t: [0.0, 0.0, -1.0],
+        t: [0.0, 0.0, 1.0],
     };
     let no_block = Block {
         x0: atlas.sky.0,
