@@ -4,7 +4,9 @@
 //! laptop: quadrotor rigid-body physics, a PX4-like cascaded controller, the
 //! noise a visual-inertial estimator adds, the ground vehicle carrying the
 //! landing pad, wind, and a [`world::World`] that ties them together and
-//! records ground-truth events (touchdown, crash, collision).
+//! records ground-truth events (touchdown, crash, collision); plus the two
+//! simulated cameras: the downward pad camera ([`camera::DownCamera`]) and
+//! the forward depth camera ([`depth::DepthCamera`]).
 //!
 //! Everything here is pure: inputs and time in, outputs out. There are no clock
 //! reads, sleeps, threads, IPC or printing; the caller drives fixed-step
@@ -18,9 +20,12 @@
 //! (`world_from_body * p_body = p_world`). SI units throughout.
 
 pub mod autopilot;
+pub mod camera;
+pub mod depth;
 pub mod estimator_noise;
 pub mod ground_vehicle;
 pub mod lockstep;
+pub mod noise;
 pub mod params;
 pub mod px4;
 pub mod quadrotor;

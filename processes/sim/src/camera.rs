@@ -1,0 +1,986 @@
+//! The downward camera: renders what the quadrotor's pad camera sees.
+//!
+//! Pinhole + OpenCV distortion (the calibration the detector will use), the
+//! pad board textured with OpenCV's own ArUco markers, a procedural asphalt
+//! ground, motion blur over the exposure, and seeded Gaussian sensor noise.
+//!
+//! Speed comes from doing the expensive part once: the undistorted ray of every
+//! pixel is fixed by the calibration, so it is computed at construction. Per
+//! frame each ray is intersected with the pad plane (kept if it lands on the
+//! board) or else the ground plane z = 0, and the texture is sampled
+//! bilinearly from a mip level chosen by the distance, so far markers do not
+//! alias. Only the ground and the pad board are drawn (no vehicle body, no
+//! shadows, no sky model).
+
+use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
+use opencv::core::{BORDER_REPLICATE, CV_8UC1, CV_8UC3, CV_32FC1, Mat, Scalar};
+use opencv::imgproc;
+use opencv::prelude::*;
+use optics::{CameraCalibration, PadModel};
+use serde::Deserialize;
+use thiserror::Error;
+
+use crate::ground_vehicle::PadState;
+use crate::noise::{MAX_SLICE, PixelNoise};
+use crate::params::{self, ParamError};
+use crate::rng::Pcg32;
+
+/// Calls `$generic` through an AVX2 build when the CPU has AVX2 (checked at
+/// run time). Only the vector width changes, so results are bit-identical.
+macro_rules! avx2_dispatch {
+    ($(#[$doc:meta])* fn $name:ident => $avx2:ident, $generic:ident ($($arg:ident: $ty:ty),*) -> $ret:ty) => {
+        $(#[$doc])*
+        fn $name($($arg: $ty),*) -> $ret {
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above), which
+                // is all the target_feature function requires.
+                return unsafe { $avx2($($arg),*) };
+            }
+            $generic($($arg),*)
+        }
+
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        fn $avx2($($arg: $ty),*) -> $ret {
+            $generic($($arg),*)
+        }
+    };
+}
+
+/// Why a camera could not be built or used.
+#[derive(Debug, Error)]
+pub enum CameraError {
+    /// A configuration value is out of range.
+    #[error("camera: {0}")]
+    Param(#[from] ParamError),
+    /// The pad could not be drawn.
+    #[error("camera: {0}")]
+    Pad(#[from] optics::PadError),
+    /// OpenCV failed (building the texture atlas, sampling, converting).
+    #[error("camera: {0}")]
+    OpenCv(#[from] opencv::Error),
+    /// The image is wider than the renderer's bands allow.
+    #[error("camera: image width {0} px is above the supported 4096 px")]
+    TooWide(u32),
+}
+
+/// Pixel layout of a rendered frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum PixelFormat {
+    /// One byte per pixel, grey (what the detector consumes).
+    #[default]
+    Mono8,
+    /// Three bytes per pixel, OpenCV's B, G, R order (grey replicated).
+    Bgr8,
+}
+
+/// Configuration of the downward camera (the `[camera_down]` section).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DownCameraParams {
+    /// Position of the camera's optical centre in the body frame (FLU), m.
+    /// The camera looks straight down: optical z = -body z, image up = body
+    /// forward (optical x = -body y, optical y = -body x).
+    pub position_in_body_m: [f64; 3],
+    /// Exposure time, s: the motion during it blurs the image.
+    pub exposure_time_s: f64,
+    /// Time from the middle of the exposure to the frame being published, s.
+    /// Metadata only: the caller applies it when timestamping and publishing.
+    pub latency_s: f64,
+    /// Standard deviation of the additive Gaussian sensor noise, grey levels.
+    pub noise_sigma: f64,
+    /// Most sub-exposure renders blended for motion blur (1 disables blur).
+    pub max_blur_samples: u32,
+    /// Output pixel layout.
+    pub format: PixelFormat,
+    /// Seed of the noise and of the ground texture.
+    pub seed: u64,
+    /// Resolution of the pad texture, px per metre (2000 = 0.5 mm texels,
+    /// fine enough for the 2.5 cm marker at 0.1 m on a 1280x720 camera).
+    pub pad_texture_px_per_m: f64,
+    /// Grey level of the markers' black.
+    pub black_level: u8,
+    /// Grey level of the board's white.
+    pub white_level: u8,
+}
+
+impl Default for DownCameraParams {
+    fn default() -> Self {
+        Self {
+            position_in_body_m: [0.05, 0.0, -0.05],
+            exposure_time_s: 0.004,
+            latency_s: 0.030,
+            noise_sigma: 2.0,
+            max_blur_samples: 8,
+            format: PixelFormat::Mono8,
+            seed: 1,
+            pad_texture_px_per_m: 2000.0,
+            black_level: 25,
+            white_level: 230,
+        }
+    }
+}
+
+impl DownCameraParams {
+    /// Checks every field; the error names the field.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        for (i, v) in self.position_in_body_m.iter().enumerate() {
+            params::in_range(&format!("position_in_body_m[{i}]"), *v, -2.0, 2.0)?;
+        }
+        params::in_range("exposure_time_s", self.exposure_time_s, 0.0, 0.1)?;
+        params::in_range("latency_s", self.latency_s, 0.0, 1.0)?;
+        params::in_range("noise_sigma", self.noise_sigma, 0.0, 64.0)?;
+        if !(1..=64).contains(&self.max_blur_samples) {
+            return Err(ParamError::new(
+                "max_blur_samples",
+                self.max_blur_samples,
+                "must be in [1, 64]",
+            ));
+        }
+        params::in_range(
+            "pad_texture_px_per_m",
+            self.pad_texture_px_per_m,
+            200.0,
+            8000.0,
+        )?;
+        if self.black_level >= self.white_level {
+            return Err(ParamError::new(
+                "black_level",
+                self.black_level,
+                format!("must be < white_level ({})", self.white_level),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The mount: maps body-frame points into the optical frame.
+    pub fn camera_from_body(&self) -> Isometry3<f64> {
+        body_from_down_camera(self.position_in_body_m).inverse()
+    }
+}
+
+/// Pose of a downward-looking optical frame at `position` in the body frame:
+/// optical x = -body y, optical y = -body x, optical z = -body z.
+fn body_from_down_camera(position: [f64; 3]) -> Isometry3<f64> {
+    let r = nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::new(
+        0.0, -1.0, 0.0, //
+        -1.0, 0.0, 0.0, //
+        0.0, 0.0, -1.0,
+    ));
+    Isometry3::from_parts(
+        Translation3::new(position[0], position[1], position[2]),
+        UnitQuaternion::from_rotation_matrix(&r),
+    )
+}
+
+/// The body's true motion at the middle of the exposure.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BodyMotion {
+    /// Body pose in world ENU.
+    pub world_from_body: Isometry3<f64>,
+    /// Velocity of the body origin in world ENU, m/s.
+    pub linear_velocity: Vector3<f64>,
+    /// Angular rates in the body frame, rad/s.
+    pub angular_velocity_body: Vector3<f64>,
+}
+
+impl BodyMotion {
+    /// A body at rest at `world_from_body` (no blur).
+    pub fn at_rest(world_from_body: Isometry3<f64>) -> Self {
+        Self {
+            world_from_body,
+            linear_velocity: Vector3::zeros(),
+            angular_velocity_body: Vector3::zeros(),
+        }
+    }
+
+    fn at(&self, dt: f64) -> Isometry3<f64> {
+        let rot = self.world_from_body.rotation
+            * UnitQuaternion::from_scaled_axis(self.angular_velocity_body * dt);
+        Isometry3::from_parts(
+            Translation3::from(self.world_from_body.translation.vector + self.linear_velocity * dt),
+            rot,
+        )
+    }
+}
+
+fn pad_at(pad: &PadState, dt: f64) -> Isometry3<f64> {
+    let rot =
+        UnitQuaternion::from_scaled_axis(pad.angular_velocity * dt) * pad.world_from_pad.rotation;
+    Isometry3::from_parts(
+        Translation3::from(pad.world_from_pad.translation.vector + pad.linear_velocity * dt),
+        rot,
+    )
+}
+
+/// One rendered image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    /// Width, px.
+    pub width: u32,
+    /// Height, px.
+    pub height: u32,
+    /// Pixel layout of `data`.
+    pub format: PixelFormat,
+    /// Row-major pixels, no padding.
+    pub data: Vec<u8>,
+    /// Exposure-to-publish latency the caller should apply, s.
+    pub latency_s: f64,
+    /// Sub-exposures blended for motion blur (1 = no visible motion).
+    pub blur_samples: u32,
+}
+
+impl Frame {
+    /// Copies the frame into an OpenCV `Mat` (CV_8UC1 or CV_8UC3), e.g. for the detector.
+    pub fn to_mat(&self) -> Result<Mat, CameraError> {
+        let typ = match self.format {
+            PixelFormat::Mono8 => CV_8UC1,
+            PixelFormat::Bgr8 => CV_8UC3,
+        };
+        let mut m = Mat::new_rows_cols_with_default(
+            self.height as i32,
+            self.width as i32,
+            typ,
+            Scalar::all(0.0),
+        )?;
+        m.data_bytes_mut()?.copy_from_slice(&self.data);
+        Ok(m)
+    }
+}
+
+/// A mono texture level, stored with one extra column and row
+/// (edge-replicated, or wrapped for a tiled texture) so a bilinear sample at
+/// the last texel, or across the tile seam, reads the right neighbour.
+#[derive(Debug, Clone)]
+struct Texture {
+    w: usize,
+    h: usize,
+    stride: usize,
+    wrap: bool,
+    data: Vec<u8>,
+}
+
+impl Texture {
+    /// From `w x h` row-major pixels; `wrap` for a texture tiled over the plane
+    /// (then `w` and `h` must be powers of two).
+    fn new(w: usize, h: usize, pixels: &[u8], wrap: bool) -> Texture {
+        let stride = w + 1;
+        let mut data = Vec::with_capacity(stride * (h + 1));
+        for r in 0..=h {
+            let src = if r < h {
+                r
+            } else if wrap {
+                0
+            } else {
+                h - 1
+            };
+            let row = &pixels[src * w..(src + 1) * w];
+            data.extend_from_slice(row);
+            data.push(if wrap { row[0] } else { row[w - 1] });
+        }
+        Texture {
+            w,
+            h,
+            stride,
+            wrap,
+            data,
+        }
+    }
+
+    fn at(&self, c: usize, r: usize) -> u8 {
+        self.data[r * self.stride + c]
+    }
+
+    fn downsample(&self) -> Texture {
+        let (w, h) = (self.w / 2, self.h / 2);
+        let mut px = Vec::with_capacity(w * h);
+        for r in 0..h {
+            for c in 0..w {
+                let s = u16::from(self.at(2 * c, 2 * r))
+                    + u16::from(self.at(2 * c + 1, 2 * r))
+                    + u16::from(self.at(2 * c, 2 * r + 1))
+                    + u16::from(self.at(2 * c + 1, 2 * r + 1));
+                px.push(((s + 2) / 4) as u8);
+            }
+        }
+        Texture::new(w, h, &px, self.wrap)
+    }
+
+    fn mip_chain(self) -> Vec<Texture> {
+        let mut levels = vec![self];
+        while let Some(last) = levels.last() {
+            if last.w < 16 || last.h < 16 {
+                break;
+            }
+            let next = last.downsample();
+            levels.push(next);
+        }
+        levels
+    }
+}
+
+/// Ground texture: 1024 x 1024 texels of 2 cm, tiled (20.48 m period).
+const GROUND_SIZE: usize = 1024;
+const GROUND_PX_PER_M: f64 = 50.0;
+/// Grey level where a ray misses both planes (looking above the horizon).
+const SKY_LEVEL: f32 = 200.0;
+
+/// Procedural asphalt: multi-octave value noise, speckle, expansion joints
+/// every 2.56 m and a few dark stains, so the ground has texture a detector
+/// must reject (and optical flow could track) without looking like a marker.
+fn ground_texture(seed: u64) -> Texture {
+    let n = GROUND_SIZE;
+    let mut rng = Pcg32::with_stream(seed, 0x6772_6f75_6e64);
+    let mut acc = vec![0.0f32; n * n];
+    for (cell, amp) in [(128usize, 14.0f32), (32, 10.0), (8, 8.0), (2, 6.0)] {
+        let g = n / cell;
+        let lattice: Vec<f32> = (0..g * g)
+            .map(|_| rng.uniform() as f32 * 2.0 - 1.0)
+            .collect();
+        for r in 0..n {
+            let (gr, fr) = (r / cell, (r % cell) as f32 / cell as f32);
+            let sr = fr * fr * (3.0 - 2.0 * fr);
+            for c in 0..n {
+                let (gc, fc) = (c / cell, (c % cell) as f32 / cell as f32);
+                let sc = fc * fc * (3.0 - 2.0 * fc);
+                let l = |a: usize, b: usize| lattice[(a % g) * g + (b % g)];
+                let top = l(gr, gc) + (l(gr, gc + 1) - l(gr, gc)) * sc;
+                let bot = l(gr + 1, gc) + (l(gr + 1, gc + 1) - l(gr + 1, gc)) * sc;
+                acc[r * n + c] += amp * (top + (bot - top) * sr);
+            }
+        }
+    }
+    let stains: Vec<(f32, f32, f32)> = (0..12)
+        .map(|_| {
+            (
+                rng.uniform() as f32 * n as f32,
+                rng.uniform() as f32 * n as f32,
+                10.0 + rng.uniform() as f32 * 30.0,
+            )
+        })
+        .collect();
+    let mut data = Vec::with_capacity(n * n);
+    for r in 0..n {
+        for c in 0..n {
+            let mut v = 105.0 + acc[r * n + c] + (rng.uniform() as f32 - 0.5) * 16.0;
+            if r % 128 < 2 || c % 128 < 2 {
+                v -= 35.0;
+            }
+            for &(sx, sy, rad) in &stains {
+                let dx = (c as f32 - sx).abs().min(n as f32 - (c as f32 - sx).abs());
+                let dy = (r as f32 - sy).abs().min(n as f32 - (r as f32 - sy).abs());
+                if dx * dx + dy * dy < rad * rad {
+                    v -= 25.0;
+                }
+            }
+            data.push(v.clamp(0.0, 255.0) as u8);
+        }
+    }
+    Texture::new(n, n, &data, true)
+}
+
+/// Mip level of detail at `depth_m` along the optical axis: the finer level
+/// whose texels are at most one pixel wide, and how far (0..1) the pixel
+/// footprint is toward the next coarser level, for trilinear blending.
+fn mip_level(depth_m: f64, focal_px: f64, texels_per_m: f64, levels: usize) -> (usize, f32) {
+    let texels_per_px = depth_m / focal_px * texels_per_m;
+    if !(texels_per_px.is_finite() && texels_per_px > 1.0) {
+        return (0, 0.0);
+    }
+    let lod = texels_per_px.log2();
+    let top = levels.saturating_sub(1);
+    let level = lod.floor() as usize;
+    if level >= top {
+        (top, 0.0)
+    } else {
+        (level, lod.fract() as f32)
+    }
+}
+
+/// A rigid transform in f32 for the per-pixel loop.
+#[derive(Debug, Clone, Copy)]
+struct PlaneMap {
+    r: [[f32; 3]; 3],
+    t: [f32; 3],
+}
+
+impl PlaneMap {
+    fn new(plane_from_camera: &Isometry3<f64>) -> Self {
+        let m = plane_from_camera.rotation.to_rotation_matrix();
+        let m = m.matrix();
+        let t = plane_from_camera.translation.vector;
+        let mut r = [[0.0f32; 3]; 3];
+        for (i, row) in r.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = m[(i, j)] as f32;
+            }
+        }
+        Self {
+            r,
+            t: [t.x as f32, t.y as f32, t.z as f32],
+        }
+    }
+}
+
+/// The downward camera renderer. Build once (rays, textures), render per frame.
+#[derive(Debug, Clone)]
+pub struct DownCamera {
+    params: DownCameraParams,
+    calibration: CameraCalibration,
+    camera_from_body: Isometry3<f64>,
+    rays: Vec<[f32; 2]>,
+    atlas: Atlas,
+    pad_min: [f64; 2],
+    pad_max: [f64; 2],
+    noise: PixelNoise,
+    /// Sub-exposure sum of the current band.
+    accum: Vec<f32>,
+    tile: Tile,
+}
+
+/// Where one mip level sits in the atlas.
+#[derive(Debug, Clone, Copy)]
+struct Block {
+    x0: f32,
+    y0: f32,
+    w: usize,
+    h: usize,
+}
+
+/// Every texture level in one OpenCV image, so one `remap` call samples the
+/// pad, the ground and the sky for all pixels at once.
+#[derive(Debug, Clone)]
+struct Atlas {
+    mat: Mat,
+    pad: Vec<Block>,
+    ground: Vec<Block>,
+    /// Centre of a 2x2 block of sky grey.
+    sky: (f32, f32),
+}
+
+impl Atlas {
+    /// Packs the pad levels in one column and the ground levels in the next
+    /// (each with its extra border row and column), plus a sky block.
+    fn new(pad: &[Texture], ground: &[Texture]) -> Result<Self, CameraError> {
+        let column = |levels: &[Texture]| -> (usize, usize) {
+            let w = levels.iter().map(|t| t.stride).max().unwrap_or(0);
+            let h = levels.iter().map(|t| t.h + 2).sum();
+            (w, h)
+        };
+        let (pw, ph) = column(pad);
+        let (gw, gh) = column(ground);
+        let width = pw + gw + 4;
+        let height = ph.max(gh + 4);
+        let mut mat = Mat::new_rows_cols_with_default(
+            height as i32,
+            width as i32,
+            CV_8UC1,
+            Scalar::all(0.0),
+        )?;
+        let data = mat.data_bytes_mut()?;
+        let place = |levels: &[Texture], x0: usize, y_start: usize, data: &mut [u8]| {
+            let mut y = y_start;
+            let mut blocks = Vec::new();
+            for t in levels {
+                for r in 0..=t.h {
+                    let dst = (y + r) * width + x0;
+                    data[dst..dst + t.stride]
+                        .copy_from_slice(&t.data[r * t.stride..(r + 1) * t.stride]);
+                }
+                blocks.push(Block {
+                    x0: x0 as f32,
+                    y0: y as f32,
+                    w: t.w,
+                    h: t.h,
+                });
+                y += t.h + 2;
+            }
+            blocks
+        };
+        let pad_blocks = place(pad, 0, 0, data);
+        let ground_blocks = place(ground, pw + 1, 0, data);
+        let (sx, sy) = (pw + gw + 1, 0);
+        for (r, c) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+            data[(sy + r) * width + sx + c] = SKY_LEVEL as u8;
+        }
+        Ok(Self {
+            mat,
+            pad: pad_blocks,
+            ground: ground_blocks,
+            sky: (sx as f32 + 0.5, sy as f32 + 0.5),
+        })
+    }
+}
+
+impl DownCamera {
+    /// Precomputes the per-pixel rays from the calibration, draws the pad
+    /// texture from the pad model and generates the ground from the seed.
+    pub fn new(
+        params: DownCameraParams,
+        calibration: CameraCalibration,
+        pad: &PadModel,
+    ) -> Result<Self, CameraError> {
+        params.validate()?;
+        let (w, h) = (calibration.width as usize, calibration.height as usize);
+        if w * TILE_ROWS > MAX_SLICE {
+            return Err(CameraError::TooWide(calibration.width));
+        }
+        let mut rays = Vec::with_capacity(w * h);
+        for v in 0..h {
+            for u in 0..w {
+                let n = calibration.undistort_pixel(&Point2::new(u as f64, v as f64));
+                rays.push([n.x as f32, n.y as f32]);
+            }
+        }
+        let mat = pad.render_texture(params.pad_texture_px_per_m)?;
+        let bytes = mat.data_bytes()?;
+        let (black, white) = (f32::from(params.black_level), f32::from(params.white_level));
+        let pixels: Vec<u8> = bytes
+            .iter()
+            .map(|&b| (black + (white - black) * f32::from(b) / 255.0).round() as u8)
+            .collect();
+        let texture = Texture::new(mat.cols() as usize, mat.rows() as usize, &pixels, false);
+        let atlas = Atlas::new(
+            &texture.mip_chain(),
+            &ground_texture(params.seed).mip_chain(),
+        )?;
+        Ok(Self {
+            camera_from_body: params.camera_from_body(),
+            noise: PixelNoise::new(params.seed),
+            atlas,
+            tile: Tile::new(),
+            pad_min: pad.board.min_m,
+            pad_max: pad.board.max_m,
+            accum: Vec::new(),
+            rays,
+            calibration,
+            params,
+        })
+    }
+
+    /// The configuration in use.
+    pub fn params(&self) -> &DownCameraParams {
+        &self.params
+    }
+
+    /// The calibration images are rendered with (what the detector should load).
+    pub fn calibration(&self) -> &CameraCalibration {
+        &self.calibration
+    }
+
+    /// The camera mount (body to optical frame).
+    pub fn camera_from_body(&self) -> Isometry3<f64> {
+        self.camera_from_body
+    }
+
+    /// Renders one frame. `body` is the true motion at the middle of the
+    /// exposure, `pad` the pad at the same instant (`None`: no pad in the world).
+    ///
+    /// The image is produced in bands of [`TILE_ROWS`] rows so that the
+    /// coordinate maps, the sampled band and the accumulator stay in cache;
+    /// each band blends every sub-exposure before moving on.
+    pub fn render(
+        &mut self,
+        body: &BodyMotion,
+        pad: Option<&PadState>,
+    ) -> Result<Frame, CameraError> {
+        let half = self.params.exposure_time_s / 2.0;
+        let samples = self.blur_samples(body, pad);
+        let body_from_camera = self.camera_from_body.inverse();
+        let passes: Vec<Pass> = (0..samples)
+            .map(|k| {
+                let dt = if samples == 1 {
+                    0.0
+                } else {
+                    2.0 * half * ((f64::from(k) + 0.5) / f64::from(samples) - 0.5)
+                };
+                let world_from_camera = body.at(dt) * body_from_camera;
+                let pad_from_camera = pad.map(|p| pad_at(p, dt).inverse() * world_from_camera);
+                self.pass(&world_from_camera, pad_from_camera.as_ref())
+            })
+            .collect();
+        let weight = 1.0 / samples as f32;
+        let (w, h) = (
+            self.calibration.width as usize,
+            self.calibration.height as usize,
+        );
+        let channels = match self.params.format {
+            PixelFormat::Mono8 => 1,
+            PixelFormat::Bgr8 => 3,
+        };
+        let mut data = vec![0u8; w * h * channels];
+        self.noise.new_frame();
+        let mut row = 0;
+        while row < h {
+            let rows = TILE_ROWS.min(h - row);
+            let range = row * w..(row + rows) * w;
+            self.tile.resize(rows, w)?;
+            self.accum.clear();
+            self.accum.resize(rows * w, 0.0);
+            for pass in &passes {
+                let rays = self.rays.get(range.clone()).unwrap_or(&[]);
+                self.tile
+                    .sample(&self.atlas, pass, rays, weight, &mut self.accum)?;
+            }
+            let out = data
+                .get_mut(range.start * channels..range.end * channels)
+                .unwrap_or(&mut []);
+            self.finish_tile(out, channels);
+            row += rows;
+        }
+        Ok(Frame {
+            width: self.calibration.width,
+            height: self.calibration.height,
+            format: self.params.format,
+            data,
+            latency_s: self.params.latency_s,
+            blur_samples: samples,
+        })
+    }
+
+    /// How many sub-exposures keep the blur smooth: about one per pixel of
+    /// image motion of the pad centre or the ground under the camera.
+    fn blur_samples(&self, body: &BodyMotion, pad: Option<&PadState>) -> u32 {
+        let half = self.params.exposure_time_s / 2.0;
+        if self.params.max_blur_samples <= 1 || half <= 0.0 {
+            return 1;
+        }
+        let body_from_camera = self.camera_from_body.inverse();
+        let cam = |dt: f64| body.at(dt) * body_from_camera;
+        let (c0, c1) = (cam(-half), cam(half));
+        let mut motion: f64 = 0.0;
+        let mut track = |p0: Point3<f64>, p1: Point3<f64>| {
+            let a = self.calibration.project(&c0.inverse_transform_point(&p0));
+            let b = self.calibration.project(&c1.inverse_transform_point(&p1));
+            if let (Some(a), Some(b)) = (a, b) {
+                motion = motion.max((a - b).norm());
+            }
+        };
+        if let Some(p) = pad {
+            track(
+                pad_at(p, -half).transform_point(&Point3::origin()),
+                pad_at(p, half).transform_point(&Point3::origin()),
+            );
+        }
+        let mid = body.at(0.0) * body_from_camera;
+        let axis = mid.rotation * Vector3::z();
+        if axis.z < -1e-6 {
+            let s = -mid.translation.vector.z / axis.z;
+            let g = Point3::from(mid.translation.vector + axis * s);
+            track(g, g);
+        }
+        (motion.ceil() as u32).clamp(1, self.params.max_blur_samples)
+    }
+
+    /// Per-sub-exposure constants: the plane maps and the mip levels to use.
+    fn pass(
+        &self,
+        world_from_camera: &Isometry3<f64>,
+        pad_from_camera: Option<&Isometry3<f64>>,
+    ) -> Pass {
+        let focal = self.calibration.fx.max(self.calibration.fy);
+        let depth_to = |plane_from_camera: &Isometry3<f64>| {
+            let axis = plane_from_camera.rotation * Vector3::z();
+            let tz = plane_from_camera.translation.vector.z;
+            if axis.z < -1e-6 {
+                -tz / axis.z
+            } else {
+                tz.abs()
+            }
+        };
+        let atlas = &self.atlas;
+        let ppm = self.params.pad_texture_px_per_m;
+        let pad = pad_from_camera
+            .filter(|p| p.translation.vector.z > 0.0)
+            .and_then(|p| {
+                let (level, blend) = mip_level(depth_to(p), focal, ppm, atlas.pad.len());
+                let fine = *atlas.pad.get(level)?;
+                let coarse = *atlas.pad.get(level + 1).unwrap_or(&fine);
+                Some(PadPass {
+                    map: PlaneMap::new(p),
+                    fine,
+                    coarse,
+                    scale: (ppm / f64::from(1u32 << level)) as f32,
+                    blend,
+                    min: [self.pad_min[0] as f32, self.pad_min[1] as f32],
+                    max: [self.pad_max[0] as f32, self.pad_max[1] as f32],
+                })
+            });
+        let ground = (world_from_camera.translation.vector.z > 0.0)
+            .then(|| {
+                let (level, _) = mip_level(
+                    depth_to(world_from_camera),
+                    focal,
+                    GROUND_PX_PER_M,
+                    atlas.ground.len(),
+                );
+                let block = *atlas.ground.get(level)?;
+                Some((
+                    PlaneMap::new(world_from_camera),
+                    block,
+                    (GROUND_PX_PER_M / f64::from(1u32 << level)) as f32,
+                ))
+            })
+            .flatten();
+        Pass { pad, ground }
+    }
+
+    /// Adds sensor noise and quantizes one band into `out`.
+    fn finish_tile(&mut self, out: &mut [u8], channels: usize) {
+        let sigma = self.params.noise_sigma as f32;
+        let noise = self.noise.slice(self.accum.len());
+        if channels == 1 {
+            quantize(out, &self.accum, noise, sigma);
+        } else {
+            for ((o, &a), &n) in out.chunks_exact_mut(channels).zip(&self.accum).zip(noise) {
+                o.fill(to_u8(a + sigma * n));
+            }
+        }
+    }
+}
+
+/// Rows rendered together: small enough that a band's maps and samples stay in cache.
+pub const TILE_ROWS: usize = 16;
+
+/// What one sub-exposure needs to map a pixel's ray to atlas coordinates.
+#[derive(Debug, Clone, Copy)]
+struct Pass {
+    pad: Option<PadPass>,
+    ground: Option<(PlaneMap, Block, f32)>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct PadPass {
+    map: PlaneMap,
+    fine: Block,
+    coarse: Block,
+    /// Texels per metre at the fine level.
+    scale: f32,
+    /// Weight of the coarse level (trilinear filtering).
+    blend: f32,
+    min: [f32; 2],
+    max: [f32; 2],
+}
+
+/// Scratch OpenCV images for one band: atlas coordinates at the fine and the
+/// coarse pad level, and what `remap` sampled there.
+#[derive(Debug, Clone)]
+struct Tile {
+    rows: usize,
+    cols: usize,
+    maps: [Mat; 4],
+    sampled: [Mat; 2],
+}
+
+impl Tile {
+    fn new() -> Self {
+        Self {
+            rows: 0,
+            cols: 0,
+            maps: [
+                Mat::default(),
+                Mat::default(),
+                Mat::default(),
+                Mat::default(),
+            ],
+            sampled: [Mat::default(), Mat::default()],
+        }
+    }
+
+    fn resize(&mut self, rows: usize, cols: usize) -> Result<(), CameraError> {
+        if (rows, cols) != (self.rows, self.cols) {
+            for m in &mut self.maps {
+                *m = Mat::new_rows_cols_with_default(
+                    rows as i32,
+                    cols as i32,
+                    CV_32FC1,
+                    Scalar::all(0.0),
+                )?;
+            }
+            (self.rows, self.cols) = (rows, cols);
+        }
+        Ok(())
+    }
+
+    /// Maps every ray of the band into the atlas, samples it with one `remap`
+    /// per pad level, and adds `weight` times the result to `accum`.
+    fn sample(
+        &mut self,
+        atlas: &Atlas,
+        pass: &Pass,
+        rays: &[[f32; 2]],
+        weight: f32,
+        accum: &mut [f32],
+    ) -> Result<(), CameraError> {
+        let [mfx, mfy, mcx, mcy] = &mut self.maps;
+        let (fx, fy) = (mfx.data_typed_mut::<f32>()?, mfy.data_typed_mut::<f32>()?);
+        let (cx, cy) = (mcx.data_typed_mut::<f32>()?, mcy.data_typed_mut::<f32>()?);
+        let any_pad = fill_maps(atlas, pass, rays, [fx, fy, cx, cy]);
+        let blend = if any_pad {
+            pass.pad.map_or(0.0, |p| p.blend)
+        } else {
+            0.0
+        };
+        let [fine, coarse] = &mut self.sampled;
+        let remap = |mx: &Mat, my: &Mat, dst: &mut Mat| {
+            imgproc::remap(
+                &atlas.mat,
+                dst,
+                mx,
+                my,
+                imgproc::INTER_LINEAR,
+                BORDER_REPLICATE,
+                Scalar::all(0.0),
+            )
+        };
+        remap(&self.maps[0], &self.maps[1], fine)?;
+        let fine = fine.data_bytes()?;
+        if blend > 0.0 {
+            remap(&self.maps[2], &self.maps[3], coarse)?;
+            let coarse = coarse.data_bytes()?;
+            accumulate(accum, fine, coarse, weight, blend);
+        } else {
+            accumulate(accum, fine, fine, weight, 0.0);
+        }
+        Ok(())
+    }
+}
+
+avx2_dispatch!(
+    /// [`fill_maps_generic`], in an AVX2 build when the CPU has it.
+    fn fill_maps => fill_maps_avx2, fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
+);
+
+/// Atlas coordinates of every ray of a band, written branch-free so the
+/// compiler can vectorize it: both planes are intersected for every pixel and
+/// the result selected (pad if the ray lands on the board, else ground, else
+/// sky). Outputs: fine-level x, y and coarse-level x, y (equal off the pad).
+/// Returns whether any ray of the band landed on the pad.
+#[inline(always)]
+fn fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool {
+    let [fx, fy, cx, cy] = maps;
+    let n = rays
+        .len()
+        .min(fx.len())
+        .min(fy.len())
+        .min(cx.len())
+        .min(cy.len());
+    let (rays, fx, fy, cx, cy) = (
+        &rays[..n],
+        &mut fx[..n],
+        &mut fy[..n],
+        &mut cx[..n],
+        &mut cy[..n],
+    );
+    // A plane the rays never hit stands in for an absent pad or ground: the
+    // camera 1 m above it, looking straight up (every ray has s < 0).
+    let never = PlaneMap {
+        r: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        t: [0.0, 0.0, 1.0],
+    };
+    let no_block = Block {
+        x0: atlas.sky.0,
+        y0: atlas.sky.1,
+        w: 1,
+        h: 1,
+    };
+    let p = pass.pad.unwrap_or(PadPass {
+        map: never,
+        fine: no_block,
+        coarse: no_block,
+        scale: 1.0,
+        blend: 0.0,
+        min: [1.0, 1.0],
+        max: [-1.0, -1.0],
+    });
+    let (gmap, gblock, gscale) = pass.ground.unwrap_or((never, no_block, 1.0));
+    let (pr, pt) = (p.map.r, p.map.t);
+    let (gr, gt) = (gmap.r, gmap.t);
+    let (fw, fh) = ((p.fine.w - 1) as f32, (p.fine.h - 1) as f32);
+    let (cw, ch) = ((p.coarse.w - 1) as f32, (p.coarse.h - 1) as f32);
+    let size = gblock.w as f32;
+    let inv = 1.0 / size;
+    let (skyx, skyy) = atlas.sky;
+    // floor(q) by the 1.5 * 2^23 rounding trick (no libm call, no float to
+    // int conversion, so the loop vectorizes); exact for |q| < 2^22 tiles.
+    const ROUND: f32 = 12_582_912.0;
+    let wrap = |t: f32| {
+        let q = (t * inv).clamp(-4.0e6, 4.0e6);
+        let k = (q + ROUND) - ROUND;
+        let k = if k > q { k - 1.0 } else { k };
+        (t - k * size).max(0.0).min(size)
+    };
+    let mut any_pad = false;
+    for i in 0..n {
+        let [rx, ry] = rays[i];
+        // Pad plane.
+        let az = pr[2][0] * rx + pr[2][1] * ry + pr[2][2];
+        let s = -pt[2] / az;
+        let x = pt[0] + s * (pr[0][0] * rx + pr[0][1] * ry + pr[0][2]);
+        let y = pt[1] + s * (pr[1][0] * rx + pr[1][1] * ry + pr[1][2]);
+        let on_pad =
+            (s > 0.0) & (x >= p.min[0]) & (x <= p.max[0]) & (y >= p.min[1]) & (y <= p.max[1]);
+        let u = (x - p.min[0]) * p.scale;
+        let v = (p.max[1] - y) * p.scale;
+        let ufine = p.fine.x0 + (u - 0.5).max(0.0).min(fw);
+        let vfine = p.fine.y0 + (v - 0.5).max(0.0).min(fh);
+        let ucoarse = p.coarse.x0 + (u * 0.5 - 0.5).max(0.0).min(cw);
+        let vcoarse = p.coarse.y0 + (v * 0.5 - 0.5).max(0.0).min(ch);
+        // Ground plane.
+        let gaz = gr[2][0] * rx + gr[2][1] * ry + gr[2][2];
+        let gs = -gt[2] / gaz;
+        let gx = gt[0] + gs * (gr[0][0] * rx + gr[0][1] * ry + gr[0][2]);
+        let gy = gt[1] + gs * (gr[1][0] * rx + gr[1][1] * ry + gr[1][2]);
+        let on_ground = gs > 0.0;
+        let ug = if on_ground {
+            gblock.x0 + wrap(gx * gscale - 0.5)
+        } else {
+            skyx
+        };
+        let vg = if on_ground {
+            gblock.y0 + wrap(-gy * gscale - 0.5)
+        } else {
+            skyy
+        };
+        fx[i] = if on_pad { ufine } else { ug };
+        fy[i] = if on_pad { vfine } else { vg };
+        cx[i] = if on_pad { ucoarse } else { ug };
+        cy[i] = if on_pad { vcoarse } else { vg };
+        any_pad |= on_pad;
+    }
+    any_pad
+}
+
+/// Rounds and saturates a grey level to a byte (vectorizes, unlike `as u8`
+/// on a float).
+#[inline(always)]
+fn to_u8(v: f32) -> u8 {
+    (v + 0.5).clamp(0.0, 255.0) as i32 as u8
+}
+
+avx2_dispatch!(
+    /// `accum += weight * lerp(fine, coarse, blend)` over a band.
+    fn accumulate => accumulate_avx2, accumulate_generic(accum: &mut [f32], fine: &[u8], coarse: &[u8], weight: f32, blend: f32) -> ()
+);
+
+#[inline(always)]
+fn accumulate_generic(accum: &mut [f32], fine: &[u8], coarse: &[u8], weight: f32, blend: f32) {
+    for ((acc, &a), &b) in accum.iter_mut().zip(fine).zip(coarse) {
+        let (a, b) = (f32::from(a), f32::from(b));
+        *acc += weight * (a + (b - a) * blend);
+    }
+}
+
+avx2_dispatch!(
+    /// `out = to_u8(accum + sigma * noise)` over a band (mono).
+    fn quantize => quantize_avx2, quantize_generic(out: &mut [u8], accum: &[f32], noise: &[f32], sigma: f32) -> ()
+);
+
+#[inline(always)]
+fn quantize_generic(out: &mut [u8], accum: &[f32], noise: &[f32], sigma: f32) {
+    for ((o, &a), &n) in out.iter_mut().zip(accum).zip(noise) {
+        *o = to_u8(a + sigma * n);
+    }
+}
