@@ -63,6 +63,14 @@ pub enum CameraError {
     /// The image is wider than the renderer's bands allow.
     #[error("camera: image width {0} px is above the supported 4096 px")]
     TooWide(u32),
+    /// The output buffer does not hold exactly one frame.
+    #[error("camera: output buffer holds {got} bytes, a frame is {want}")]
+    BufferSize {
+        /// Bytes given.
+        got: usize,
+        /// Bytes a frame needs.
+        want: usize,
+    },
 }
 
 /// Pixel layout of a rendered frame.
@@ -586,6 +594,41 @@ impl DownCamera {
         body: &BodyMotion,
         pad: Option<&PadState>,
     ) -> Result<Frame, CameraError> {
+        let mut data = vec![0u8; self.frame_len()];
+        let blur_samples = self.render_into(body, pad, &mut data)?;
+        Ok(Frame {
+            width: self.calibration.width,
+            height: self.calibration.height,
+            format: self.params.format,
+            data,
+            latency_s: self.params.latency_s,
+            blur_samples,
+        })
+    }
+
+    /// Bytes of one frame (row-major, no padding).
+    pub fn frame_len(&self) -> usize {
+        let channels = match self.params.format {
+            PixelFormat::Mono8 => 1,
+            PixelFormat::Bgr8 => 3,
+        };
+        self.calibration.width as usize * self.calibration.height as usize * channels
+    }
+
+    /// Renders straight into `data` (a loaned shared-memory sample in the `sim` process,
+    /// so the frame is never copied); returns the sub-exposures blended.
+    pub fn render_into(
+        &mut self,
+        body: &BodyMotion,
+        pad: Option<&PadState>,
+        data: &mut [u8],
+    ) -> Result<u32, CameraError> {
+        if data.len() != self.frame_len() {
+            return Err(CameraError::BufferSize {
+                got: data.len(),
+                want: self.frame_len(),
+            });
+        }
         let half = self.params.exposure_time_s / 2.0;
         let samples = self.blur_samples(body, pad);
         let body_from_camera = self.camera_from_body.inverse();
@@ -610,7 +653,6 @@ impl DownCamera {
             PixelFormat::Mono8 => 1,
             PixelFormat::Bgr8 => 3,
         };
-        let mut data = vec![0u8; w * h * channels];
         self.noise.new_frame();
         let mut row = 0;
         while row < h {
@@ -630,14 +672,7 @@ impl DownCamera {
             self.finish_tile(out, channels);
             row += rows;
         }
-        Ok(Frame {
-            width: self.calibration.width,
-            height: self.calibration.height,
-            format: self.params.format,
-            data,
-            latency_s: self.params.latency_s,
-            blur_samples: samples,
-        })
+        Ok(samples)
     }
 
     /// How many sub-exposures keep the blur smooth: about one per pixel of

@@ -203,6 +203,29 @@ impl DepthCamera {
 
     /// Renders the depth image seen from `world_from_body` with these obstacles.
     pub fn render(&mut self, world_from_body: &Isometry3<f64>, obstacles: &[Aabb]) -> DepthFrame {
+        let mut out = vec![0u16; self.frame_len()];
+        self.render_into(world_from_body, obstacles, &mut out);
+        DepthFrame {
+            width: self.params.width,
+            height: self.params.height,
+            depth_mm: out,
+            latency_s: self.params.latency_s,
+        }
+    }
+
+    /// Pixels of one frame.
+    pub fn frame_len(&self) -> usize {
+        self.depth.len()
+    }
+
+    /// Renders straight into `out` (a loaned shared-memory sample in the `sim` process);
+    /// pixels beyond `out` are not written, missing ones stay as they were.
+    pub fn render_into(
+        &mut self,
+        world_from_body: &Isometry3<f64>,
+        obstacles: &[Aabb],
+        out: &mut [u16],
+    ) {
         let world_from_camera = world_from_body * self.camera_from_body.inverse();
         let rot = world_from_camera.rotation.to_rotation_matrix();
         let m = rot.matrix();
@@ -262,7 +285,6 @@ impl DepthCamera {
             self.params.max_depth_m as f32,
         );
         let k = self.params.noise_k_per_m as f32;
-        let mut out = vec![0u16; self.depth.len()];
         let to_mm = |z: f32, n: f32| {
             if z >= lo && z <= hi {
                 ((z + k * z * z * n) * 1000.0 + 0.5).clamp(1.0, 65535.0) as i32 as u16
@@ -276,12 +298,6 @@ impl DepthCamera {
             for ((o, &d), &n) in o.iter_mut().zip(d).zip(noise) {
                 *o = to_mm(d, n);
             }
-        }
-        DepthFrame {
-            width: self.params.width,
-            height: self.params.height,
-            depth_mm: out,
-            latency_s: self.params.latency_s,
         }
     }
 

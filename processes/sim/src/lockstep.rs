@@ -11,6 +11,11 @@ use ipc_types::msg::{Header, Text, TruthEvent, TruthKind};
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
 
+use nalgebra::{Isometry3, Translation3};
+use optics::{CameraCalibration, PadModel};
+
+use crate::camera::{BodyMotion, CameraError, DownCamera};
+use crate::depth::DepthCamera;
 use crate::params::ParamError;
 use crate::px4::commander::{Commander, Px4Params, VehicleStatus};
 use crate::scenario::LoadedScenario;
@@ -79,6 +84,26 @@ pub enum SimError {
     /// A PX4 parameter.
     #[error("PX4 parameter {0}")]
     Px4(#[from] ParamError),
+    /// The camera calibration file.
+    #[error(transparent)]
+    Calibration(#[from] optics::CalibrationError),
+    /// The pad model.
+    #[error(transparent)]
+    Pad(#[from] optics::PadError),
+    /// The downward camera.
+    #[error(transparent)]
+    Camera(#[from] CameraError),
+}
+
+/// When a rendered frame was captured and when it may be published.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Shot {
+    /// Middle of the exposure, simulated ns.
+    pub capture_ns: u64,
+    /// Capture plus the sensor's latency: when a real driver would hand it over.
+    pub publish_ns: u64,
+    /// Sub-exposures blended (motion blur).
+    pub blur_samples: u32,
 }
 
 /// The world, the PX4 commander that flies it, and the sensor schedule.
@@ -86,6 +111,8 @@ pub enum SimError {
 pub struct Simulator {
     world: World,
     commander: Commander,
+    down_camera: Option<Box<DownCamera>>,
+    depth_camera: Option<Box<DepthCamera>>,
     camera: Schedule,
     depth: Schedule,
     events_seen: usize,
@@ -97,13 +124,22 @@ impl Simulator {
     pub fn new(scenario: &LoadedScenario, seed: u64) -> Result<Self, SimError> {
         let world = World::new(scenario.world_params(seed))?;
         let commander = Commander::new(Px4Params::default())?;
-        Ok(Self::from_world(
+        let calibration = CameraCalibration::load(scenario.calibration_path())?;
+        let pad = PadModel::load(scenario.pad_path())?;
+        let mut down = scenario.scenario.camera.sensor.clone();
+        down.seed = seed.wrapping_add(2);
+        let mut depth = scenario.scenario.depth.sensor.clone();
+        depth.seed = seed.wrapping_add(3);
+        let mut sim = Self::from_world(
             world,
             commander,
             scenario.scenario.camera.rate_hz,
             scenario.scenario.depth.rate_hz,
             seed,
-        ))
+        );
+        sim.down_camera = Some(Box::new(DownCamera::new(down, calibration, &pad)?));
+        sim.depth_camera = Some(Box::new(DepthCamera::new(depth)?));
+        Ok(sim)
     }
 
     /// A simulator around an existing world and commander (tests, custom set-ups).
@@ -117,6 +153,8 @@ impl Simulator {
         Self {
             world,
             commander,
+            down_camera: None,
+            depth_camera: None,
             camera: Schedule::new(camera_hz, (1e9 / camera_hz.max(1.0)) as u64),
             // Offset by half a period so camera and depth work do not land on one step.
             depth: Schedule::new(depth_hz, (1.5e9 / depth_hz.max(1.0)) as u64),
@@ -143,6 +181,56 @@ impl Simulator {
     /// MAVLink messages the autopilot has produced since the last call.
     pub fn take_mavlink(&mut self) -> Vec<MavMessage> {
         self.commander.take_outgoing()
+    }
+
+    /// The downward camera, if this simulator has one.
+    pub fn down_camera(&self) -> Option<&DownCamera> {
+        self.down_camera.as_deref()
+    }
+
+    /// The depth camera, if this simulator has one.
+    pub fn depth_camera(&self) -> Option<&DepthCamera> {
+        self.depth_camera.as_deref()
+    }
+
+    /// Renders the downward camera at the current true pose into `out` (exactly
+    /// `down_camera().frame_len()` bytes); `None` without a camera.
+    pub fn render_camera_into(&mut self, out: &mut [u8]) -> Result<Option<Shot>, SimError> {
+        let Some(cam) = self.down_camera.as_deref_mut() else {
+            return Ok(None);
+        };
+        let truth = self.world.truth();
+        let body = BodyMotion {
+            world_from_body: Isometry3::from_parts(
+                Translation3::from(truth.position),
+                truth.world_from_body,
+            ),
+            linear_velocity: truth.velocity,
+            angular_velocity_body: truth.body_rates,
+        };
+        let pad = self.world.pad();
+        let blur_samples = cam.render_into(&body, pad.as_ref(), out)?;
+        let now = self.world.time_ns();
+        Ok(Some(Shot {
+            capture_ns: now,
+            publish_ns: now + (cam.params().latency_s.max(0.0) * 1e9) as u64,
+            blur_samples,
+        }))
+    }
+
+    /// Renders the depth camera at the current true pose into `out`; `None` without one.
+    pub fn render_depth_into(&mut self, out: &mut [u16]) -> Option<Shot> {
+        let cam = self.depth_camera.as_deref_mut()?;
+        let truth = self.world.truth();
+        let world_from_body =
+            Isometry3::from_parts(Translation3::from(truth.position), truth.world_from_body);
+        cam.render_into(&world_from_body, self.world.obstacles(), out);
+        let now = self.world.time_ns();
+        Some(Shot {
+            capture_ns: now,
+            publish_ns: now + (cam.params().latency_s.max(0.0) * 1e9) as u64,
+            blur_samples: 1,
+        })
     }
 
     /// The PX4 commander (mode, arming).
@@ -274,6 +362,68 @@ mod tests {
         assert_eq!(a, run(3));
         assert_eq!(a.0, 60, "30 Hz over 2 s");
         assert_ne!(a.2, run(4).2, "another seed, another estimate noise");
+    }
+
+    fn deploy() -> std::path::PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy")
+    }
+
+    #[test]
+    fn due_sensors_render_into_the_callers_buffers() {
+        let scn = crate::scenario::load("obstacle-demo", &deploy()).expect("scenario");
+        let mut sim = Simulator::new(&scn, 1).expect("sim");
+        // Above the pad (it waits at (6, -0.5) for 10 s), falling from 1.5 m.
+        let above_pad =
+            crate::quadrotor::VehicleState::at_rest(nalgebra::Vector3::new(6.0, -0.5, 1.9), 0.0);
+        sim.world_mut()
+            .set_vehicle_state(above_pad)
+            .expect("place the vehicle");
+        let cam_len = sim.down_camera().expect("camera").frame_len();
+        let depth_len = sim.depth_camera().expect("depth").frame_len();
+        let mut image = vec![0u8; cam_len];
+        let mut depth = vec![0u16; depth_len];
+        let (mut shots, mut depths) = (0, 0);
+        for _ in 0..100 {
+            let r = sim.step().expect("step");
+            if r.camera_due {
+                let shot = sim
+                    .render_camera_into(&mut image)
+                    .expect("render")
+                    .expect("shot");
+                assert!(shot.publish_ns > shot.capture_ns, "latency applied");
+                shots += 1;
+            }
+            if r.depth_due {
+                sim.render_depth_into(&mut depth).expect("depth shot");
+                depths += 1;
+            }
+        }
+        assert_eq!(
+            (shots, depths),
+            (6, 5),
+            "30 Hz each over 0.2 s, depth offset"
+        );
+        let (lo, hi) = image
+            .iter()
+            .fold((255u8, 0u8), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        assert!(hi > lo + 30, "a textured image, not a flat one");
+        assert!(depth.iter().any(|&d| d > 0), "the ground is in view");
+        let mut wrong = vec![0u8; cam_len - 1];
+        assert!(
+            sim.render_camera_into(&mut wrong).is_err(),
+            "a short buffer is refused"
+        );
+    }
+
+    #[test]
+    fn a_missing_calibration_file_is_an_error_naming_it() {
+        let mut scn = crate::scenario::load("paper-sim", &deploy()).expect("scenario");
+        scn.scenario.camera.calibration = "no_such_camera.yaml".into();
+        let e = Simulator::new(&scn, 1)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("no_such_camera.yaml"), "{e}");
     }
 
     #[test]

@@ -12,6 +12,8 @@ use ipc_types::runtime::config::{self, ConfigError, Invalid, Validate, check_ran
 use serde::Deserialize;
 
 use crate::autopilot::AutopilotParams;
+use crate::camera::DownCameraParams;
+use crate::depth::DepthCameraParams;
 use crate::estimator_noise::EstimatorNoiseParams;
 use crate::ground_vehicle::GroundVehicleParams;
 use crate::params::ParamError;
@@ -57,12 +59,8 @@ pub struct CameraParams {
     pub calibration: String,
     /// Frames per second.
     pub rate_hz: f64,
-    /// Exposure time, ms (motion blur).
-    pub exposure_ms: f64,
-    /// Time from the middle of the exposure to publication, ms.
-    pub latency_ms: f64,
-    /// Standard deviation of the sensor noise, grey levels.
-    pub noise_std: f64,
+    /// Mount, exposure, latency, noise, pixel format.
+    pub sensor: DownCameraParams,
 }
 
 impl Default for CameraParams {
@@ -70,9 +68,7 @@ impl Default for CameraParams {
         Self {
             calibration: "camera_down_640x480.yaml".into(),
             rate_hz: 30.0,
-            exposure_ms: 4.0,
-            latency_ms: 15.0,
-            noise_std: 2.0,
+            sensor: DownCameraParams::default(),
         }
     }
 }
@@ -83,15 +79,15 @@ impl Default for CameraParams {
 pub struct DepthParams {
     /// Frames per second.
     pub rate_hz: f64,
-    /// Depth noise grows as `noise_coefficient * z^2` (m, z in m).
-    pub noise_coefficient: f64,
+    /// Resolution, field of view, range, noise, mount.
+    pub sensor: DepthCameraParams,
 }
 
 impl Default for DepthParams {
     fn default() -> Self {
         Self {
             rate_hz: 30.0,
-            noise_coefficient: 0.002,
+            sensor: DepthCameraParams::default(),
         }
     }
 }
@@ -188,16 +184,15 @@ impl Validate for Scenario {
             }
         }
         check_range("camera.rate_hz", self.camera.rate_hz, 1.0, 240.0)?;
-        check_range("camera.exposure_ms", self.camera.exposure_ms, 0.0, 50.0)?;
-        check_range("camera.latency_ms", self.camera.latency_ms, 0.0, 500.0)?;
-        check_range("camera.noise_std", self.camera.noise_std, 0.0, 50.0)?;
+        self.camera
+            .sensor
+            .validate()
+            .map_err(|e| from_param("camera.sensor", e))?;
         check_range("depth.rate_hz", self.depth.rate_hz, 1.0, 90.0)?;
-        check_range(
-            "depth.noise_coefficient",
-            self.depth.noise_coefficient,
-            0.0,
-            0.1,
-        )?;
+        self.depth
+            .sensor
+            .validate()
+            .map_err(|e| from_param("depth.sensor", e))?;
         Ok(())
     }
 }
@@ -323,6 +318,11 @@ impl LoadedScenario {
     /// The camera calibration file.
     pub fn calibration_path(&self) -> PathBuf {
         resolve(&self.config_dir, &self.scenario.camera.calibration)
+    }
+
+    /// The landing pad's layout (`deploy/config/pad.toml`).
+    pub fn pad_path(&self) -> PathBuf {
+        self.config_dir.join("pad.toml")
     }
 }
 
