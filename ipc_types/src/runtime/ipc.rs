@@ -504,6 +504,17 @@ impl<T: Debug + ZeroCopySend + Copy + 'static, H: MessageHeader> SlicePublisher<
             .map_err(|e| port_err(&self.service, "loan", e))
     }
 
+    /// Loans `len` elements of shared memory, zero-initialized, for producers that write
+    /// through a `&mut [T]` (a renderer): safe, at the cost of one memset.
+    pub fn loan(&mut self, len: usize) -> Result<SliceSample<T, H>, IpcError>
+    where
+        T: Default,
+    {
+        self.port
+            .loan_slice(len)
+            .map_err(|e| port_err(&self.service, "loan", e))
+    }
+
     /// Sends a written sample: stamps the next sequence number into its header, then
     /// notifies subscribers. Returns the sequence number.
     pub fn send(&mut self, mut sample: SliceSample<T, H>) -> Result<u64, IpcError> {

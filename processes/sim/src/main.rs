@@ -12,10 +12,13 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use ipc_types::msg::TruthKind;
+use ipc_types::msg::{
+    CameraFrameHeader, DepthFrameHeader, Header, Intrinsics, PixelEncoding, Stage, TruthKind,
+};
 use ipc_types::runtime::config::deploy_dir;
-use ipc_types::runtime::{Ipc, IpcPrefix, logging};
+use ipc_types::runtime::{Ipc, IpcPrefix, logging, monotonic_ns};
 use ipc_types::services;
+use sim::camera::PixelFormat;
 use sim::lockstep::Simulator;
 use sim::px4::endpoint::{EndpointConfig, SimVehicle};
 
@@ -85,6 +88,40 @@ fn run(args: &Args) -> Result<()> {
     let ipc = Ipc::open("sim", &prefix)?;
     let mut truth = ipc.publisher::<ipc_types::msg::TruthEvent>(services::SIM_TRUTH)?;
     let mut heartbeat = ipc.heartbeat(Duration::from_millis(500))?;
+    let sim_ref = vehicle.simulator();
+    let (cam_len, cam_geometry) = match sim_ref.down_camera() {
+        Some(c) => (
+            c.frame_len(),
+            Some((
+                c.calibration().width,
+                c.calibration().height,
+                c.params().format,
+                (c.params().exposure_time_s * 1e9) as u64,
+            )),
+        ),
+        None => (0, None),
+    };
+    let depth_geometry = sim_ref.depth_camera().map(|d| {
+        let p = d.params();
+        let (fx, fy) = p.focal_px();
+        let (cx, cy) = p.principal_point_px();
+        (
+            d.frame_len(),
+            p.width,
+            p.height,
+            Intrinsics { fx, fy, cx, cy },
+        )
+    });
+    let mut camera =
+        ipc.slice_publisher::<u8, CameraFrameHeader>(services::SIM_CAMERA, cam_len.max(1))?;
+    let mut depth = ipc.slice_publisher::<u16, DepthFrameHeader>(
+        services::SIM_DEPTH,
+        depth_geometry.map(|g| g.0).unwrap_or(1),
+    )?;
+    // Rendered frames wait here for the sensor's exposure-to-publish latency.
+    let mut pending_camera = None;
+    let mut pending_depth = None;
+    let mut dropped: u64 = 0;
     tracing::info!(
         scenario = %scenario.scenario.name,
         seed,
@@ -93,6 +130,7 @@ fn run(args: &Args) -> Result<()> {
     );
 
     let stop = AtomicBool::new(false);
+    let speed = args.speed;
     let until = Instant::now() + Duration::from_secs_f64(duration_s / args.speed + 1.0);
     let end_ns = (duration_s * 1e9) as u64;
     let mut steps: u64 = 0;
@@ -104,6 +142,75 @@ fn run(args: &Args) -> Result<()> {
                 if let Err(e) = truth.send(t.msg, t) {
                     failure = Some(e);
                     return false;
+                }
+            }
+            let now = monotonic_ns();
+            if report.camera_due
+                && let Some((width, height, format, exposure_ns)) = cam_geometry
+            {
+                match camera.loan(cam_len) {
+                    Ok(mut sample) => match sim.render_camera_into(sample.payload_mut()) {
+                        Ok(Some(shot)) => {
+                            let (encoding, bpp) = match format {
+                                PixelFormat::Mono8 => (PixelEncoding::Mono8, 1),
+                                PixelFormat::Bgr8 => (PixelEncoding::Bgr8, 3),
+                            };
+                            *sample.user_header_mut() = CameraFrameHeader {
+                                msg: Header::captured_at(now),
+                                width,
+                                height,
+                                stride: width * bpp,
+                                encoding: encoding as u32,
+                                camera_id: 0,
+                                undistorted: 0,
+                                exposure_ns,
+                            };
+                            let wall_latency = ((shot.publish_ns - shot.capture_ns) as f64 / speed) as u64;
+                            pending_camera = Some((sample, now + wall_latency));
+                        }
+                        Ok(None) => {}
+                        Err(e) => tracing::warn!(error = %e, "camera frame not rendered"),
+                    },
+                    // A consumer holds every sample: drop this frame rather than queue latency.
+                    Err(_) => dropped += 1,
+                }
+            }
+            if report.depth_due
+                && let Some((len, width, height, intrinsics)) = depth_geometry
+            {
+                match depth.loan(len) {
+                    Ok(mut sample) => {
+                        if let Some(shot) = sim.render_depth_into(sample.payload_mut()) {
+                            *sample.user_header_mut() = DepthFrameHeader {
+                                msg: Header::captured_at(now),
+                                width,
+                                height,
+                                depth_scale_m: 0.001,
+                                intrinsics,
+                                camera_id: 0,
+                                reserved: 0,
+                            };
+                            let wall_latency = ((shot.publish_ns - shot.capture_ns) as f64 / speed) as u64;
+                            pending_depth = Some((sample, now + wall_latency));
+                        }
+                    }
+                    Err(_) => dropped += 1,
+                }
+            }
+            if pending_camera.as_ref().is_some_and(|(_, at)| now >= *at)
+                && let Some((mut sample, _)) = pending_camera.take()
+            {
+                sample.user_header_mut().msg.push_stage(Stage::Sensor, now, monotonic_ns());
+                if let Err(e) = camera.send(sample) {
+                    tracing::warn!(error = %e, "camera frame not sent");
+                }
+            }
+            if pending_depth.as_ref().is_some_and(|(_, at)| now >= *at)
+                && let Some((mut sample, _)) = pending_depth.take()
+            {
+                sample.user_header_mut().msg.push_stage(Stage::Sensor, now, monotonic_ns());
+                if let Err(e) = depth.send(sample) {
+                    tracing::warn!(error = %e, "depth frame not sent");
                 }
             }
             steps += 1;
@@ -121,6 +228,12 @@ fn run(args: &Args) -> Result<()> {
             sim.time_ns() < end_ns
         })
         .context("simulation")?;
+    if dropped > 0 {
+        tracing::warn!(
+            dropped,
+            "frames dropped because consumers held every sample"
+        );
+    }
     if let Some(e) = failure {
         return Err(e).context("publishing");
     }

@@ -641,7 +641,7 @@ fn garbage_datagrams_do_not_crash_it() {
 /// The `sim` binary as systemd would start it: a companion flies it over UDP, and the
 /// evaluator-only truth topic reports the liftoff and the touchdown over iceoryx2.
 #[test]
-fn the_sim_process_flies_over_mavlink_and_publishes_ground_truth() {
+fn the_sim_process_flies_over_mavlink_and_publishes_camera_depth_and_ground_truth() {
     use ipc_types::msg::{TruthEvent, TruthKind};
     use ipc_types::runtime::{Ipc, IpcPrefix};
 
@@ -656,6 +656,13 @@ fn the_sim_process_flies_over_mavlink_and_publishes_ground_truth() {
     let truth = ipc
         .subscriber::<TruthEvent>(ipc_types::services::SIM_TRUTH)
         .unwrap();
+    let camera = ipc
+        .slice_subscriber::<u8, ipc_types::msg::CameraFrameHeader>(ipc_types::services::SIM_CAMERA)
+        .unwrap();
+    let depth = ipc
+        .slice_subscriber::<u16, ipc_types::msg::DepthFrameHeader>(ipc_types::services::SIM_DEPTH)
+        .unwrap();
+    let started = Instant::now();
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sim"))
         .args(["--scenario", "indoor-static", "--duration-s", "60"])
         .args(["--mavlink-listen", &addr.to_string()])
@@ -681,6 +688,25 @@ fn the_sim_process_flies_over_mavlink_and_publishes_ground_truth() {
         MavResult::MAV_RESULT_ACCEPTED
     );
     assert!(c.landed_state(MavLandedState::MAV_LANDED_STATE_ON_GROUND, secs(10)));
+    let elapsed = started.elapsed().as_secs_f64();
+    let frame = camera.latest().unwrap().expect("camera frames");
+    let h = *frame.user_header();
+    assert_eq!(h.expected_len(), Some(frame.payload().len()), "{h:?}");
+    assert!(
+        h.msg.seq as f64 > 30.0 * elapsed * 0.5,
+        "{} camera frames in {elapsed:.1} s",
+        h.msg.seq
+    );
+    let d = depth.latest().unwrap().expect("depth frames");
+    assert_eq!(
+        (d.user_header().width * d.user_header().height) as usize,
+        d.payload().len()
+    );
+    assert!(
+        d.payload().iter().any(|&mm| mm > 0),
+        "the ground is in view"
+    );
+    drop((frame, d));
     let mut kinds = Vec::new();
     while let Ok(Some(t)) = truth.receive() {
         kinds.push(TruthKind::from_raw(t.kind));
