@@ -1,6 +1,7 @@
 //! `landing`: the one user-facing command of the landing stack.
 
 mod bench_ipc;
+mod bench_sim;
 mod config_cmd;
 mod stats;
 
@@ -36,6 +37,8 @@ enum BenchCommand {
     /// One-way latency of camera frames between two OS processes: iceoryx2 zero-copy
     /// against a Unix domain socket copy.
     Ipc(bench_ipc::IpcArgs),
+    /// Real-time factor of the simulator with both cameras, and render times.
+    Sim(bench_sim::SimArgs),
     /// Internal: the publishing side of `bench ipc`, started by it in a second process.
     #[command(hide = true)]
     IpcPeer(bench_ipc::PeerArgs),
@@ -56,6 +59,7 @@ fn main() -> ExitCode {
     ipc_types::runtime::logging::init("warn");
     let result = match cli.command {
         Command::Bench(BenchCommand::Ipc(args)) => bench_ipc::run(&args, cli.ipc_prefix.as_deref()),
+        Command::Bench(BenchCommand::Sim(args)) => bench_sim::run(&args),
         Command::Bench(BenchCommand::IpcPeer(args)) => {
             bench_ipc::run_peer(&args, cli.ipc_prefix.as_deref())
         }

@@ -1,0 +1,155 @@
+//! `landing bench sim`: how much faster than real time the simulator runs with both
+//! cameras rendering at their rates, and what one render costs.
+//!
+//! The vehicle is flown as px4-link would fly it (arm + take-off over MAVLink messages to
+//! the simulated autopilot), so the cameras see a real flight: the ground, the moving pad.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::Args;
+use ipc_types::runtime::config::deploy_dir;
+use mavlink::MavHeader;
+use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd, MavMessage};
+use serde_json::json;
+use sim::lockstep::Simulator;
+
+use crate::stats::percentile;
+
+/// Arguments of `landing bench sim`.
+#[derive(Debug, Args)]
+pub struct SimArgs {
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+    /// Simulated seconds flown per camera resolution.
+    #[arg(long, default_value_t = 20.0)]
+    seconds: f64,
+    /// The deploy directory (default: found above the current directory or executable).
+    #[arg(long)]
+    deploy_dir: Option<PathBuf>,
+}
+
+/// What one flight measured.
+struct Flight {
+    realtime_factor: f64,
+    render_ms: Vec<f64>,
+    depth_ms: Vec<f64>,
+}
+
+fn command(sim: &mut Simulator, command: MavCmd, param1: f32, param7: f32) {
+    let header = MavHeader {
+        system_id: 1,
+        component_id: 191,
+        sequence: 0,
+    };
+    sim.handle_mavlink(
+        &header,
+        &MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            param1,
+            param2: 0.0,
+            param3: 0.0,
+            param4: f32::NAN,
+            param5: f32::NAN,
+            param6: f32::NAN,
+            param7,
+            command,
+            target_system: 1,
+            target_component: 1,
+            confirmation: 0,
+        }),
+    );
+}
+
+fn fly(scenario: &str, seconds: f64, deploy: &std::path::Path) -> Result<Flight> {
+    let scn = sim::scenario::load(scenario, deploy)?;
+    let mut sim = Simulator::new(&scn, 1).context("building the simulator")?;
+    command(&mut sim, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0);
+    command(&mut sim, MavCmd::MAV_CMD_NAV_TAKEOFF, 0.0, 2.0);
+    let mut image = vec![0u8; sim.down_camera().map_or(0, |c| c.frame_len())];
+    let mut depth = vec![0u16; sim.depth_camera().map_or(0, |c| c.frame_len())];
+    let (mut render_ms, mut depth_ms) = (Vec::new(), Vec::new());
+    let end_ns = (seconds * 1e9) as u64;
+    let start = Instant::now();
+    while sim.time_ns() < end_ns {
+        let r = sim.step()?;
+        let _ = sim.take_mavlink();
+        if r.camera_due {
+            let t = Instant::now();
+            sim.render_camera_into(&mut image)?;
+            render_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        if r.depth_due {
+            let t = Instant::now();
+            sim.render_depth_into(&mut depth);
+            depth_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    let wall = start.elapsed().as_secs_f64();
+    tracing::info!(
+        wall_s = wall,
+        render_s = render_ms.iter().sum::<f64>() / 1e3,
+        depth_s = depth_ms.iter().sum::<f64>() / 1e3,
+        "where the time went"
+    );
+    Ok(Flight {
+        realtime_factor: seconds / wall.max(1e-9),
+        render_ms,
+        depth_ms,
+    })
+}
+
+fn round3(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}
+
+/// Runs the benchmark and prints the figures.
+pub fn run(args: &SimArgs) -> Result<()> {
+    if !(args.seconds.is_finite() && (1.0..=600.0).contains(&args.seconds)) {
+        anyhow::bail!(
+            "--seconds {} is not allowed (allowed: 1 to 600)",
+            args.seconds
+        );
+    }
+    let deploy = args.deploy_dir.clone().unwrap_or_else(deploy_dir);
+    eprintln!(
+        "bench sim: {} s of outdoor-1 (640x480 camera, depth)...",
+        args.seconds
+    );
+    let small = fly("outdoor-1", args.seconds, &deploy)?;
+    eprintln!(
+        "bench sim: {} s of paper-sim (1280x720 camera, depth)...",
+        args.seconds
+    );
+    let large = fly("paper-sim", args.seconds, &deploy)?;
+    let mut depth_all = small.depth_ms.clone();
+    depth_all.extend(&large.depth_ms);
+    let out = json!({
+        "realtime_factor": round3(small.realtime_factor),
+        "realtime_factor_1280x720": round3(large.realtime_factor),
+        "render_ms_p50_640x480": round3(percentile(&small.render_ms, 50.0)),
+        "render_ms_p50_1280x720": round3(percentile(&large.render_ms, 50.0)),
+        "depth_ms_p50": round3(percentile(&depth_all, 50.0)),
+        "frames": small.render_ms.len() + large.render_ms.len(),
+    });
+    if args.json {
+        println!("{out}");
+    } else {
+        println!(
+            "real-time factor, physics 500 Hz + 640x480 camera 30 Hz + depth 30 Hz: {:.1}",
+            small.realtime_factor
+        );
+        println!(
+            "real-time factor with the 1280x720 camera: {:.1}",
+            large.realtime_factor
+        );
+        println!(
+            "render p50: 640x480 {:.2} ms, 1280x720 {:.2} ms; depth 640x480 p50 {:.2} ms",
+            percentile(&small.render_ms, 50.0),
+            percentile(&large.render_ms, 50.0),
+            percentile(&depth_all, 50.0)
+        );
+    }
+    Ok(())
+}
