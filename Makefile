@@ -7,7 +7,7 @@ APT_PACKAGES := libopencv-dev libopencv-contrib-dev clang libclang-dev pkg-confi
 CARGO ?= cargo
 export CARGO_TERM_COLOR ?= never
 
-.PHONY: demo test bootstrap build lint bench help
+.PHONY: demo test bootstrap build lint bench help peers
 
 help:
 	@echo "make demo   install what is missing, build (release), run the simulated mission"
@@ -39,6 +39,13 @@ lint: bootstrap
 
 test: lint
 	$(CARGO) test --release --workspace
+	$(MAKE) --no-print-directory peers
+
+# Independent MAVLink peers (pymavlink from PyPI) fly the simulator as they fly PX4 SITL.
+peers:
+	@python3 -c 'import pymavlink' 2>/dev/null || python3 -m pip install --quiet --disable-pip-version-check pymavlink
+	$(CARGO) build --release -p sim
+	python3 tests/peers/pymavlink_flight.py target/release/sim
 
 bench: build
 	./target/release/landing bench ipc
