@@ -1,0 +1,109 @@
+//! Tests of `ipc`.
+
+use super::*;
+
+#[test]
+fn prefixes_reject_path_characters() {
+    assert!(IpcPrefix::new("run_1-a.b").is_ok());
+    assert!(IpcPrefix::new("../x").is_err());
+    assert!(IpcPrefix::new("").is_err());
+    assert!(IpcPrefix::new(&"a".repeat(33)).is_err());
+    assert!(IpcPrefix::new(IpcPrefix::unique("some test!").as_str()).is_ok());
+}
+
+#[test]
+fn the_periodic_waiter_learns_the_period_despite_bursts_and_drops() {
+    let mut w = PeriodicWait::new(Duration::from_micros(200), Duration::from_millis(1));
+    let mut t = 1_000_000_000u64;
+    for i in 0..20u64 {
+        // 30 Hz, with a burst (a second sample read 5 us later) every 4th frame and a
+        // dropped frame every 7th.
+        t += if i % 7 == 6 { 66_666_667 } else { 33_333_333 };
+        w.on_arrival(t);
+        if i % 4 == 0 {
+            w.on_arrival(t + 5_000);
+            t += 5_000;
+        }
+    }
+    let p = w.period().expect("a period").as_secs_f64();
+    assert!((p - 1.0 / 30.0).abs() < 0.001, "period {p}");
+}
+
+#[test]
+fn sequence_gaps_are_counted() {
+    let (last, gaps) = (Cell::new(0), Cell::new(0));
+    for s in [1, 2, 5, 6, 9] {
+        track_seq(&last, &gaps, s);
+    }
+    assert_eq!(gaps.get(), 4);
+}
+
+#[test]
+fn a_message_sent_in_one_node_arrives_in_another_with_its_header() {
+    let prefix = IpcPrefix::unique("pubsub");
+    let a = Ipc::open("a", &prefix).expect("node a");
+    let b = Ipc::open("b", &prefix).expect("node b");
+    let sub = b
+        .subscriber::<crate::msg::PlannerGoal>("t/goal")
+        .expect("subscriber");
+    let mut publ = a
+        .publisher::<crate::msg::PlannerGoal>("t/goal")
+        .expect("publisher");
+    let goal = crate::msg::PlannerGoal {
+        position: [1.0, 2.0, 3.0],
+        ..Default::default()
+    };
+    publ.send(Header::captured_at(42), &goal).expect("send");
+    publ.send(Header::captured_at(43), &goal).expect("send");
+    let s = sub.latest().expect("receive").expect("a sample");
+    assert_eq!(s.position, [1.0, 2.0, 3.0]);
+    assert_eq!(s.user_header().seq, 2);
+    assert_eq!(s.user_header().capture_ns, 43);
+}
+
+#[test]
+fn two_prefixes_never_see_each_other() {
+    let a = Ipc::open("a", &IpcPrefix::unique("iso")).expect("node a");
+    let b = Ipc::open("b", &IpcPrefix::unique("iso")).expect("node b");
+    let sub = b.subscriber::<u64>("t/iso").expect("subscriber");
+    let mut publ = a.publisher::<u64>("t/iso").expect("publisher");
+    publ.send(Header::default(), &7).expect("send");
+    assert!(sub.receive().expect("receive").is_none());
+}
+
+#[test]
+fn the_wait_loop_wakes_on_data_and_reports_a_missed_heartbeat() {
+    let prefix = IpcPrefix::unique("wait");
+    let a = Ipc::open("worker", &prefix).expect("node");
+    let w = Ipc::open("watcher", &prefix).expect("node");
+    let hb_listener = w
+        .heartbeat_listener("worker", Duration::from_millis(30))
+        .expect("hb listener");
+    let mut hb = a.heartbeat(Duration::from_millis(30)).expect("hb");
+    let sub = w.subscriber::<u64>("t/wait").expect("sub");
+    let mut publ = a.publisher::<u64>("t/wait").expect("pub");
+    hb.beat().expect("beat");
+    publ.send(Header::default(), &5).expect("send");
+    let mut got_data = false;
+    let mut missed = false;
+    let exit = run_wait_loop(
+        &[sub.listener()],
+        &[(&hb_listener, Duration::from_millis(30))],
+        Some(Duration::from_secs(2)),
+        |wake| {
+            match wake {
+                Wake::Data(0) => {
+                    got_data = matches!(sub.receive(), Ok(Some(s)) if *s == 5);
+                }
+                Wake::DeadlineMissed(0) => missed = true,
+                Wake::Tick => return false,
+                _ => {}
+            }
+            !(got_data && missed)
+        },
+    )
+    .expect("loop");
+    assert_eq!(exit, LoopExit::Stopped);
+    assert!(got_data, "data wake-up");
+    assert!(missed, "the worker stopped beating, so its deadline passed");
+}

@@ -1,0 +1,781 @@
+//! Tests of `commander`.
+
+use std::f64::consts::FRAC_PI_2;
+
+use mavlink::dialects::common::MavCmd;
+use nalgebra::UnitQuaternion;
+
+use super::*;
+
+const MS: u64 = 1_000_000;
+const S: u64 = 1_000_000_000;
+const COMPANION: MavHeader = MavHeader {
+    system_id: 1,
+    component_id: 191,
+    sequence: 0,
+};
+
+fn status(z: f64, landed: bool) -> VehicleStatus {
+    VehicleStatus {
+        estimate: EstimatedState {
+            position: Vector3::new(1.0, 2.0, z),
+            velocity: Vector3::zeros(),
+            world_from_body: UnitQuaternion::identity(),
+            body_rates: Vector3::zeros(),
+            landed,
+        },
+        crashed: false,
+    }
+}
+
+fn ground() -> VehicleStatus {
+    status(0.0, true)
+}
+
+fn cmd(command: MavCmd, p: [f32; 7]) -> MavMessage {
+    MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+        param1: p[0],
+        param2: p[1],
+        param3: p[2],
+        param4: p[3],
+        param5: p[4],
+        param6: p[5],
+        param7: p[6],
+        command,
+        target_system: 1,
+        target_component: 1,
+        confirmation: 0,
+    })
+}
+
+/// Sends a command and returns its ACK result (and drops other output).
+fn command(c: &mut Commander, now: u64, msg: &MavMessage, v: &VehicleStatus) -> MavResult {
+    c.take_outgoing();
+    c.handle_message(now, &COMPANION, msg, v);
+    let acks: Vec<_> = c
+        .take_outgoing()
+        .into_iter()
+        .filter_map(|m| match m {
+            MavMessage::COMMAND_ACK(a) => Some(a),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(acks.len(), 1, "one ACK per command");
+    assert_eq!((acks[0].target_system, acks[0].target_component), (1, 191));
+    acks[0].result
+}
+
+fn arm_msg(arm: bool) -> MavMessage {
+    cmd(
+        MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+        [f32::from(u8::from(arm)), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    )
+}
+
+fn set_mode_msg(main: f32, sub: f32) -> MavMessage {
+    cmd(
+        MavCmd::MAV_CMD_DO_SET_MODE,
+        [1.0, main, sub, 0.0, 0.0, 0.0, 0.0],
+    )
+}
+
+fn sp_msg(type_mask: u16, frame: MavFrame, v: [f32; 11]) -> MavMessage {
+    MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
+        time_boot_ms: 0,
+        x: v[0],
+        y: v[1],
+        z: v[2],
+        vx: v[3],
+        vy: v[4],
+        vz: v[5],
+        afx: v[6],
+        afy: v[7],
+        afz: v[8],
+        yaw: v[9],
+        yaw_rate: v[10],
+        type_mask: PositionTargetTypemask::from_bits_retain(type_mask),
+        target_system: 1,
+        target_component: 1,
+        coordinate_frame: frame,
+    })
+}
+
+/// Position-only setpoint at NED (x, y, z).
+fn pos_sp(x: f32, y: f32, z: f32) -> MavMessage {
+    sp_msg(
+        0x0DF8,
+        MavFrame::MAV_FRAME_LOCAL_NED,
+        [x, y, z, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    )
+}
+
+fn new() -> Commander {
+    Commander::new(Px4Params::default()).unwrap()
+}
+
+/// Streams setpoints at 20 Hz from `from` for `dur`, updating at 500 Hz.
+fn stream(c: &mut Commander, from: u64, dur: u64, v: &VehicleStatus) -> u64 {
+    let mut t = from;
+    while t < from + dur {
+        if (t - from).is_multiple_of(50 * MS) {
+            c.handle_message(t, &COMPANION, &pos_sp(0.0, 0.0, -2.0), v);
+        }
+        c.update(t, v);
+        t += 2 * MS;
+    }
+    t
+}
+
+#[test]
+fn params_parse_with_px4_names_and_validate() {
+    let p: Px4Params = toml::from_str("COM_OF_LOSS_T = 0.5\nCOM_OBL_RC_ACT = 5").unwrap();
+    assert_eq!(p.com_of_loss_t, 0.5);
+    assert_eq!(p.com_obl_rc_act, 5);
+    assert_eq!(p.mis_takeoff_alt, 2.5);
+    assert!(toml::from_str::<Px4Params>("COM_FOO = 1").is_err());
+    let bad = Px4Params {
+        com_obl_rc_act: 3,
+        ..Px4Params::default()
+    };
+    assert!(bad.validate().is_err());
+    let bad = Px4Params {
+        mpc_land_speed: f64::NAN,
+        ..Px4Params::default()
+    };
+    assert!(Commander::new(bad).is_err());
+    assert!(Px4Params::default().validate().is_ok());
+}
+
+#[test]
+fn custom_mode_packing() {
+    assert_eq!(FlightMode::Offboard.custom_mode(), 6 << 16);
+    assert_eq!(FlightMode::AutoLand.custom_mode(), (6 << 24) | (4 << 16));
+    assert_eq!(FlightMode::AutoLoiter.custom_mode(), (3 << 24) | (4 << 16));
+    assert_eq!(FlightMode::AutoTakeoff.custom_mode(), (2 << 24) | (4 << 16));
+    assert_eq!(FlightMode::Posctl.custom_mode(), 3 << 16);
+    for m in [
+        FlightMode::Posctl,
+        FlightMode::AutoTakeoff,
+        FlightMode::AutoLoiter,
+        FlightMode::AutoLand,
+        FlightMode::Offboard,
+    ] {
+        let (main, sub) = m.main_sub();
+        assert_eq!(
+            ModeRequest::from_main_sub(main, sub),
+            ModeRequest::Simulated(m)
+        );
+    }
+    assert_eq!(ModeRequest::from_main_sub(4, 5), ModeRequest::NotSimulated);
+    assert_eq!(ModeRequest::from_main_sub(1, 0), ModeRequest::NotSimulated);
+    assert_eq!(ModeRequest::from_main_sub(0, 6), ModeRequest::Unknown);
+    assert_eq!(ModeRequest::from_main_sub(42, 0), ModeRequest::Unknown);
+}
+
+#[test]
+fn heartbeat_at_1_hz_with_px4_identity() {
+    let mut c = new();
+    let v = ground();
+    let mut beats = Vec::new();
+    for i in 0..1500 {
+        c.update(i * 2 * MS, &v);
+        beats.extend(c.take_outgoing().into_iter().filter_map(|m| match m {
+            MavMessage::HEARTBEAT(h) => Some(h),
+            _ => None,
+        }));
+    }
+    assert_eq!(beats.len(), 3, "t = 0, 1, 2 s");
+    let h = &beats[0];
+    assert_eq!(h.mavtype, MavType::MAV_TYPE_QUADROTOR);
+    assert_eq!(h.autopilot, MavAutopilot::MAV_AUTOPILOT_PX4);
+    assert!(
+        h.base_mode
+            .contains(MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
+    );
+    assert!(
+        !h.base_mode
+            .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED)
+    );
+    assert_eq!(h.system_status, MavState::MAV_STATE_STANDBY);
+    assert_eq!(h.custom_mode, FlightMode::Posctl.custom_mode());
+    assert_eq!(
+        command(&mut c, 3 * S, &arm_msg(true), &v),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    let h = c.heartbeat();
+    assert!(
+        h.base_mode
+            .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED)
+    );
+    assert_eq!(h.system_status, MavState::MAV_STATE_ACTIVE);
+}
+
+#[test]
+fn telemetry_default_rates_and_frames() {
+    let mut c = new();
+    let mut v = status(3.0, false);
+    v.estimate.velocity = Vector3::new(1.0, 0.0, 0.5);
+    v.estimate.body_rates = Vector3::new(0.1, 0.2, 0.3);
+    let mut out = Vec::new();
+    for i in 0..500 {
+        c.update(i * 2 * MS, &v);
+        out.extend(c.take_outgoing());
+    }
+    let n = |id| {
+        out.iter()
+            .filter(|m| mavlink::Message::message_id(*m) == id)
+            .count()
+    };
+    assert_eq!(n(msg_id::ATTITUDE_QUATERNION), 50);
+    assert!((29..=31).contains(&n(msg_id::LOCAL_POSITION_NED)));
+    assert_eq!(n(msg_id::EXTENDED_SYS_STATE), 5);
+    assert_eq!(n(msg_id::ODOMETRY), 0);
+    for m in &out {
+        match m {
+            MavMessage::LOCAL_POSITION_NED(p) => {
+                assert_eq!([p.x, p.y, p.z], [2.0, 1.0, -3.0]);
+                assert_eq!([p.vx, p.vy, p.vz], [0.0, 1.0, -0.5]);
+            }
+            MavMessage::ATTITUDE_QUATERNION(q) => {
+                assert_eq!([q.rollspeed, q.pitchspeed, q.yawspeed], [0.1, -0.2, -0.3]);
+                let h = 0.5f32.sqrt();
+                assert!((q.q1 - h).abs() < 1e-6 && (q.q4 - h).abs() < 1e-6);
+            }
+            MavMessage::EXTENDED_SYS_STATE(s) => {
+                // Disarmed counts as on the ground.
+                assert_eq!(s.landed_state, MavLandedState::MAV_LANDED_STATE_ON_GROUND);
+            }
+            _ => {}
+        }
+    }
+}
+
+#[test]
+fn set_message_interval_and_request_message() {
+    let mut c = new();
+    let v = ground();
+    let req = |id: f32, us: f32| {
+        cmd(
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+            [id, us, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+    };
+    assert_eq!(
+        command(&mut c, 0, &req(32.0, 100_000.0), &v),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(
+        command(&mut c, 0, &req(331.0, 20_000.0), &v),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(
+        command(&mut c, 0, &req(31.0, -1.0), &v),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(
+        command(&mut c, 0, &req(9999.0, 1000.0), &v),
+        MavResult::MAV_RESULT_FAILED
+    );
+    assert_eq!(
+        command(&mut c, 0, &req(32.0, -5.0), &v),
+        MavResult::MAV_RESULT_DENIED
+    );
+    assert_eq!(
+        command(&mut c, 0, &req(f32::NAN, 5.0), &v),
+        MavResult::MAV_RESULT_DENIED
+    );
+    let mut out = Vec::new();
+    for i in 0..500 {
+        c.update(i * 2 * MS, &v);
+        out.extend(c.take_outgoing());
+    }
+    let n = |id| {
+        out.iter()
+            .filter(|m| mavlink::Message::message_id(*m) == id)
+            .count()
+    };
+    assert_eq!(n(msg_id::LOCAL_POSITION_NED), 10);
+    assert_eq!(n(msg_id::ODOMETRY), 50);
+    assert_eq!(n(msg_id::ATTITUDE_QUATERNION), 0);
+    let odom = out.iter().find_map(|m| match m {
+        MavMessage::ODOMETRY(o) => Some(o.clone()),
+        _ => None,
+    });
+    let odom = odom.unwrap();
+    assert_eq!(odom.frame_id, MavFrame::MAV_FRAME_LOCAL_NED);
+    assert_eq!(odom.child_frame_id, MavFrame::MAV_FRAME_BODY_FRD);
+    assert_eq!([odom.x, odom.y, odom.z], [2.0, 1.0, -0.0]);
+    // Interval 0 restores the default.
+    assert_eq!(
+        command(&mut c, S, &req(31.0, 0.0), &v),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    // REQUEST_MESSAGE: ACK, then the message once.
+    c.take_outgoing();
+    c.handle_message(
+        S,
+        &COMPANION,
+        &cmd(
+            MavCmd::MAV_CMD_REQUEST_MESSAGE,
+            [245.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        ),
+        &v,
+    );
+    let out = c.take_outgoing();
+    assert!(
+        matches!(&out[0], MavMessage::COMMAND_ACK(a) if a.result == MavResult::MAV_RESULT_ACCEPTED)
+    );
+    assert!(matches!(&out[1], MavMessage::EXTENDED_SYS_STATE(_)));
+    let r = command(
+        &mut c,
+        S,
+        &cmd(
+            MavCmd::MAV_CMD_REQUEST_MESSAGE,
+            [77.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        ),
+        &v,
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_FAILED);
+}
+
+#[test]
+fn arm_disarm_results() {
+    let mut c = new();
+    let g = ground();
+    assert_eq!(
+        command(&mut c, 0, &arm_msg(true), &g),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert!(c.armed());
+    // Already armed: accepted.
+    assert_eq!(
+        command(&mut c, 0, &arm_msg(true), &g),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    // Bad param1.
+    let bad = cmd(
+        MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+        [0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    assert_eq!(command(&mut c, 0, &bad, &g), MavResult::MAV_RESULT_DENIED);
+    // Disarm in the air refused unless forced.
+    let air = status(3.0, false);
+    c.update(10 * MS, &air);
+    assert_eq!(
+        command(&mut c, 20 * MS, &arm_msg(false), &air),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+    );
+    assert!(c.armed());
+    let force = cmd(
+        MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+        [0.0, FORCE_DISARM_MAGIC, 0.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    assert_eq!(
+        command(&mut c, 30 * MS, &force, &air),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert!(!c.armed());
+    // Crashed: arming denied.
+    let mut crashed = ground();
+    crashed.crashed = true;
+    c.update(40 * MS, &crashed);
+    assert_eq!(
+        command(&mut c, 50 * MS, &arm_msg(true), &crashed),
+        MavResult::MAV_RESULT_DENIED
+    );
+    assert!(!c.armed());
+    assert_eq!(c.heartbeat().system_status, MavState::MAV_STATE_EMERGENCY);
+}
+
+#[test]
+fn crash_disarms() {
+    let mut c = new();
+    let air = status(3.0, false);
+    command(&mut c, 0, &arm_msg(true), &air);
+    let mut crashed = air;
+    crashed.crashed = true;
+    c.update(2 * MS, &crashed);
+    assert!(!c.armed());
+    assert_eq!(c.take_events(), vec![CommanderEvent::DisarmCrash]);
+}
+
+#[test]
+fn commands_for_other_systems_are_ignored_and_unknown_ones_unsupported() {
+    let mut c = new();
+    let g = ground();
+    let mut m = arm_msg(true);
+    if let MavMessage::COMMAND_LONG(d) = &mut m {
+        d.target_system = 2;
+    }
+    c.handle_message(0, &COMPANION, &m, &g);
+    assert!(c.take_outgoing().is_empty());
+    assert!(!c.armed());
+    let r = command(&mut c, 0, &cmd(MavCmd::MAV_CMD_DO_REPOSITION, [0.0; 7]), &g);
+    assert_eq!(r, MavResult::MAV_RESULT_UNSUPPORTED);
+}
+
+#[test]
+fn takeoff_climbs_at_tko_speed_then_loiters() {
+    let mut c = new();
+    let g = ground();
+    command(&mut c, 0, &arm_msg(true), &g);
+    let r = command(
+        &mut c,
+        0,
+        &cmd(
+            MavCmd::MAV_CMD_NAV_TAKEOFF,
+            [0.0, 0.0, 0.0, f32::NAN, f32::NAN, f32::NAN, f32::NAN],
+        ),
+        &g,
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
+    assert_eq!(c.mode(), FlightMode::AutoTakeoff);
+    c.update(0, &g);
+    c.update(S, &status(1.0, false));
+    assert_eq!(c.landed_state(), LandedState::Takeoff);
+    let sp = c.setpoint();
+    assert_eq!(sp.position[0], Some(1.0));
+    assert_eq!(sp.position[1], Some(2.0));
+    assert!(
+        (sp.position[2].unwrap() - 1.5).abs() < 1e-9,
+        "ramp at 1.5 m/s"
+    );
+    assert_eq!(sp.velocity[2], Some(1.5));
+    // Reaching MIS_TAKEOFF_ALT (2.5 m) switches to AUTO.LOITER there.
+    c.update(2 * S, &status(2.4, false));
+    assert_eq!(c.mode(), FlightMode::AutoLoiter);
+    assert_eq!(c.landed_state(), LandedState::InAir);
+    let sp = c.setpoint();
+    assert_eq!(sp.position, [Some(1.0), Some(2.0), Some(2.5)]);
+    // param7 gives the altitude.
+    let r = command(
+        &mut c,
+        3 * S,
+        &cmd(
+            MavCmd::MAV_CMD_NAV_TAKEOFF,
+            [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 6.0],
+        ),
+        &status(2.5, false),
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
+    c.update(3 * S, &status(2.5, false));
+    c.update(4 * S, &status(3.0, false));
+    assert_eq!(c.mode(), FlightMode::AutoTakeoff);
+    c.update(5 * S, &status(5.9, false));
+    assert_eq!(c.mode(), FlightMode::AutoLoiter);
+    assert_eq!(c.setpoint().position[2], Some(6.0));
+}
+
+#[test]
+fn takeoff_while_disarmed_waits_for_arming() {
+    let mut c = new();
+    let g = ground();
+    let to = cmd(MavCmd::MAV_CMD_NAV_TAKEOFF, [0.0; 7]);
+    assert_eq!(command(&mut c, 0, &to, &g), MavResult::MAV_RESULT_ACCEPTED);
+    c.update(S, &g);
+    assert_eq!(c.mode(), FlightMode::AutoTakeoff);
+    assert_eq!(c.landed_state(), LandedState::OnGround);
+    command(&mut c, 2 * S, &arm_msg(true), &g);
+    c.update(2 * S, &g);
+    c.update(2 * S + 500 * MS, &g);
+    let z = c.setpoint().position[2].unwrap();
+    assert!((z - 0.75).abs() < 1e-9, "ramp starts at arming: {z}");
+}
+
+#[test]
+fn land_descends_then_disarms_after_com_disarm_land() {
+    let mut c = new();
+    let air = status(3.0, false);
+    command(&mut c, 0, &arm_msg(true), &ground());
+    c.update(0, &air);
+    let r = command(&mut c, 0, &cmd(MavCmd::MAV_CMD_NAV_LAND, [0.0; 7]), &air);
+    assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
+    c.update(2 * MS, &air);
+    assert_eq!(c.mode(), FlightMode::AutoLand);
+    assert_eq!(c.landed_state(), LandedState::Landing);
+    let sp = c.setpoint();
+    assert_eq!(sp.position, [Some(1.0), Some(2.0), None]);
+    assert_eq!(sp.velocity, [None, None, Some(-0.7)]);
+    // Touchdown at t = 1 s: landed after the land detector (0.5 s),
+    // disarmed COM_DISARM_LAND (2 s) after that.
+    let mut t = S;
+    while t < S + LAND_DETECT_NS + 2 * S - 10 * MS {
+        c.update(t, &ground());
+        t += 2 * MS;
+    }
+    assert_eq!(c.landed_state(), LandedState::OnGround);
+    assert!(c.armed());
+    c.update(S + LAND_DETECT_NS + 2 * S + 2 * MS, &ground());
+    assert!(!c.armed());
+    assert_eq!(c.mode(), FlightMode::AutoLand);
+    assert_eq!(c.take_events(), vec![CommanderEvent::AutoDisarmLanded]);
+}
+
+#[test]
+fn preflight_auto_disarm() {
+    let mut c = new();
+    let g = ground();
+    command(&mut c, 0, &arm_msg(true), &g);
+    let mut t = 0;
+    while t < 10 * S - 10 * MS {
+        c.update(t, &g);
+        t += 10 * MS;
+    }
+    assert!(c.armed());
+    c.update(10 * S, &g);
+    assert!(!c.armed());
+    assert_eq!(c.take_events(), vec![CommanderEvent::AutoDisarmPreflight]);
+}
+
+#[test]
+fn offboard_needs_a_one_second_stream() {
+    let mut c = new();
+    let g = ground();
+    // No stream at all.
+    assert_eq!(
+        command(&mut c, 0, &set_mode_msg(6.0, 0.0), &g),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+    );
+    assert_eq!(c.mode(), FlightMode::Posctl);
+    // 0.5 s of stream: still refused.
+    let t = stream(&mut c, 0, 500 * MS, &g);
+    assert_eq!(
+        command(&mut c, t, &set_mode_msg(6.0, 0.0), &g),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+    );
+    assert_eq!(c.mode(), FlightMode::Posctl);
+    // Setpoints do not drive the vehicle outside OFFBOARD.
+    command(&mut c, t, &arm_msg(true), &g);
+    c.update(t, &g);
+    assert_eq!(c.setpoint().position[2], Some(0.0));
+    // >= 1 s: accepted, and the setpoint (NED z -2 = ENU z 2) applies.
+    let t = stream(&mut c, t, 600 * MS, &g);
+    assert!(c.offboard_available(t));
+    assert_eq!(
+        command(&mut c, t, &set_mode_msg(6.0, 0.0), &g),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(c.mode(), FlightMode::Offboard);
+    assert_eq!(c.heartbeat().custom_mode, 6 << 16);
+    c.update(t, &g);
+    assert_eq!(c.setpoint().position, [Some(0.0), Some(0.0), Some(2.0)]);
+}
+
+#[test]
+fn a_gap_restarts_the_stream_clock() {
+    let mut c = new();
+    let g = ground();
+    let t = stream(&mut c, 0, 800 * MS, &g);
+    // A 1.5 s gap (> COM_OF_LOSS_T), then 0.5 s more: not 1 s continuous.
+    let t = stream(&mut c, t + 1500 * MS, 500 * MS, &g);
+    assert!(!c.offboard_available(t));
+    assert_eq!(
+        command(&mut c, t, &set_mode_msg(6.0, 0.0), &g),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+    );
+}
+
+#[test]
+fn arming_in_offboard_without_stream_is_rejected() {
+    let mut c = new();
+    let g = ground();
+    let t = stream(&mut c, 0, 1200 * MS, &g);
+    command(&mut c, t, &set_mode_msg(6.0, 0.0), &g);
+    assert_eq!(c.mode(), FlightMode::Offboard);
+    // Stream stops; disarmed, so no failsafe, but arming is refused.
+    c.update(t + 3 * S, &g);
+    assert_eq!(c.mode(), FlightMode::Offboard);
+    assert_eq!(
+        command(&mut c, t + 3 * S, &arm_msg(true), &g),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+    );
+}
+
+fn offboard_loss(action: u8) -> (FlightMode, u64, Vec<CommanderEvent>) {
+    let mut c = Commander::new(Px4Params {
+        com_obl_rc_act: action,
+        ..Px4Params::default()
+    })
+    .unwrap();
+    let air = status(2.0, false);
+    let t = stream(&mut c, 0, 1200 * MS, &air);
+    command(&mut c, t, &arm_msg(true), &air);
+    command(&mut c, t, &set_mode_msg(6.0, 0.0), &air);
+    assert_eq!(c.mode(), FlightMode::Offboard);
+    let last = t - 50 * MS;
+    let mut now = t;
+    while c.mode() == FlightMode::Offboard && now < t + 5 * S {
+        c.update(now, &air);
+        now += 2 * MS;
+    }
+    (c.mode(), now - 2 * MS - last, c.take_events())
+}
+
+#[test]
+fn offboard_loss_lands_after_com_of_loss_t() {
+    let (mode, after, events) = offboard_loss(4);
+    assert_eq!(mode, FlightMode::AutoLand);
+    assert!((1000 * MS..=1010 * MS).contains(&after), "after {after} ns");
+    assert_eq!(
+        events,
+        vec![CommanderEvent::OffboardLost(FlightMode::AutoLand)]
+    );
+}
+
+#[test]
+fn offboard_loss_holds_with_com_obl_rc_act_5() {
+    let (mode, _, events) = offboard_loss(5);
+    assert_eq!(mode, FlightMode::AutoLoiter);
+    assert_eq!(
+        events,
+        vec![CommanderEvent::OffboardLost(FlightMode::AutoLoiter)]
+    );
+}
+
+#[test]
+fn do_set_mode_results() {
+    let mut c = new();
+    let air = status(2.0, false);
+    command(&mut c, 0, &arm_msg(true), &ground());
+    assert_eq!(
+        command(&mut c, 0, &set_mode_msg(4.0, 3.0), &air),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(c.mode(), FlightMode::AutoLoiter);
+    assert_eq!(c.heartbeat().custom_mode, (3 << 24) | (4 << 16));
+    c.update(0, &air);
+    assert_eq!(c.setpoint().position, [Some(1.0), Some(2.0), Some(2.0)]);
+    assert_eq!(
+        command(&mut c, 0, &set_mode_msg(4.0, 6.0), &air),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(c.mode(), FlightMode::AutoLand);
+    assert_eq!(
+        command(&mut c, 0, &set_mode_msg(3.0, 0.0), &air),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(c.mode(), FlightMode::Posctl);
+    // Real PX4 modes the simulator does not fly.
+    assert_eq!(
+        command(&mut c, 0, &set_mode_msg(4.0, 5.0), &air),
+        MavResult::MAV_RESULT_UNSUPPORTED
+    );
+    assert_eq!(
+        command(&mut c, 0, &set_mode_msg(1.0, 0.0), &air),
+        MavResult::MAV_RESULT_UNSUPPORTED
+    );
+    assert_eq!(c.mode(), FlightMode::Posctl);
+    // Wrongly packed: ACKed, nothing happens (as PX4).
+    assert_eq!(
+        command(&mut c, 0, &set_mode_msg(0.0, 6.0), &air),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    let no_flag = cmd(
+        MavCmd::MAV_CMD_DO_SET_MODE,
+        [0.0, 4.0, 6.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    assert_eq!(
+        command(&mut c, 0, &no_flag, &air),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(c.mode(), FlightMode::Posctl);
+    assert_eq!(
+        command(&mut c, 0, &set_mode_msg(f32::NAN, 0.0), &air),
+        MavResult::MAV_RESULT_DENIED
+    );
+    // DO_SET_MODE to AUTO.TAKEOFF uses MIS_TAKEOFF_ALT.
+    assert_eq!(
+        command(&mut c, 0, &set_mode_msg(4.0, 2.0), &air),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(c.mode(), FlightMode::AutoTakeoff);
+}
+
+#[test]
+#[allow(deprecated)]
+fn set_mode_message_is_acked_as_do_set_mode() {
+    let mut c = new();
+    let g = ground();
+    let m = MavMessage::SET_MODE(SET_MODE_DATA {
+        custom_mode: (3 << 24) | (4 << 16),
+        target_system: 1,
+        base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+    });
+    c.handle_message(0, &COMPANION, &m, &g);
+    let out = c.take_outgoing();
+    assert!(matches!(&out[0], MavMessage::COMMAND_ACK(a)
+        if a.command == MavCmd::MAV_CMD_DO_SET_MODE && a.result == MavResult::MAV_RESULT_ACCEPTED));
+    assert_eq!(c.mode(), FlightMode::AutoLoiter);
+}
+
+#[test]
+fn setpoint_conversion_ned_to_enu() {
+    let all = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 0.0, 0.5];
+    let sp = setpoint_from_local_ned(&match sp_msg(0, MavFrame::MAV_FRAME_LOCAL_NED, all) {
+        MavMessage::SET_POSITION_TARGET_LOCAL_NED(d) => d,
+        _ => unreachable!(),
+    })
+    .unwrap();
+    assert_eq!(sp.position, [Some(2.0), Some(1.0), Some(-3.0)]);
+    assert_eq!(sp.velocity, [Some(5.0), Some(4.0), Some(-6.0)]);
+    assert_eq!(sp.acceleration, [Some(8.0), Some(7.0), Some(-9.0)]);
+    assert!(
+        (sp.yaw.unwrap() - FRAC_PI_2).abs() < 1e-9,
+        "NED yaw 0 = north = ENU pi/2"
+    );
+    assert_eq!(sp.yaw_rate, Some(-0.5));
+}
+
+fn convert(mask: u16, frame: MavFrame, v: [f32; 11]) -> Option<Setpoint> {
+    match sp_msg(mask, frame, v) {
+        MavMessage::SET_POSITION_TARGET_LOCAL_NED(d) => setpoint_from_local_ned(&d),
+        _ => None,
+    }
+}
+
+#[test]
+fn setpoint_type_mask_frames_and_non_finite() {
+    let v = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 0.0, 0.5];
+    // Ignore NED x position (bit 1): ENU y is absent.
+    let sp = convert(1, MavFrame::MAV_FRAME_LOCAL_NED, v).unwrap();
+    assert_eq!(sp.position, [Some(2.0), None, Some(-3.0)]);
+    // Velocity only (the usual 0x0DC7) with yaw rate.
+    let sp = convert(0x05C7, MavFrame::MAV_FRAME_LOCAL_NED, v).unwrap();
+    assert_eq!(sp.position, [None; 3]);
+    assert_eq!(sp.velocity, [Some(5.0), Some(4.0), Some(-6.0)]);
+    assert_eq!(sp.acceleration, [None; 3]);
+    assert_eq!(sp.yaw, None);
+    assert_eq!(sp.yaw_rate, Some(-0.5));
+    // NaN counts as ignored.
+    let mut nan = v;
+    nan[2] = f32::NAN;
+    nan[9] = f32::INFINITY;
+    let sp = convert(0, MavFrame::MAV_FRAME_LOCAL_NED, nan).unwrap();
+    assert_eq!(sp.position[2], None);
+    assert_eq!(sp.yaw, None);
+    // Everything ignored, body frames and force: not a setpoint.
+    assert!(convert(0x01FF, MavFrame::MAV_FRAME_LOCAL_NED, v).is_none());
+    assert!(convert(0, MavFrame::MAV_FRAME_BODY_FRD, v).is_none());
+    assert!(convert(0, MavFrame::MAV_FRAME_LOCAL_OFFSET_NED, v).is_none());
+    assert!(convert(0x0200, MavFrame::MAV_FRAME_LOCAL_NED, v).is_none());
+}
+
+#[test]
+fn rejected_setpoints_do_not_count_as_a_stream() {
+    let mut c = new();
+    let g = ground();
+    let body = sp_msg(0x0DF8, MavFrame::MAV_FRAME_BODY_FRD, [0.0; 11]);
+    let mut t = 0;
+    while t < 1500 * MS {
+        c.handle_message(t, &COMPANION, &body, &g);
+        c.update(t, &g);
+        t += 50 * MS;
+    }
+    assert!(!c.offboard_available(t));
+}
+
+#[test]
+fn enu_from_local_ned_inverts_the_report() {
+    let p = enu_from_local_ned(2.0, 1.0, -3.0);
+    assert_eq!(p, Vector3::new(1.0, 2.0, 3.0));
+}

@@ -1,0 +1,84 @@
+//! Tests of `scenario`.
+
+use super::*;
+
+fn deploy() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy")
+}
+
+#[test]
+fn every_shipped_scenario_loads_and_builds_a_world() {
+    for name in SHIPPED {
+        let s = load(name, &deploy()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(&s.scenario.name, name);
+        let world = crate::world::World::new(s.world_params(7));
+        assert!(world.is_ok(), "{name}: {:?}", world.err());
+    }
+}
+
+fn write(text: &str, tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("sim-scn-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let p = dir.join(format!("{tag}.toml"));
+    std::fs::write(&p, text).expect("write");
+    p
+}
+
+fn base() -> String {
+    std::fs::read_to_string(deploy().join("scenarios/paper-sim.toml")).expect("paper-sim")
+}
+
+fn error_of(text: &str, tag: &str) -> String {
+    let p = write(text, tag);
+    load(p.to_str().expect("utf-8"), &deploy())
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default()
+}
+
+#[test]
+fn an_unknown_key_is_named() {
+    let e = error_of(&base().replace("duration_s", "duraton_s"), "unknown");
+    assert!(e.contains("duraton_s"), "{e}");
+    assert!(!e.contains('\n'));
+}
+
+#[test]
+fn a_ground_vehicle_faster_than_60_kmh_is_refused() {
+    let text = base().replace("speed_m_s = 0.778", "speed_m_s = 20.0");
+    let e = error_of(&text, "fast");
+    assert!(e.contains("ground_vehicle.") && e.contains("20"), "{e}");
+}
+
+#[test]
+fn a_negative_mass_airframe_is_refused() {
+    let dir = std::env::temp_dir().join(format!("sim-af-{}", std::process::id()));
+    let airframes = dir.join("config/airframes");
+    std::fs::create_dir_all(&airframes).expect("dir");
+    std::fs::create_dir_all(dir.join("scenarios")).expect("dir");
+    let p450 = std::fs::read_to_string(deploy().join("config/airframes/p450.toml")).expect("p450");
+    std::fs::write(
+        airframes.join("p450.toml"),
+        p450.replace("mass_kg = 1.5", "mass_kg = -1.0"),
+    )
+    .expect("write");
+    let scn = dir.join("scenarios/x.toml");
+    std::fs::write(&scn, base()).expect("write");
+    let e = load(scn.to_str().expect("utf-8"), &dir)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(e.contains("airframe.mass_kg") && e.contains("-1"), "{e}");
+}
+
+#[test]
+fn an_unknown_scenario_name_lists_the_shipped_ones() {
+    let e = load("paper-simm", &deploy())
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(
+        e.contains("paper-simm") && e.contains("highspeed-30-curve"),
+        "{e}"
+    );
+}
