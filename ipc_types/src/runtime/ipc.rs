@@ -169,6 +169,8 @@ impl MessageHeader for Header {
 
 impl_message_header!(CameraFrameHeader, DepthFrameHeader, OccupancyMapHeader);
 
+type PubSubBuilder<P, H> = iceoryx2::service::builder::publish_subscribe::Builder<P, H, Svc>;
+
 /// A process's connection to iceoryx2: one node, named after the process.
 pub struct Ipc {
     node: Node<Svc>,
@@ -242,22 +244,33 @@ impl Ipc {
             .map_err(|e| service_err(service, e))
     }
 
+    /// The publish-subscribe service `service` with this stack's quality of service; every
+    /// port of a topic is opened through here, so publishers and subscribers always agree.
+    fn pubsub<P, H>(&self, service: &str, history: usize) -> Result<PubSubBuilder<P, H>, IpcError>
+    where
+        P: Debug + IceoryxSend + ?Sized + 'static,
+        H: Debug + ZeroCopySend + 'static,
+    {
+        Ok(self
+            .node
+            .service_builder(&Self::service_name(service)?)
+            .publish_subscribe::<P>()
+            .user_header::<H>()
+            .enable_safe_overflow(true)
+            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+            .subscriber_max_borrowed_samples(MAX_BORROWED)
+            .history_size(history)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_publishers(MAX_PUBLISHERS))
+    }
+
     /// A publisher of fixed-size messages `T` on `service`.
     pub fn publisher<T>(&self, service: &str) -> Result<Publisher<T>, IpcError>
     where
         T: Debug + ZeroCopySend + Copy + 'static,
     {
         let factory = self
-            .node
-            .service_builder(&Self::service_name(service)?)
-            .publish_subscribe::<T>()
-            .user_header::<Header>()
-            .enable_safe_overflow(true)
-            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
-            .subscriber_max_borrowed_samples(MAX_BORROWED)
-            .history_size(1)
-            .max_subscribers(MAX_SUBSCRIBERS)
-            .max_publishers(MAX_PUBLISHERS)
+            .pubsub::<T, Header>(service, 1)?
             .open_or_create()
             .map_err(|e| service_err(service, e))?;
         let port = factory
@@ -283,16 +296,7 @@ impl Ipc {
         T: Debug + ZeroCopySend + Copy + 'static,
     {
         let factory = self
-            .node
-            .service_builder(&Self::service_name(service)?)
-            .publish_subscribe::<T>()
-            .user_header::<Header>()
-            .enable_safe_overflow(true)
-            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
-            .subscriber_max_borrowed_samples(MAX_BORROWED)
-            .history_size(1)
-            .max_subscribers(MAX_SUBSCRIBERS)
-            .max_publishers(MAX_PUBLISHERS)
+            .pubsub::<T, Header>(service, 1)?
             .open_or_create()
             .map_err(|e| service_err(service, e))?;
         let port = factory
@@ -326,16 +330,7 @@ impl Ipc {
         H: MessageHeader,
     {
         let factory = self
-            .node
-            .service_builder(&Self::service_name(service)?)
-            .publish_subscribe::<[T]>()
-            .user_header::<H>()
-            .enable_safe_overflow(true)
-            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
-            .subscriber_max_borrowed_samples(MAX_BORROWED)
-            .history_size(0)
-            .max_subscribers(MAX_SUBSCRIBERS)
-            .max_publishers(MAX_PUBLISHERS)
+            .pubsub::<[T], H>(service, 0)?
             .open_or_create()
             .map_err(|e| service_err(service, e))?;
         let port = factory
@@ -365,16 +360,7 @@ impl Ipc {
         H: MessageHeader,
     {
         let factory = self
-            .node
-            .service_builder(&Self::service_name(service)?)
-            .publish_subscribe::<[T]>()
-            .user_header::<H>()
-            .enable_safe_overflow(true)
-            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
-            .subscriber_max_borrowed_samples(MAX_BORROWED)
-            .history_size(0)
-            .max_subscribers(MAX_SUBSCRIBERS)
-            .max_publishers(MAX_PUBLISHERS)
+            .pubsub::<[T], H>(service, 0)?
             .open_or_create()
             .map_err(|e| service_err(service, e))?;
         let port = factory
