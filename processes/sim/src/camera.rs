@@ -439,6 +439,9 @@ pub struct DownCamera {
     calibration: CameraCalibration,
     camera_from_body: Isometry3<f64>,
     rays: Vec<[f32; 2]>,
+    /// Smallest and largest normalized ray coordinates (x, y) of any pixel:
+    /// the field of view, for deciding what is in view.
+    ray_bounds: [[f64; 2]; 2],
     atlas: Atlas,
     pad_min: [f64; 2],
     pad_max: [f64; 2],
@@ -542,6 +545,13 @@ impl DownCamera {
                 rays.push([n.x as f32, n.y as f32]);
             }
         }
+        let mut ray_bounds = [[f64::INFINITY; 2], [f64::NEG_INFINITY; 2]];
+        for r in &rays {
+            for k in 0..2 {
+                ray_bounds[0][k] = ray_bounds[0][k].min(f64::from(r[k]));
+                ray_bounds[1][k] = ray_bounds[1][k].max(f64::from(r[k]));
+            }
+        }
         let mat = pad.render_texture(params.pad_texture_px_per_m)?;
         let bytes = mat.data_bytes()?;
         let (black, white) = (f32::from(params.black_level), f32::from(params.white_level));
@@ -563,6 +573,7 @@ impl DownCamera {
             pad_max: pad.board.max_m,
             accum: Vec::new(),
             rays,
+            ray_bounds,
             calibration,
             params,
         })
@@ -659,17 +670,28 @@ impl DownCamera {
             let rows = TILE_ROWS.min(h - row);
             let range = row * w..(row + rows) * w;
             self.tile.resize(rows, w)?;
-            self.accum.clear();
-            self.accum.resize(rows * w, 0.0);
-            for pass in &passes {
-                let rays = self.rays.get(range.clone()).unwrap_or(&[]);
-                self.tile
-                    .sample(&self.atlas, pass, rays, weight, &mut self.accum)?;
-            }
+            let rays = self.rays.get(range.clone()).unwrap_or(&[]);
             let out = data
                 .get_mut(range.start * channels..range.end * channels)
                 .unwrap_or(&mut []);
-            self.finish_tile(out, channels);
+            if let [pass] = passes.as_slice() {
+                // One sub-exposure (the common case): noise and quantize straight
+                // from the sampled band, no f32 accumulator round trip.
+                let blend = self.tile.sample(&self.atlas, pass, rays)?;
+                let sigma = self.params.noise_sigma as f32;
+                let noise = self.noise.slice(rows * w);
+                let (fine, coarse) = self.tile.sampled()?;
+                quantize_sampled(out, channels, fine, coarse, blend, noise, sigma);
+            } else {
+                self.accum.clear();
+                self.accum.resize(rows * w, 0.0);
+                for pass in &passes {
+                    let blend = self.tile.sample(&self.atlas, pass, rays)?;
+                    let (fine, coarse) = self.tile.sampled()?;
+                    accumulate(&mut self.accum, fine, coarse, weight, blend);
+                }
+                self.finish_tile(out, channels);
+            }
             row += rows;
         }
         Ok(samples)
@@ -686,9 +708,27 @@ impl DownCamera {
         let cam = |dt: f64| body.at(dt) * body_from_camera;
         let (c0, c1) = (cam(-half), cam(half));
         let mut motion: f64 = 0.0;
+        // Only a point in view counts: outside the calibrated field the
+        // distortion polynomial swings wildly, so a pad far outside the image
+        // would otherwise ask for the most sub-exposures while the visible
+        // ground barely moves (the 120 deg paper-sim camera hovering at 2 m).
+        let [lo, hi] = self.ray_bounds;
+        let in_view = |p: &Point3<f64>| {
+            p.z > 0.0 && {
+                let (x, y) = (p.x / p.z, p.y / p.z);
+                (lo[0]..=hi[0]).contains(&x) && (lo[1]..=hi[1]).contains(&y)
+            }
+        };
         let mut track = |p0: Point3<f64>, p1: Point3<f64>| {
-            let a = self.calibration.project(&c0.inverse_transform_point(&p0));
-            let b = self.calibration.project(&c1.inverse_transform_point(&p1));
+            let (q0, q1) = (
+                c0.inverse_transform_point(&p0),
+                c1.inverse_transform_point(&p1),
+            );
+            if !(in_view(&q0) || in_view(&q1)) {
+                return;
+            }
+            let a = self.calibration.project(&q0);
+            let b = self.calibration.project(&q1);
             if let (Some(a), Some(b)) = (a, b) {
                 motion = motion.max((a - b).norm());
             }
@@ -807,6 +847,8 @@ struct Tile {
     cols: usize,
     maps: [Mat; 4],
     sampled: [Mat; 2],
+    /// Whether `sampled[1]` holds the coarse level of the last band.
+    coarse_valid: bool,
 }
 
 impl Tile {
@@ -821,6 +863,7 @@ impl Tile {
                 Mat::default(),
             ],
             sampled: [Mat::default(), Mat::default()],
+            coarse_valid: false,
         }
     }
 
@@ -839,16 +882,15 @@ impl Tile {
         Ok(())
     }
 
-    /// Maps every ray of the band into the atlas, samples it with one `remap`
-    /// per pad level, and adds `weight` times the result to `accum`.
+    /// Maps every ray of the band into the atlas and samples it with one `remap`
+    /// per pad level; returns the weight of the coarse level (0: only the fine
+    /// level was sampled, and [`Tile::sampled`] returns it twice).
     fn sample(
         &mut self,
         atlas: &Atlas,
         pass: &Pass,
         rays: &[[f32; 2]],
-        weight: f32,
-        accum: &mut [f32],
-    ) -> Result<(), CameraError> {
+    ) -> Result<f32, CameraError> {
         let [mfx, mfy, mcx, mcy] = &mut self.maps;
         let (fx, fy) = (mfx.data_typed_mut::<f32>()?, mfy.data_typed_mut::<f32>()?);
         let (cx, cy) = (mcx.data_typed_mut::<f32>()?, mcy.data_typed_mut::<f32>()?);
@@ -871,15 +913,23 @@ impl Tile {
             )
         };
         remap(&self.maps[0], &self.maps[1], fine)?;
-        let fine = fine.data_bytes()?;
-        if blend > 0.0 {
+        self.coarse_valid = blend > 0.0;
+        if self.coarse_valid {
             remap(&self.maps[2], &self.maps[3], coarse)?;
-            let coarse = coarse.data_bytes()?;
-            accumulate(accum, fine, coarse, weight, blend);
-        } else {
-            accumulate(accum, fine, fine, weight, 0.0);
         }
-        Ok(())
+        Ok(if self.coarse_valid { blend } else { 0.0 })
+    }
+
+    /// The band sampled at the fine and the coarse level by the last
+    /// [`Tile::sample`] (the fine one twice when the coarse was not needed).
+    fn sampled(&self) -> Result<(&[u8], &[u8]), CameraError> {
+        let fine = self.sampled[0].data_bytes()?;
+        let coarse = if self.coarse_valid {
+            self.sampled[1].data_bytes()?
+        } else {
+            fine
+        };
+        Ok((fine, coarse))
     }
 }
 
@@ -1017,5 +1067,52 @@ avx2_dispatch!(
 fn quantize_generic(out: &mut [u8], accum: &[f32], noise: &[f32], sigma: f32) {
     for ((o, &a), &n) in out.iter_mut().zip(accum).zip(noise) {
         *o = to_u8(a + sigma * n);
+    }
+}
+
+/// `out = to_u8(lerp(fine, coarse, blend) + sigma * noise)` over a band, each
+/// grey written `channels` times: the single-sub-exposure path, same
+/// arithmetic as accumulating with weight 1 and then quantizing.
+fn quantize_sampled(
+    out: &mut [u8],
+    channels: usize,
+    fine: &[u8],
+    coarse: &[u8],
+    blend: f32,
+    noise: &[f32],
+    sigma: f32,
+) {
+    if channels == 1 {
+        quantize_mono(out, fine, coarse, blend, noise, sigma);
+    } else {
+        for (((o, &a), &b), &n) in out
+            .chunks_exact_mut(channels)
+            .zip(fine)
+            .zip(coarse)
+            .zip(noise)
+        {
+            let (a, b) = (f32::from(a), f32::from(b));
+            o.fill(to_u8(a + (b - a) * blend + sigma * n));
+        }
+    }
+}
+
+avx2_dispatch!(
+    /// Mono [`quantize_sampled`].
+    fn quantize_mono => quantize_mono_avx2, quantize_mono_generic(out: &mut [u8], fine: &[u8], coarse: &[u8], blend: f32, noise: &[f32], sigma: f32) -> ()
+);
+
+#[inline(always)]
+fn quantize_mono_generic(
+    out: &mut [u8],
+    fine: &[u8],
+    coarse: &[u8],
+    blend: f32,
+    noise: &[f32],
+    sigma: f32,
+) {
+    for (((o, &a), &b), &n) in out.iter_mut().zip(fine).zip(coarse).zip(noise) {
+        let (a, b) = (f32::from(a), f32::from(b));
+        *o = to_u8(a + (b - a) * blend + sigma * n);
     }
 }
