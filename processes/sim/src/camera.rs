@@ -1038,11 +1038,14 @@ fn fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut 
     any_pad
 }
 
-/// Rounds and saturates a grey level to a byte (vectorizes, unlike `as u8`
-/// on a float).
+/// Rounds (half to even) and saturates a grey level to a byte. Adding
+/// 1.5 * 2^23 puts the rounded value in the low mantissa bits, so this is
+/// float min/max/add and a bit mask: it vectorizes fully, where a float to
+/// int cast kept a scalar NaN check per pixel in the loops below.
 #[inline(always)]
 fn to_u8(v: f32) -> u8 {
-    (v + 0.5).clamp(0.0, 255.0) as i32 as u8
+    const ROUND: f32 = 12_582_912.0;
+    (v.max(0.0).min(255.0) + ROUND).to_bits() as u8
 }
 
 avx2_dispatch!(
@@ -1111,8 +1114,11 @@ fn quantize_mono_generic(
     noise: &[f32],
     sigma: f32,
 ) {
-    for (((o, &a), &b), &n) in out.iter_mut().zip(fine).zip(coarse).zip(noise) {
-        let (a, b) = (f32::from(a), f32::from(b));
-        *o = to_u8(a + (b - a) * blend + sigma * n);
+    // Indexed over slices cut to one length: the four-way zip did not vectorize.
+    let n = out.len().min(fine.len()).min(coarse.len()).min(noise.len());
+    let (out, fine, coarse, noise) = (&mut out[..n], &fine[..n], &coarse[..n], &noise[..n]);
+    for i in 0..n {
+        let (a, b) = (f32::from(fine[i]), f32::from(coarse[i]));
+        out[i] = to_u8(a + (b - a) * blend + sigma * noise[i]);
     }
 }
