@@ -442,6 +442,8 @@ pub struct DownCamera {
     /// Smallest and largest normalized ray coordinates (x, y) of any pixel:
     /// the field of view, for deciding what is in view.
     ray_bounds: [[f64; 2]; 2],
+    /// The same per band of [`TILE_ROWS`] rows, to skip the pad where it cannot be.
+    band_bounds: Vec<[[f32; 2]; 2]>,
     atlas: Atlas,
     pad_min: [f64; 2],
     pad_max: [f64; 2],
@@ -545,6 +547,20 @@ impl DownCamera {
                 rays.push([n.x as f32, n.y as f32]);
             }
         }
+        let band_bounds: Vec<[[f32; 2]; 2]> = rays
+            .chunks(TILE_ROWS * w)
+            .map(|band| {
+                band.iter().fold(
+                    [[f32::INFINITY; 2], [f32::NEG_INFINITY; 2]],
+                    |[lo, hi], r| {
+                        [
+                            [lo[0].min(r[0]), lo[1].min(r[1])],
+                            [hi[0].max(r[0]), hi[1].max(r[1])],
+                        ]
+                    },
+                )
+            })
+            .collect();
         let mut ray_bounds = [[f64::INFINITY; 2], [f64::NEG_INFINITY; 2]];
         for r in &rays {
             for k in 0..2 {
@@ -574,6 +590,7 @@ impl DownCamera {
             accum: Vec::new(),
             rays,
             ray_bounds,
+            band_bounds,
             calibration,
             params,
         })
@@ -671,13 +688,19 @@ impl DownCamera {
             let range = row * w..(row + rows) * w;
             self.tile.resize(rows, w)?;
             let rays = self.rays.get(range.clone()).unwrap_or(&[]);
+            // Unbounded if missing, so the pad is then never skipped.
+            let band = self
+                .band_bounds
+                .get(row / TILE_ROWS)
+                .copied()
+                .unwrap_or([[f32::NEG_INFINITY; 2], [f32::INFINITY; 2]]);
             let out = data
                 .get_mut(range.start * channels..range.end * channels)
                 .unwrap_or(&mut []);
             if let [pass] = passes.as_slice() {
                 // One sub-exposure (the common case): noise and quantize straight
                 // from the sampled band, no f32 accumulator round trip.
-                let blend = self.tile.sample(&self.atlas, pass, rays)?;
+                let blend = self.tile.sample(&self.atlas, pass, rays, band)?;
                 let sigma = self.params.noise_sigma as f32;
                 let noise = self.noise.slice(rows * w);
                 let (fine, coarse) = self.tile.sampled()?;
@@ -686,7 +709,7 @@ impl DownCamera {
                 self.accum.clear();
                 self.accum.resize(rows * w, 0.0);
                 for pass in &passes {
-                    let blend = self.tile.sample(&self.atlas, pass, rays)?;
+                    let blend = self.tile.sample(&self.atlas, pass, rays, band)?;
                     let (fine, coarse) = self.tile.sampled()?;
                     accumulate(&mut self.accum, fine, coarse, weight, blend);
                 }
@@ -772,6 +795,7 @@ impl DownCamera {
             .and_then(|p| {
                 let (level, blend) = mip_level(depth_to(p), focal, ppm, atlas.pad.len());
                 let fine = *atlas.pad.get(level)?;
+                let (view_min, view_max) = self.pad_view(p);
                 let coarse = *atlas.pad.get(level + 1).unwrap_or(&fine);
                 Some(PadPass {
                     map: PlaneMap::new(p),
@@ -781,6 +805,8 @@ impl DownCamera {
                     blend,
                     min: [self.pad_min[0] as f32, self.pad_min[1] as f32],
                     max: [self.pad_max[0] as f32, self.pad_max[1] as f32],
+                    view_min,
+                    view_max,
                 })
             });
         let ground = (world_from_camera.translation.vector.z > 0.0)
@@ -800,6 +826,34 @@ impl DownCamera {
             })
             .flatten();
         Pass { pad, ground }
+    }
+
+    /// Bounding box of the board's corners in normalized ray coordinates,
+    /// widened by 1e-3 (a fraction of a pixel, far above the f32 error of the
+    /// per-pixel test); unbounded when a corner is not in front of the camera.
+    fn pad_view(&self, pad_from_camera: &Isometry3<f64>) -> ([f32; 2], [f32; 2]) {
+        const MARGIN: f64 = 1e-3;
+        let camera_from_pad = pad_from_camera.inverse();
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for (x, y) in [
+            (self.pad_min[0], self.pad_min[1]),
+            (self.pad_max[0], self.pad_min[1]),
+            (self.pad_min[0], self.pad_max[1]),
+            (self.pad_max[0], self.pad_max[1]),
+        ] {
+            let c = camera_from_pad.transform_point(&Point3::new(x, y, 0.0));
+            if c.z.is_nan() || c.z <= 1e-6 {
+                return ([f32::NEG_INFINITY; 2], [f32::INFINITY; 2]);
+            }
+            for (k, v) in [c.x / c.z, c.y / c.z].into_iter().enumerate() {
+                lo[k] = lo[k].min(v);
+                hi[k] = hi[k].max(v);
+            }
+        }
+        (
+            [(lo[0] - MARGIN) as f32, (lo[1] - MARGIN) as f32],
+            [(hi[0] + MARGIN) as f32, (hi[1] + MARGIN) as f32],
+        )
     }
 
     /// Adds sensor noise and quantizes one band into `out`.
@@ -837,6 +891,11 @@ struct PadPass {
     blend: f32,
     min: [f32; 2],
     max: [f32; 2],
+    /// Bounding box of the board in normalized ray coordinates (x/z, y/z),
+    /// widened a little, or unbounded when the board reaches behind the
+    /// camera: a band whose rays all fall outside it cannot see the pad.
+    view_min: [f32; 2],
+    view_max: [f32; 2],
 }
 
 /// Scratch OpenCV images for one band: atlas coordinates at the fine and the
@@ -884,17 +943,23 @@ impl Tile {
 
     /// Maps every ray of the band into the atlas and samples it with one `remap`
     /// per pad level; returns the weight of the coarse level (0: only the fine
-    /// level was sampled, and [`Tile::sampled`] returns it twice).
+    /// level was sampled, and [`Tile::sampled`] returns it twice). `band` is
+    /// the smallest and largest ray (x, y) of the band's pixels.
     fn sample(
         &mut self,
         atlas: &Atlas,
         pass: &Pass,
         rays: &[[f32; 2]],
+        band: [[f32; 2]; 2],
     ) -> Result<f32, CameraError> {
         let [mfx, mfy, mcx, mcy] = &mut self.maps;
         let (fx, fy) = (mfx.data_typed_mut::<f32>()?, mfy.data_typed_mut::<f32>()?);
         let (cx, cy) = (mcx.data_typed_mut::<f32>()?, mcy.data_typed_mut::<f32>()?);
-        let any_pad = fill_maps(atlas, pass, rays, [fx, fy, cx, cy]);
+        let pad_in_band = pass.pad.is_some_and(|p| {
+            let [lo, hi] = band;
+            (0..2).all(|k| p.view_min[k] <= hi[k] && lo[k] <= p.view_max[k])
+        });
+        let any_pad = fill_maps(atlas, pass, rays, [fx, fy, cx, cy], pad_in_band);
         let blend = if any_pad {
             pass.pad.map_or(0.0, |p| p.blend)
         } else {
@@ -933,18 +998,81 @@ impl Tile {
     }
 }
 
+/// [`fill_maps_generic`] specialized to what the band needs: rays that
+/// cannot reach the board skip the pad arithmetic, and the coarse maps are
+/// written only when the pad level is blended (about half the arithmetic and
+/// stores of the full loop, which the 120 deg camera's mostly-ground frames
+/// paid for every pixel).
+fn fill_maps(
+    atlas: &Atlas,
+    pass: &Pass,
+    rays: &[[f32; 2]],
+    maps: [&mut [f32]; 4],
+    pad_in_band: bool,
+) -> bool {
+    match pass.pad.filter(|_| pad_in_band).map(|p| p.blend > 0.0) {
+        None => fill_maps_ground(atlas, pass, rays, maps),
+        Some(false) => fill_maps_fine(atlas, pass, rays, maps),
+        Some(true) => fill_maps_trilinear(atlas, pass, rays, maps),
+    }
+}
+
 avx2_dispatch!(
-    /// [`fill_maps_generic`], in an AVX2 build when the CPU has it.
-    fn fill_maps => fill_maps_avx2, fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
+    /// Ground and sky only (fine maps).
+    fn fill_maps_ground => fill_maps_ground_avx2, fill_maps_ground_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
 );
+avx2_dispatch!(
+    /// Pad at one level, ground, sky (fine maps).
+    fn fill_maps_fine => fill_maps_fine_avx2, fill_maps_fine_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
+);
+avx2_dispatch!(
+    /// Pad at two levels, ground, sky (fine and coarse maps).
+    fn fill_maps_trilinear => fill_maps_trilinear_avx2, fill_maps_trilinear_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
+);
+
+#[inline(always)]
+fn fill_maps_ground_generic(
+    atlas: &Atlas,
+    pass: &Pass,
+    rays: &[[f32; 2]],
+    maps: [&mut [f32]; 4],
+) -> bool {
+    fill_maps_generic::<false, false>(atlas, pass, rays, maps)
+}
+
+#[inline(always)]
+fn fill_maps_fine_generic(
+    atlas: &Atlas,
+    pass: &Pass,
+    rays: &[[f32; 2]],
+    maps: [&mut [f32]; 4],
+) -> bool {
+    fill_maps_generic::<true, false>(atlas, pass, rays, maps)
+}
+
+#[inline(always)]
+fn fill_maps_trilinear_generic(
+    atlas: &Atlas,
+    pass: &Pass,
+    rays: &[[f32; 2]],
+    maps: [&mut [f32]; 4],
+) -> bool {
+    fill_maps_generic::<true, true>(atlas, pass, rays, maps)
+}
 
 /// Atlas coordinates of every ray of a band, written branch-free so the
 /// compiler can vectorize it: both planes are intersected for every pixel and
 /// the result selected (pad if the ray lands on the board, else ground, else
-/// sky). Outputs: fine-level x, y and coarse-level x, y (equal off the pad).
-/// Returns whether any ray of the band landed on the pad.
+/// sky). Outputs: fine-level x, y and coarse-level x, y (equal off the pad;
+/// written only with `COARSE`). Without `PAD` every ray is taken to miss the
+/// board. Returns whether any ray of the band landed on the pad.
 #[inline(always)]
-fn fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool {
+fn fill_maps_generic<const PAD: bool, const COARSE: bool>(
+    atlas: &Atlas,
+    pass: &Pass,
+    rays: &[[f32; 2]],
+    maps: [&mut [f32]; 4],
+) -> bool {
     let [fx, fy, cx, cy] = maps;
     let n = rays
         .len()
@@ -979,6 +1107,8 @@ fn fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut 
         blend: 0.0,
         min: [1.0, 1.0],
         max: [-1.0, -1.0],
+        view_min: [1.0, 1.0],
+        view_max: [-1.0, -1.0],
     });
     let (gmap, gblock, gscale) = pass.ground.unwrap_or((never, no_block, 1.0));
     let (pr, pt) = (p.map.r, p.map.t);
@@ -1006,7 +1136,7 @@ fn fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut 
         let x = pt[0] + s * (pr[0][0] * rx + pr[0][1] * ry + pr[0][2]);
         let y = pt[1] + s * (pr[1][0] * rx + pr[1][1] * ry + pr[1][2]);
         let on_pad =
-            (s > 0.0) & (x >= p.min[0]) & (x <= p.max[0]) & (y >= p.min[1]) & (y <= p.max[1]);
+            PAD & (s > 0.0) & (x >= p.min[0]) & (x <= p.max[0]) & (y >= p.min[1]) & (y <= p.max[1]);
         let u = (x - p.min[0]) * p.scale;
         let v = (p.max[1] - y) * p.scale;
         let ufine = p.fine.x0 + (u - 0.5).max(0.0).min(fw);
@@ -1031,8 +1161,10 @@ fn fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut 
         };
         fx[i] = if on_pad { ufine } else { ug };
         fy[i] = if on_pad { vfine } else { vg };
-        cx[i] = if on_pad { ucoarse } else { ug };
-        cy[i] = if on_pad { vcoarse } else { vg };
+        if COARSE {
+            cx[i] = if on_pad { ucoarse } else { ug };
+            cy[i] = if on_pad { vcoarse } else { vg };
+        }
         any_pad |= on_pad;
     }
     any_pad
