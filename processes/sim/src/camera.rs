@@ -1175,6 +1175,10 @@ fn fill_maps_generic<const PAD: bool, const COARSE: bool>(
 /// float min/max/add and a bit mask: it vectorizes fully, where a float to
 /// int cast kept a scalar NaN check per pixel in the loops below.
 #[inline(always)]
+#[allow(
+    clippy::manual_clamp,
+    reason = "max/min map NaN to 0; clamp would pass NaN through to the bit trick"
+)]
 fn to_u8(v: f32) -> u8 {
     const ROUND: f32 = 12_582_912.0;
     (v.max(0.0).min(255.0) + ROUND).to_bits() as u8
