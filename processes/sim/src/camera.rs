@@ -439,6 +439,11 @@ pub struct DownCamera {
     calibration: CameraCalibration,
     camera_from_body: Isometry3<f64>,
     rays: Vec<[f32; 2]>,
+    /// Smallest and largest normalized ray coordinates (x, y) of any pixel:
+    /// the field of view, for deciding what is in view.
+    ray_bounds: [[f64; 2]; 2],
+    /// The same per band of [`TILE_ROWS`] rows, to skip the pad where it cannot be.
+    band_bounds: Vec<[[f32; 2]; 2]>,
     atlas: Atlas,
     pad_min: [f64; 2],
     pad_max: [f64; 2],
@@ -542,6 +547,27 @@ impl DownCamera {
                 rays.push([n.x as f32, n.y as f32]);
             }
         }
+        let band_bounds: Vec<[[f32; 2]; 2]> = rays
+            .chunks(TILE_ROWS * w)
+            .map(|band| {
+                band.iter().fold(
+                    [[f32::INFINITY; 2], [f32::NEG_INFINITY; 2]],
+                    |[lo, hi], r| {
+                        [
+                            [lo[0].min(r[0]), lo[1].min(r[1])],
+                            [hi[0].max(r[0]), hi[1].max(r[1])],
+                        ]
+                    },
+                )
+            })
+            .collect();
+        let mut ray_bounds = [[f64::INFINITY; 2], [f64::NEG_INFINITY; 2]];
+        for r in &rays {
+            for k in 0..2 {
+                ray_bounds[0][k] = ray_bounds[0][k].min(f64::from(r[k]));
+                ray_bounds[1][k] = ray_bounds[1][k].max(f64::from(r[k]));
+            }
+        }
         let mat = pad.render_texture(params.pad_texture_px_per_m)?;
         let bytes = mat.data_bytes()?;
         let (black, white) = (f32::from(params.black_level), f32::from(params.white_level));
@@ -563,6 +589,8 @@ impl DownCamera {
             pad_max: pad.board.max_m,
             accum: Vec::new(),
             rays,
+            ray_bounds,
+            band_bounds,
             calibration,
             params,
         })
@@ -659,17 +687,34 @@ impl DownCamera {
             let rows = TILE_ROWS.min(h - row);
             let range = row * w..(row + rows) * w;
             self.tile.resize(rows, w)?;
-            self.accum.clear();
-            self.accum.resize(rows * w, 0.0);
-            for pass in &passes {
-                let rays = self.rays.get(range.clone()).unwrap_or(&[]);
-                self.tile
-                    .sample(&self.atlas, pass, rays, weight, &mut self.accum)?;
-            }
+            let rays = self.rays.get(range.clone()).unwrap_or(&[]);
+            // Unbounded if missing, so the pad is then never skipped.
+            let band = self
+                .band_bounds
+                .get(row / TILE_ROWS)
+                .copied()
+                .unwrap_or([[f32::NEG_INFINITY; 2], [f32::INFINITY; 2]]);
             let out = data
                 .get_mut(range.start * channels..range.end * channels)
                 .unwrap_or(&mut []);
-            self.finish_tile(out, channels);
+            if let [pass] = passes.as_slice() {
+                // One sub-exposure (the common case): noise and quantize straight
+                // from the sampled band, no f32 accumulator round trip.
+                let blend = self.tile.sample(&self.atlas, pass, rays, band)?;
+                let sigma = self.params.noise_sigma as f32;
+                let noise = self.noise.slice(rows * w);
+                let (fine, coarse) = self.tile.sampled()?;
+                quantize_sampled(out, channels, fine, coarse, blend, noise, sigma);
+            } else {
+                self.accum.clear();
+                self.accum.resize(rows * w, 0.0);
+                for pass in &passes {
+                    let blend = self.tile.sample(&self.atlas, pass, rays, band)?;
+                    let (fine, coarse) = self.tile.sampled()?;
+                    accumulate(&mut self.accum, fine, coarse, weight, blend);
+                }
+                self.finish_tile(out, channels);
+            }
             row += rows;
         }
         Ok(samples)
@@ -686,9 +731,27 @@ impl DownCamera {
         let cam = |dt: f64| body.at(dt) * body_from_camera;
         let (c0, c1) = (cam(-half), cam(half));
         let mut motion: f64 = 0.0;
+        // Only a point in view counts: outside the calibrated field the
+        // distortion polynomial swings wildly, so a pad far outside the image
+        // would otherwise ask for the most sub-exposures while the visible
+        // ground barely moves (the 120 deg paper-sim camera hovering at 2 m).
+        let [lo, hi] = self.ray_bounds;
+        let in_view = |p: &Point3<f64>| {
+            p.z > 0.0 && {
+                let (x, y) = (p.x / p.z, p.y / p.z);
+                (lo[0]..=hi[0]).contains(&x) && (lo[1]..=hi[1]).contains(&y)
+            }
+        };
         let mut track = |p0: Point3<f64>, p1: Point3<f64>| {
-            let a = self.calibration.project(&c0.inverse_transform_point(&p0));
-            let b = self.calibration.project(&c1.inverse_transform_point(&p1));
+            let (q0, q1) = (
+                c0.inverse_transform_point(&p0),
+                c1.inverse_transform_point(&p1),
+            );
+            if !(in_view(&q0) || in_view(&q1)) {
+                return;
+            }
+            let a = self.calibration.project(&q0);
+            let b = self.calibration.project(&q1);
             if let (Some(a), Some(b)) = (a, b) {
                 motion = motion.max((a - b).norm());
             }
@@ -732,6 +795,7 @@ impl DownCamera {
             .and_then(|p| {
                 let (level, blend) = mip_level(depth_to(p), focal, ppm, atlas.pad.len());
                 let fine = *atlas.pad.get(level)?;
+                let (view_min, view_max) = self.pad_view(p);
                 let coarse = *atlas.pad.get(level + 1).unwrap_or(&fine);
                 Some(PadPass {
                     map: PlaneMap::new(p),
@@ -741,6 +805,8 @@ impl DownCamera {
                     blend,
                     min: [self.pad_min[0] as f32, self.pad_min[1] as f32],
                     max: [self.pad_max[0] as f32, self.pad_max[1] as f32],
+                    view_min,
+                    view_max,
                 })
             });
         let ground = (world_from_camera.translation.vector.z > 0.0)
@@ -760,6 +826,34 @@ impl DownCamera {
             })
             .flatten();
         Pass { pad, ground }
+    }
+
+    /// Bounding box of the board's corners in normalized ray coordinates,
+    /// widened by 1e-3 (a fraction of a pixel, far above the f32 error of the
+    /// per-pixel test); unbounded when a corner is not in front of the camera.
+    fn pad_view(&self, pad_from_camera: &Isometry3<f64>) -> ([f32; 2], [f32; 2]) {
+        const MARGIN: f64 = 1e-3;
+        let camera_from_pad = pad_from_camera.inverse();
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for (x, y) in [
+            (self.pad_min[0], self.pad_min[1]),
+            (self.pad_max[0], self.pad_min[1]),
+            (self.pad_min[0], self.pad_max[1]),
+            (self.pad_max[0], self.pad_max[1]),
+        ] {
+            let c = camera_from_pad.transform_point(&Point3::new(x, y, 0.0));
+            if c.z.is_nan() || c.z <= 1e-6 {
+                return ([f32::NEG_INFINITY; 2], [f32::INFINITY; 2]);
+            }
+            for (k, v) in [c.x / c.z, c.y / c.z].into_iter().enumerate() {
+                lo[k] = lo[k].min(v);
+                hi[k] = hi[k].max(v);
+            }
+        }
+        (
+            [(lo[0] - MARGIN) as f32, (lo[1] - MARGIN) as f32],
+            [(hi[0] + MARGIN) as f32, (hi[1] + MARGIN) as f32],
+        )
     }
 
     /// Adds sensor noise and quantizes one band into `out`.
@@ -797,6 +891,11 @@ struct PadPass {
     blend: f32,
     min: [f32; 2],
     max: [f32; 2],
+    /// Bounding box of the board in normalized ray coordinates (x/z, y/z),
+    /// widened a little, or unbounded when the board reaches behind the
+    /// camera: a band whose rays all fall outside it cannot see the pad.
+    view_min: [f32; 2],
+    view_max: [f32; 2],
 }
 
 /// Scratch OpenCV images for one band: atlas coordinates at the fine and the
@@ -807,6 +906,8 @@ struct Tile {
     cols: usize,
     maps: [Mat; 4],
     sampled: [Mat; 2],
+    /// Whether `sampled[1]` holds the coarse level of the last band.
+    coarse_valid: bool,
 }
 
 impl Tile {
@@ -821,6 +922,7 @@ impl Tile {
                 Mat::default(),
             ],
             sampled: [Mat::default(), Mat::default()],
+            coarse_valid: false,
         }
     }
 
@@ -839,20 +941,25 @@ impl Tile {
         Ok(())
     }
 
-    /// Maps every ray of the band into the atlas, samples it with one `remap`
-    /// per pad level, and adds `weight` times the result to `accum`.
+    /// Maps every ray of the band into the atlas and samples it with one `remap`
+    /// per pad level; returns the weight of the coarse level (0: only the fine
+    /// level was sampled, and [`Tile::sampled`] returns it twice). `band` is
+    /// the smallest and largest ray (x, y) of the band's pixels.
     fn sample(
         &mut self,
         atlas: &Atlas,
         pass: &Pass,
         rays: &[[f32; 2]],
-        weight: f32,
-        accum: &mut [f32],
-    ) -> Result<(), CameraError> {
+        band: [[f32; 2]; 2],
+    ) -> Result<f32, CameraError> {
         let [mfx, mfy, mcx, mcy] = &mut self.maps;
         let (fx, fy) = (mfx.data_typed_mut::<f32>()?, mfy.data_typed_mut::<f32>()?);
         let (cx, cy) = (mcx.data_typed_mut::<f32>()?, mcy.data_typed_mut::<f32>()?);
-        let any_pad = fill_maps(atlas, pass, rays, [fx, fy, cx, cy]);
+        let pad_in_band = pass.pad.is_some_and(|p| {
+            let [lo, hi] = band;
+            (0..2).all(|k| p.view_min[k] <= hi[k] && lo[k] <= p.view_max[k])
+        });
+        let any_pad = fill_maps(atlas, pass, rays, [fx, fy, cx, cy], pad_in_band);
         let blend = if any_pad {
             pass.pad.map_or(0.0, |p| p.blend)
         } else {
@@ -871,30 +978,101 @@ impl Tile {
             )
         };
         remap(&self.maps[0], &self.maps[1], fine)?;
-        let fine = fine.data_bytes()?;
-        if blend > 0.0 {
+        self.coarse_valid = blend > 0.0;
+        if self.coarse_valid {
             remap(&self.maps[2], &self.maps[3], coarse)?;
-            let coarse = coarse.data_bytes()?;
-            accumulate(accum, fine, coarse, weight, blend);
-        } else {
-            accumulate(accum, fine, fine, weight, 0.0);
         }
-        Ok(())
+        Ok(if self.coarse_valid { blend } else { 0.0 })
+    }
+
+    /// The band sampled at the fine and the coarse level by the last
+    /// [`Tile::sample`] (the fine one twice when the coarse was not needed).
+    fn sampled(&self) -> Result<(&[u8], &[u8]), CameraError> {
+        let fine = self.sampled[0].data_bytes()?;
+        let coarse = if self.coarse_valid {
+            self.sampled[1].data_bytes()?
+        } else {
+            fine
+        };
+        Ok((fine, coarse))
+    }
+}
+
+/// [`fill_maps_generic`] specialized to what the band needs: rays that
+/// cannot reach the board skip the pad arithmetic, and the coarse maps are
+/// written only when the pad level is blended (about half the arithmetic and
+/// stores of the full loop, which the 120 deg camera's mostly-ground frames
+/// paid for every pixel).
+fn fill_maps(
+    atlas: &Atlas,
+    pass: &Pass,
+    rays: &[[f32; 2]],
+    maps: [&mut [f32]; 4],
+    pad_in_band: bool,
+) -> bool {
+    match pass.pad.filter(|_| pad_in_band).map(|p| p.blend > 0.0) {
+        None => fill_maps_ground(atlas, pass, rays, maps),
+        Some(false) => fill_maps_fine(atlas, pass, rays, maps),
+        Some(true) => fill_maps_trilinear(atlas, pass, rays, maps),
     }
 }
 
 avx2_dispatch!(
-    /// [`fill_maps_generic`], in an AVX2 build when the CPU has it.
-    fn fill_maps => fill_maps_avx2, fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
+    /// Ground and sky only (fine maps).
+    fn fill_maps_ground => fill_maps_ground_avx2, fill_maps_ground_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
 );
+avx2_dispatch!(
+    /// Pad at one level, ground, sky (fine maps).
+    fn fill_maps_fine => fill_maps_fine_avx2, fill_maps_fine_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
+);
+avx2_dispatch!(
+    /// Pad at two levels, ground, sky (fine and coarse maps).
+    fn fill_maps_trilinear => fill_maps_trilinear_avx2, fill_maps_trilinear_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
+);
+
+#[inline(always)]
+fn fill_maps_ground_generic(
+    atlas: &Atlas,
+    pass: &Pass,
+    rays: &[[f32; 2]],
+    maps: [&mut [f32]; 4],
+) -> bool {
+    fill_maps_generic::<false, false>(atlas, pass, rays, maps)
+}
+
+#[inline(always)]
+fn fill_maps_fine_generic(
+    atlas: &Atlas,
+    pass: &Pass,
+    rays: &[[f32; 2]],
+    maps: [&mut [f32]; 4],
+) -> bool {
+    fill_maps_generic::<true, false>(atlas, pass, rays, maps)
+}
+
+#[inline(always)]
+fn fill_maps_trilinear_generic(
+    atlas: &Atlas,
+    pass: &Pass,
+    rays: &[[f32; 2]],
+    maps: [&mut [f32]; 4],
+) -> bool {
+    fill_maps_generic::<true, true>(atlas, pass, rays, maps)
+}
 
 /// Atlas coordinates of every ray of a band, written branch-free so the
 /// compiler can vectorize it: both planes are intersected for every pixel and
 /// the result selected (pad if the ray lands on the board, else ground, else
-/// sky). Outputs: fine-level x, y and coarse-level x, y (equal off the pad).
-/// Returns whether any ray of the band landed on the pad.
+/// sky). Outputs: fine-level x, y and coarse-level x, y (equal off the pad;
+/// written only with `COARSE`). Without `PAD` every ray is taken to miss the
+/// board. Returns whether any ray of the band landed on the pad.
 #[inline(always)]
-fn fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool {
+fn fill_maps_generic<const PAD: bool, const COARSE: bool>(
+    atlas: &Atlas,
+    pass: &Pass,
+    rays: &[[f32; 2]],
+    maps: [&mut [f32]; 4],
+) -> bool {
     let [fx, fy, cx, cy] = maps;
     let n = rays
         .len()
@@ -929,6 +1107,8 @@ fn fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut 
         blend: 0.0,
         min: [1.0, 1.0],
         max: [-1.0, -1.0],
+        view_min: [1.0, 1.0],
+        view_max: [-1.0, -1.0],
     });
     let (gmap, gblock, gscale) = pass.ground.unwrap_or((never, no_block, 1.0));
     let (pr, pt) = (p.map.r, p.map.t);
@@ -956,7 +1136,7 @@ fn fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut 
         let x = pt[0] + s * (pr[0][0] * rx + pr[0][1] * ry + pr[0][2]);
         let y = pt[1] + s * (pr[1][0] * rx + pr[1][1] * ry + pr[1][2]);
         let on_pad =
-            (s > 0.0) & (x >= p.min[0]) & (x <= p.max[0]) & (y >= p.min[1]) & (y <= p.max[1]);
+            PAD & (s > 0.0) & (x >= p.min[0]) & (x <= p.max[0]) & (y >= p.min[1]) & (y <= p.max[1]);
         let u = (x - p.min[0]) * p.scale;
         let v = (p.max[1] - y) * p.scale;
         let ufine = p.fine.x0 + (u - 0.5).max(0.0).min(fw);
@@ -981,18 +1161,27 @@ fn fill_maps_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut 
         };
         fx[i] = if on_pad { ufine } else { ug };
         fy[i] = if on_pad { vfine } else { vg };
-        cx[i] = if on_pad { ucoarse } else { ug };
-        cy[i] = if on_pad { vcoarse } else { vg };
+        if COARSE {
+            cx[i] = if on_pad { ucoarse } else { ug };
+            cy[i] = if on_pad { vcoarse } else { vg };
+        }
         any_pad |= on_pad;
     }
     any_pad
 }
 
-/// Rounds and saturates a grey level to a byte (vectorizes, unlike `as u8`
-/// on a float).
+/// Rounds (half to even) and saturates a grey level to a byte. Adding
+/// 1.5 * 2^23 puts the rounded value in the low mantissa bits, so this is
+/// float min/max/add and a bit mask: it vectorizes fully, where a float to
+/// int cast kept a scalar NaN check per pixel in the loops below.
 #[inline(always)]
+#[allow(
+    clippy::manual_clamp,
+    reason = "max/min map NaN to 0; clamp would pass NaN through to the bit trick"
+)]
 fn to_u8(v: f32) -> u8 {
-    (v + 0.5).clamp(0.0, 255.0) as i32 as u8
+    const ROUND: f32 = 12_582_912.0;
+    (v.max(0.0).min(255.0) + ROUND).to_bits() as u8
 }
 
 avx2_dispatch!(
@@ -1017,5 +1206,55 @@ avx2_dispatch!(
 fn quantize_generic(out: &mut [u8], accum: &[f32], noise: &[f32], sigma: f32) {
     for ((o, &a), &n) in out.iter_mut().zip(accum).zip(noise) {
         *o = to_u8(a + sigma * n);
+    }
+}
+
+/// `out = to_u8(lerp(fine, coarse, blend) + sigma * noise)` over a band, each
+/// grey written `channels` times: the single-sub-exposure path, same
+/// arithmetic as accumulating with weight 1 and then quantizing.
+fn quantize_sampled(
+    out: &mut [u8],
+    channels: usize,
+    fine: &[u8],
+    coarse: &[u8],
+    blend: f32,
+    noise: &[f32],
+    sigma: f32,
+) {
+    if channels == 1 {
+        quantize_mono(out, fine, coarse, blend, noise, sigma);
+    } else {
+        for (((o, &a), &b), &n) in out
+            .chunks_exact_mut(channels)
+            .zip(fine)
+            .zip(coarse)
+            .zip(noise)
+        {
+            let (a, b) = (f32::from(a), f32::from(b));
+            o.fill(to_u8(a + (b - a) * blend + sigma * n));
+        }
+    }
+}
+
+avx2_dispatch!(
+    /// Mono [`quantize_sampled`].
+    fn quantize_mono => quantize_mono_avx2, quantize_mono_generic(out: &mut [u8], fine: &[u8], coarse: &[u8], blend: f32, noise: &[f32], sigma: f32) -> ()
+);
+
+#[inline(always)]
+fn quantize_mono_generic(
+    out: &mut [u8],
+    fine: &[u8],
+    coarse: &[u8],
+    blend: f32,
+    noise: &[f32],
+    sigma: f32,
+) {
+    // Indexed over slices cut to one length: the four-way zip did not vectorize.
+    let n = out.len().min(fine.len()).min(coarse.len()).min(noise.len());
+    let (out, fine, coarse, noise) = (&mut out[..n], &fine[..n], &coarse[..n], &noise[..n]);
+    for i in 0..n {
+        let (a, b) = (f32::from(fine[i]), f32::from(coarse[i]));
+        out[i] = to_u8(a + (b - a) * blend + sigma * noise[i]);
     }
 }
