@@ -16,6 +16,7 @@ use ipc_types::msg::{
     CameraFrameHeader, DepthFrameHeader, Header, Intrinsics, PixelEncoding, Stage, TruthKind,
 };
 use ipc_types::runtime::config::deploy_dir;
+use ipc_types::runtime::ipc::SliceSample;
 use ipc_types::runtime::{Ipc, IpcPrefix, logging, monotonic_ns};
 use ipc_types::services;
 use sim::camera::PixelFormat;
@@ -119,8 +120,8 @@ fn run(args: &Args) -> Result<()> {
         depth_geometry.map(|g| g.0).unwrap_or(1),
     )?;
     // Rendered frames wait here for the sensor's exposure-to-publish latency.
-    let mut pending_camera = None;
-    let mut pending_depth = None;
+    let mut pending_camera: Option<(SliceSample<u8, CameraFrameHeader>, u64)> = None;
+    let mut pending_depth: Option<(SliceSample<u16, DepthFrameHeader>, u64)> = None;
     let mut dropped: u64 = 0;
     tracing::info!(
         scenario = %scenario.scenario.name,
@@ -145,6 +146,28 @@ fn run(args: &Args) -> Result<()> {
                 }
             }
             let now = monotonic_ns();
+            // Frames whose latency has passed go out first; one still pending when the next
+            // is due goes out now, in order, rather than being overwritten.
+            if pending_camera
+                .as_ref()
+                .is_some_and(|(_, at)| now >= *at || report.camera_due)
+                && let Some((mut sample, _)) = pending_camera.take()
+            {
+                sample.user_header_mut().msg.push_stage(Stage::Sensor, now, monotonic_ns());
+                if let Err(e) = camera.send(sample) {
+                    tracing::warn!(error = %e, "camera frame not sent");
+                }
+            }
+            if pending_depth
+                .as_ref()
+                .is_some_and(|(_, at)| now >= *at || report.depth_due)
+                && let Some((mut sample, _)) = pending_depth.take()
+            {
+                sample.user_header_mut().msg.push_stage(Stage::Sensor, now, monotonic_ns());
+                if let Err(e) = depth.send(sample) {
+                    tracing::warn!(error = %e, "depth frame not sent");
+                }
+            }
             if report.camera_due
                 && let Some((width, height, format, exposure_ns)) = cam_geometry
             {
@@ -195,22 +218,6 @@ fn run(args: &Args) -> Result<()> {
                         }
                     }
                     Err(_) => dropped += 1,
-                }
-            }
-            if pending_camera.as_ref().is_some_and(|(_, at)| now >= *at)
-                && let Some((mut sample, _)) = pending_camera.take()
-            {
-                sample.user_header_mut().msg.push_stage(Stage::Sensor, now, monotonic_ns());
-                if let Err(e) = camera.send(sample) {
-                    tracing::warn!(error = %e, "camera frame not sent");
-                }
-            }
-            if pending_depth.as_ref().is_some_and(|(_, at)| now >= *at)
-                && let Some((mut sample, _)) = pending_depth.take()
-            {
-                sample.user_header_mut().msg.push_stage(Stage::Sensor, now, monotonic_ns());
-                if let Err(e) = depth.send(sample) {
-                    tracing::warn!(error = %e, "depth frame not sent");
                 }
             }
             steps += 1;
