@@ -442,7 +442,7 @@ pub struct DownCamera {
     /// Smallest and largest normalized ray coordinates (x, y) of any pixel:
     /// the field of view, for deciding what is in view.
     ray_bounds: [[f64; 2]; 2],
-    /// The same per band of [`TILE_ROWS`] rows, to skip the pad where it cannot be.
+    /// The same per strip of [`STRIP_ROWS`] rows, to skip the pad where it cannot be.
     band_bounds: Vec<[[f32; 2]; 2]>,
     atlas: Atlas,
     pad_min: [f64; 2],
@@ -537,7 +537,7 @@ impl DownCamera {
     ) -> Result<Self, CameraError> {
         params.validate()?;
         let (w, h) = (calibration.width as usize, calibration.height as usize);
-        if w * TILE_ROWS > MAX_SLICE {
+        if w > MAX_WIDTH {
             return Err(CameraError::TooWide(calibration.width));
         }
         let mut rays = Vec::with_capacity(w * h);
@@ -548,7 +548,7 @@ impl DownCamera {
             }
         }
         let band_bounds: Vec<[[f32; 2]; 2]> = rays
-            .chunks(TILE_ROWS * w)
+            .chunks(STRIP_ROWS * w)
             .map(|band| {
                 band.iter().fold(
                     [[f32::INFINITY; 2], [f32::NEG_INFINITY; 2]],
@@ -688,12 +688,8 @@ impl DownCamera {
             let range = row * w..(row + rows) * w;
             self.tile.resize(rows, w)?;
             let rays = self.rays.get(range.clone()).unwrap_or(&[]);
-            // Unbounded if missing, so the pad is then never skipped.
-            let band = self
-                .band_bounds
-                .get(row / TILE_ROWS)
-                .copied()
-                .unwrap_or([[f32::NEG_INFINITY; 2], [f32::INFINITY; 2]]);
+            let strips = row / STRIP_ROWS..(row + rows).div_ceil(STRIP_ROWS);
+            let band = self.band_bounds.get(strips).unwrap_or(&[]);
             let out = data
                 .get_mut(range.start * channels..range.end * channels)
                 .unwrap_or(&mut []);
@@ -870,8 +866,20 @@ impl DownCamera {
     }
 }
 
-/// Rows rendered together: small enough that a band's maps and samples stay in cache.
-pub const TILE_ROWS: usize = 16;
+/// Rows rendered together. `remap` splits its work over OpenCV's threads only
+/// when a call covers more than 2^16 pixels: with 16-row bands it ran on one
+/// core while the other idled. 240 rows (a half 640x480 frame, a third of a
+/// 1280x720 one) lets it use both, which outweighs the maps no longer
+/// fitting in L1/L2 (measured with `landing bench sim`). Divides 480 and 720.
+pub const TILE_ROWS: usize = 240;
+
+/// Rows whose maps are filled together, each strip tested on its own for
+/// whether it can see the pad. Divides [`TILE_ROWS`].
+const STRIP_ROWS: usize = 16;
+const _: () = assert!(TILE_ROWS % STRIP_ROWS == 0);
+/// Widest image: a band of it must fit in one noise slice.
+const MAX_WIDTH: usize = 4096;
+const _: () = assert!(MAX_WIDTH * TILE_ROWS <= MAX_SLICE);
 
 /// What one sub-exposure needs to map a pixel's ray to atlas coordinates.
 #[derive(Debug, Clone, Copy)]
@@ -943,23 +951,38 @@ impl Tile {
 
     /// Maps every ray of the band into the atlas and samples it with one `remap`
     /// per pad level; returns the weight of the coarse level (0: only the fine
-    /// level was sampled, and [`Tile::sampled`] returns it twice). `band` is
-    /// the smallest and largest ray (x, y) of the band's pixels.
+    /// level was sampled, and [`Tile::sampled`] returns it twice). `band`
+    /// holds the smallest and largest ray (x, y) of each [`STRIP_ROWS`]-row
+    /// strip of the band (a missing strip is taken to see the pad).
     fn sample(
         &mut self,
         atlas: &Atlas,
         pass: &Pass,
         rays: &[[f32; 2]],
-        band: [[f32; 2]; 2],
+        band: &[[[f32; 2]; 2]],
     ) -> Result<f32, CameraError> {
         let [mfx, mfy, mcx, mcy] = &mut self.maps;
         let (fx, fy) = (mfx.data_typed_mut::<f32>()?, mfy.data_typed_mut::<f32>()?);
         let (cx, cy) = (mcx.data_typed_mut::<f32>()?, mcy.data_typed_mut::<f32>()?);
-        let pad_in_band = pass.pad.is_some_and(|p| {
-            let [lo, hi] = band;
-            (0..2).all(|k| p.view_min[k] <= hi[k] && lo[k] <= p.view_max[k])
-        });
-        let any_pad = fill_maps(atlas, pass, rays, [fx, fy, cx, cy], pad_in_band);
+        // Strip by strip, so the pad arithmetic is skipped where it cannot be
+        // and the strip's rays and maps are still in cache for the next loop.
+        let strip = STRIP_ROWS * self.cols.max(1);
+        let mut any_pad = false;
+        for (k, ((((rays, fx), fy), cx), cy)) in rays
+            .chunks(strip)
+            .zip(fx.chunks_mut(strip))
+            .zip(fy.chunks_mut(strip))
+            .zip(cx.chunks_mut(strip))
+            .zip(cy.chunks_mut(strip))
+            .enumerate()
+        {
+            let pad_in_strip = pass.pad.is_some_and(|p| {
+                band.get(k).is_none_or(|[lo, hi]| {
+                    (0..2).all(|k| p.view_min[k] <= hi[k] && lo[k] <= p.view_max[k])
+                })
+            });
+            any_pad |= fill_maps(atlas, pass, rays, [fx, fy, cx, cy], pad_in_strip);
+        }
         let blend = if any_pad {
             pass.pad.map_or(0.0, |p| p.blend)
         } else {
@@ -1010,16 +1033,24 @@ fn fill_maps(
     maps: [&mut [f32]; 4],
     pad_in_band: bool,
 ) -> bool {
-    match pass.pad.filter(|_| pad_in_band).map(|p| p.blend > 0.0) {
-        None => fill_maps_ground(atlas, pass, rays, maps),
-        Some(false) => fill_maps_fine(atlas, pass, rays, maps),
-        Some(true) => fill_maps_trilinear(atlas, pass, rays, maps),
+    // With a blended pad level the coarse maps are sampled over the whole
+    // band, so strips that cannot see the pad still write them (= fine).
+    let blended = pass.pad.is_some_and(|p| p.blend > 0.0);
+    match (pass.pad.is_some() && pad_in_band, blended) {
+        (false, false) => fill_maps_ground(atlas, pass, rays, maps),
+        (false, true) => fill_maps_ground_coarse(atlas, pass, rays, maps),
+        (true, false) => fill_maps_fine(atlas, pass, rays, maps),
+        (true, true) => fill_maps_trilinear(atlas, pass, rays, maps),
     }
 }
 
 avx2_dispatch!(
     /// Ground and sky only (fine maps).
     fn fill_maps_ground => fill_maps_ground_avx2, fill_maps_ground_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
+);
+avx2_dispatch!(
+    /// Ground and sky only (fine and coarse maps).
+    fn fill_maps_ground_coarse => fill_maps_ground_coarse_avx2, fill_maps_ground_coarse_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
 );
 avx2_dispatch!(
     /// Pad at one level, ground, sky (fine maps).
@@ -1038,6 +1069,16 @@ fn fill_maps_ground_generic(
     maps: [&mut [f32]; 4],
 ) -> bool {
     fill_maps_generic::<false, false>(atlas, pass, rays, maps)
+}
+
+#[inline(always)]
+fn fill_maps_ground_coarse_generic(
+    atlas: &Atlas,
+    pass: &Pass,
+    rays: &[[f32; 2]],
+    maps: [&mut [f32]; 4],
+) -> bool {
+    fill_maps_generic::<false, true>(atlas, pass, rays, maps)
 }
 
 #[inline(always)]

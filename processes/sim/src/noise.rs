@@ -14,7 +14,7 @@ const FIELD_BITS: u32 = 20;
 const FIELD_SIZE: usize = 1 << FIELD_BITS;
 
 /// Longest slice [`PixelNoise::slice`] returns at once.
-pub const MAX_SLICE: usize = 1 << 16;
+pub const MAX_SLICE: usize = 1 << 20;
 
 /// A seeded source of standard-normal samples, cheap enough for every pixel.
 #[derive(Debug, Clone)]
