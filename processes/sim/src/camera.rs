@@ -876,7 +876,7 @@ pub const TILE_ROWS: usize = 240;
 /// Rows whose maps are filled together, each strip tested on its own for
 /// whether it can see the pad. Divides [`TILE_ROWS`].
 const STRIP_ROWS: usize = 16;
-const _: () = assert!(TILE_ROWS % STRIP_ROWS == 0);
+const _: () = assert!(TILE_ROWS.is_multiple_of(STRIP_ROWS));
 /// Widest image: a band of it must fit in one noise slice.
 const MAX_WIDTH: usize = 4096;
 const _: () = assert!(MAX_WIDTH * TILE_ROWS <= MAX_SLICE);
