@@ -21,6 +21,7 @@
 
 pub mod autopilot;
 pub mod camera;
+pub mod camera_worker;
 pub mod depth;
 pub mod estimator_noise;
 pub mod ground_vehicle;

@@ -16,6 +16,7 @@ use optics::{CameraCalibration, PadModel};
 
 use crate::camera::{BodyMotion, CameraError, DownCamera};
 use crate::depth::DepthCamera;
+use crate::ground_vehicle::PadState;
 use crate::params::ParamError;
 use crate::px4::commander::{Commander, Px4Params, VehicleStatus};
 use crate::scenario::LoadedScenario;
@@ -193,12 +194,8 @@ impl Simulator {
         self.depth_camera.as_deref()
     }
 
-    /// Renders the downward camera at the current true pose into `out` (exactly
-    /// `down_camera().frame_len()` bytes); `None` without a camera.
-    pub fn render_camera_into(&mut self, out: &mut [u8]) -> Result<Option<Shot>, SimError> {
-        let Some(cam) = self.down_camera.as_deref_mut() else {
-            return Ok(None);
-        };
+    /// What the downward camera sees now: the body's true motion and the pad.
+    pub fn camera_view(&self) -> (BodyMotion, Option<PadState>) {
         let truth = self.world.truth();
         let body = BodyMotion {
             world_from_body: Isometry3::from_parts(
@@ -208,9 +205,24 @@ impl Simulator {
             linear_velocity: truth.velocity,
             angular_velocity_body: truth.body_rates,
         };
-        let pad = self.world.pad();
-        let blur_samples = cam.render_into(&body, pad.as_ref(), out)?;
+        (body, self.world.pad())
+    }
+
+    /// Moves the downward camera out, e.g. onto a [`crate::camera_worker::CameraWorker`];
+    /// `render_camera_into` then returns `None`.
+    pub fn take_down_camera(&mut self) -> Option<DownCamera> {
+        self.down_camera.take().map(|c| *c)
+    }
+
+    /// Renders the downward camera at the current true pose into `out` (exactly
+    /// `down_camera().frame_len()` bytes); `None` without a camera.
+    pub fn render_camera_into(&mut self, out: &mut [u8]) -> Result<Option<Shot>, SimError> {
+        let (body, pad) = self.camera_view();
         let now = self.world.time_ns();
+        let Some(cam) = self.down_camera.as_deref_mut() else {
+            return Ok(None);
+        };
+        let blur_samples = cam.render_into(&body, pad.as_ref(), out)?;
         Ok(Some(Shot {
             capture_ns: now,
             publish_ns: now + (cam.params().latency_s.max(0.0) * 1e9) as u64,

@@ -119,3 +119,42 @@ fn a_touchdown_becomes_a_truth_event() {
     assert_eq!(t.rel_position_pad, [0.03, -0.01]);
     assert_eq!(t.msg.capture_ns, 5);
 }
+
+#[test]
+fn the_camera_worker_renders_exactly_what_synchronous_rendering_does() {
+    use crate::camera_worker::{CameraWorker, WorkerError};
+    let scn = crate::scenario::load("obstacle-demo", &deploy()).expect("scenario");
+    let place = |sim: &mut Simulator| {
+        let above_pad =
+            crate::quadrotor::VehicleState::at_rest(nalgebra::Vector3::new(6.0, -0.5, 1.9), 0.0);
+        sim.world_mut().set_vehicle_state(above_pad).expect("place");
+    };
+    let mut sync = Simulator::new(&scn, 4).expect("sim");
+    let mut piped = Simulator::new(&scn, 4).expect("sim");
+    place(&mut sync);
+    place(&mut piped);
+    let mut worker = CameraWorker::spawn(piped.take_down_camera().expect("camera")).expect("spawn");
+    assert!(
+        piped
+            .render_camera_into(&mut [])
+            .expect("no camera")
+            .is_none()
+    );
+    assert!(matches!(worker.collect(), Err(WorkerError::Idle)));
+    let mut image = vec![0u8; worker.frame_len()];
+    let mut compared = 0;
+    for _ in 0..60 {
+        let a = sync.step().expect("step");
+        let b = piped.step().expect("step");
+        assert_eq!(a.camera_due, b.camera_due);
+        if a.camera_due {
+            sync.render_camera_into(&mut image).expect("render");
+            let (body, pad) = piped.camera_view();
+            worker.submit(body, pad, Vec::new()).expect("submit");
+            let (frame, _) = worker.collect().expect("collect");
+            assert_eq!(frame, image, "frame {compared}");
+            compared += 1;
+        }
+    }
+    assert_eq!(compared, 3);
+}

@@ -22,6 +22,7 @@ fn every_subcommand_has_help() {
         vec![],
         vec!["bench"],
         vec!["bench", "ipc"],
+        vec!["bench", "sim"],
         vec!["config"],
         vec!["config", "check"],
     ] {
@@ -141,4 +142,21 @@ fn the_ipc_benchmark_prints_the_documented_json() {
         }
     }
     assert!(v["ratio_p50_1280x720"].as_f64().unwrap_or(0.0) > 0.0);
+}
+
+#[test]
+fn the_sim_benchmark_prints_the_documented_json() {
+    let o = landing(&["bench", "sim", "--json", "--seconds", "1"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    for key in [
+        "realtime_factor",
+        "realtime_factor_single_thread",
+        "render_ms_p50_640x480",
+        "render_ms_p50_1280x720",
+        "depth_ms_p50",
+    ] {
+        let x = v[key].as_f64().unwrap_or(-1.0);
+        assert!(x > 0.0, "{key} = {x}");
+    }
 }
