@@ -24,12 +24,9 @@ use serde::Deserialize;
 use thiserror::Error;
 
 use super::commander::{Commander, Px4Params, VehicleStatus};
-use crate::lockstep::{Simulator, StepReport};
+use crate::lockstep::{PHYSICS_STEP_NS, Simulator, StepReport};
 use crate::params::ParamError;
-use crate::world::{MAX_STEP_NS, World, WorldError};
-
-/// The physics step [`SimVehicle::run_realtime`] uses: 2 ms (500 Hz).
-pub const REALTIME_STEP_NS: u64 = 2_000_000;
+use crate::world::{World, WorldError};
 
 /// Largest datagram read; MAVLink 2 frames are at most 280 bytes, but a
 /// sender may pack several into one datagram.
@@ -98,9 +95,6 @@ pub enum EndpointError {
     /// The simulator failed to step.
     #[error("simulator: {0}")]
     Sim(#[from] crate::lockstep::SimError),
-    /// The step length is not in (0, MAX_STEP_NS].
-    #[error("dt_ns = {0}: must be in (0, {MAX_STEP_NS}]")]
-    InvalidStep(u64),
 }
 
 /// A non-blocking UDP MAVLink 2 endpoint: pure I/O; the [`Simulator`] owns the commander.
@@ -354,10 +348,10 @@ impl SimVehicle {
                 .saturating_sub(skipped_ns);
             let behind = target_ns.saturating_sub(self.sim.time_ns());
             if behind > MAX_LAG_NS {
-                skipped_ns = skipped_ns.saturating_add(behind - REALTIME_STEP_NS);
+                skipped_ns = skipped_ns.saturating_add(behind - PHYSICS_STEP_NS);
                 tracing::debug!(behind_ms = behind / 1_000_000, "real-time loop fell behind");
             }
-            while self.sim.time_ns().saturating_add(REALTIME_STEP_NS)
+            while self.sim.time_ns().saturating_add(PHYSICS_STEP_NS)
                 <= world_start_ns
                     .saturating_add(elapsed_ns)
                     .saturating_sub(skipped_ns)
