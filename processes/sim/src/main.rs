@@ -18,6 +18,7 @@ use ipc_types::msg::{
 use ipc_types::runtime::config::deploy_dir;
 use ipc_types::runtime::ipc::SliceSample;
 use ipc_types::runtime::{Ipc, IpcPrefix, logging, monotonic_ns};
+use ipc_types::runtime::{MessageHeader, SlicePublisher};
 use ipc_types::services;
 use sim::camera::PixelFormat;
 use sim::lockstep::Simulator;
@@ -148,26 +149,8 @@ fn run(args: &Args) -> Result<()> {
             let now = monotonic_ns();
             // Frames whose latency has passed go out first; one still pending when the next
             // is due goes out now, in order, rather than being overwritten.
-            if pending_camera
-                .as_ref()
-                .is_some_and(|(_, at)| now >= *at || report.camera_due)
-                && let Some((mut sample, _)) = pending_camera.take()
-            {
-                sample.user_header_mut().msg.push_stage(Stage::Sensor, now, monotonic_ns());
-                if let Err(e) = camera.send(sample) {
-                    tracing::warn!(error = %e, "camera frame not sent");
-                }
-            }
-            if pending_depth
-                .as_ref()
-                .is_some_and(|(_, at)| now >= *at || report.depth_due)
-                && let Some((mut sample, _)) = pending_depth.take()
-            {
-                sample.user_header_mut().msg.push_stage(Stage::Sensor, now, monotonic_ns());
-                if let Err(e) = depth.send(sample) {
-                    tracing::warn!(error = %e, "depth frame not sent");
-                }
-            }
+            release(&mut pending_camera, &mut camera, now, report.camera_due);
+            release(&mut pending_depth, &mut depth, now, report.depth_due);
             if report.camera_due
                 && let Some((width, height, format, exposure_ns)) = cam_geometry
             {
@@ -245,4 +228,28 @@ fn run(args: &Args) -> Result<()> {
         return Err(e).context("publishing");
     }
     Ok(())
+}
+
+/// Sends a held frame once its sensor latency has passed, or at once when `force` (the
+/// next frame is due: frames go out in order, never overwritten). The sensor stage spans
+/// capture to publication.
+fn release<T, H>(
+    pending: &mut Option<(SliceSample<T, H>, u64)>,
+    publisher: &mut SlicePublisher<T, H>,
+    now: u64,
+    force: bool,
+) where
+    T: std::fmt::Debug + ipc_types::iceoryx2::prelude::ZeroCopySend + Copy + 'static,
+    H: MessageHeader,
+{
+    if !pending.as_ref().is_some_and(|(_, at)| now >= *at || force) {
+        return;
+    }
+    if let Some((mut sample, _)) = pending.take() {
+        let msg = sample.user_header_mut().msg_mut();
+        msg.push_stage(Stage::Sensor, msg.capture_ns, monotonic_ns());
+        if let Err(e) = publisher.send(sample) {
+            tracing::warn!(error = %e, service = publisher.service(), "frame not sent");
+        }
+    }
 }
