@@ -373,7 +373,7 @@ impl Ipc {
             .listener_builder()
             .create()
             .map_err(|e| service_err(service, e))?;
-        Ok(SliceSubscriber {
+        Ok(Subscriber {
             port,
             listener,
             service: service.to_string(),
@@ -526,63 +526,53 @@ fn notify(notifier: &Notifier<Svc>, service: &str) -> Result<(), IpcError> {
     }
 }
 
-/// Receives fixed-size messages.
-pub struct Subscriber<T: Debug + ZeroCopySend + Copy + 'static> {
-    port: IoxSubscriber<Svc, T, Header>,
+/// The two kinds of iceoryx2 subscriber ports (fixed-size and slice payloads) have
+/// separate `receive` methods; this lets one [`Subscriber`] wrap either.
+pub trait ReceivePort<P: ?Sized + Debug + IceoryxSend, H: MessageHeader> {
+    /// The oldest unread sample.
+    fn receive_sample(&self) -> Result<Option<Sample<Svc, P, H>>, iceoryx2::port::ReceiveError>;
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static, H: MessageHeader> ReceivePort<T, H>
+    for IoxSubscriber<Svc, T, H>
+{
+    fn receive_sample(&self) -> Result<Option<Sample<Svc, T, H>>, iceoryx2::port::ReceiveError> {
+        self.receive()
+    }
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static, H: MessageHeader> ReceivePort<[T], H>
+    for IoxSubscriber<Svc, [T], H>
+{
+    fn receive_sample(&self) -> Result<Option<Sample<Svc, [T], H>>, iceoryx2::port::ReceiveError> {
+        self.receive()
+    }
+}
+
+/// Receives a topic's samples, read in place from shared memory: fixed-size messages
+/// (`Subscriber<T>`) or variable-length payloads ([`SliceSubscriber`]).
+pub struct Subscriber<P: ?Sized + Debug + IceoryxSend + 'static, H: MessageHeader = Header> {
+    port: IoxSubscriber<Svc, P, H>,
     listener: Listener<Svc>,
     service: String,
     last_seq: Cell<u64>,
     gaps: Cell<u64>,
 }
 
-impl<T: Debug + ZeroCopySend + Copy + 'static> Subscriber<T> {
-    /// The oldest unread sample, read in place from shared memory, or `None`.
-    pub fn receive(&self) -> Result<Option<Sample<Svc, T, Header>>, IpcError> {
-        let s = self
-            .port
-            .receive()
-            .map_err(|e| port_err(&self.service, "receive", e))?;
-        if let Some(s) = &s {
-            track_seq(&self.last_seq, &self.gaps, s.user_header().seq);
-        }
-        Ok(s)
-    }
+/// Receives variable-length payloads (frames, maps) with header `H`.
+pub type SliceSubscriber<T, H> = Subscriber<[T], H>;
 
-    /// The newest unread sample, dropping older ones: what a controller wants.
-    pub fn latest(&self) -> Result<Option<Sample<Svc, T, Header>>, IpcError> {
-        let mut newest = None;
-        while let Some(s) = self.receive()? {
-            newest = Some(s);
-        }
-        Ok(newest)
-    }
-
-    /// The event listener to wait on.
-    pub fn listener(&self) -> &Listener<Svc> {
-        &self.listener
-    }
-
-    /// Messages lost to overflow or a publisher restart, counted from sequence gaps.
-    pub fn gaps(&self) -> u64 {
-        self.gaps.get()
-    }
-}
-
-/// Receives variable-length payloads, read in place from shared memory.
-pub struct SliceSubscriber<T: Debug + ZeroCopySend + Copy + 'static, H: MessageHeader> {
-    port: IoxSubscriber<Svc, [T], H>,
-    listener: Listener<Svc>,
-    service: String,
-    last_seq: Cell<u64>,
-    gaps: Cell<u64>,
-}
-
-impl<T: Debug + ZeroCopySend + Copy + 'static, H: MessageHeader> SliceSubscriber<T, H> {
+impl<P, H> Subscriber<P, H>
+where
+    P: ?Sized + Debug + IceoryxSend + 'static,
+    H: MessageHeader,
+    IoxSubscriber<Svc, P, H>: ReceivePort<P, H>,
+{
     /// The oldest unread sample, or `None`. The payload is the publisher's memory: no copy.
-    pub fn receive(&self) -> Result<Option<Sample<Svc, [T], H>>, IpcError> {
+    pub fn receive(&self) -> Result<Option<Sample<Svc, P, H>>, IpcError> {
         let s = self
             .port
-            .receive()
+            .receive_sample()
             .map_err(|e| port_err(&self.service, "receive", e))?;
         if let Some(s) = &s {
             track_seq(&self.last_seq, &self.gaps, s.user_header().msg().seq);
@@ -591,8 +581,8 @@ impl<T: Debug + ZeroCopySend + Copy + 'static, H: MessageHeader> SliceSubscriber
     }
 
     /// The newest unread sample, dropping (and counting) older ones, so that a slow
-    /// consumer always works on the freshest frame.
-    pub fn latest(&self) -> Result<Option<Sample<Svc, [T], H>>, IpcError> {
+    /// consumer always works on the freshest data.
+    pub fn latest(&self) -> Result<Option<Sample<Svc, P, H>>, IpcError> {
         let mut newest = None;
         while let Some(s) = self.receive()? {
             newest = Some(s);
