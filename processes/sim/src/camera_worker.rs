@@ -6,6 +6,7 @@
 //! while the frame is drawn. Jobs are rendered one at a time, in order, by the same
 //! `DownCamera`, so the images are exactly those of synchronous rendering.
 
+use std::collections::VecDeque;
 use std::sync::mpsc;
 use std::thread::JoinHandle;
 
@@ -13,6 +14,7 @@ use thiserror::Error;
 
 use crate::camera::{BodyMotion, CameraError, DownCamera};
 use crate::ground_vehicle::PadState;
+use crate::lockstep::{Shot, Simulator, StepReport};
 
 /// Why the worker could not render.
 #[derive(Debug, Error)]
@@ -120,5 +122,88 @@ impl Drop for CameraWorker {
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
+    }
+}
+
+/// The downward camera of a lockstep [`Simulator`] on its worker: submits the view when a
+/// frame is due and hands the image back at its publish time (capture + sensor latency),
+/// in order. This is how a lockstep runner should drive the camera.
+#[derive(Debug)]
+pub struct CameraPipeline {
+    worker: CameraWorker,
+    latency_ns: u64,
+    pending: VecDeque<Shot>,
+    spare: Vec<Vec<u8>>,
+}
+
+impl CameraPipeline {
+    /// Moves `sim`'s downward camera onto a worker; `None` when it has no camera.
+    pub fn from_simulator(sim: &mut Simulator) -> Result<Option<Self>, WorkerError> {
+        let Some(camera) = sim.take_down_camera() else {
+            return Ok(None);
+        };
+        let latency_ns = (camera.params().latency_s.max(0.0) * 1e9) as u64;
+        Ok(Some(Self {
+            worker: CameraWorker::spawn(camera)?,
+            latency_ns,
+            pending: VecDeque::new(),
+            spare: Vec::new(),
+        }))
+    }
+
+    /// Call after every [`Simulator::step`]: frames whose publish time has come (or that
+    /// must go before the next one is drawn) are pushed to `ready`; a due frame is started.
+    pub fn on_step(
+        &mut self,
+        sim: &Simulator,
+        report: &StepReport,
+        ready: &mut Vec<(Vec<u8>, Shot)>,
+    ) -> Result<(), WorkerError> {
+        let now = sim.time_ns();
+        while let Some(&shot) = self.pending.front() {
+            if shot.publish_ns > now && !report.camera_due {
+                break;
+            }
+            self.pending.pop_front();
+            let (buf, blur_samples) = self.worker.collect()?;
+            ready.push((
+                buf,
+                Shot {
+                    blur_samples,
+                    ..shot
+                },
+            ));
+        }
+        if report.camera_due {
+            let (body, pad) = sim.camera_view();
+            self.worker
+                .submit(body, pad, self.spare.pop().unwrap_or_default())?;
+            self.pending.push_back(Shot {
+                capture_ns: now,
+                publish_ns: now + self.latency_ns,
+                blur_samples: 0,
+            });
+        }
+        Ok(())
+    }
+
+    /// Gives a consumed frame's buffer back, so rendering does not allocate.
+    pub fn recycle(&mut self, buf: Vec<u8>) {
+        self.spare.push(buf);
+    }
+
+    /// Waits for every frame still in flight (end of a run).
+    pub fn drain(&mut self, ready: &mut Vec<(Vec<u8>, Shot)>) -> Result<(), WorkerError> {
+        while let Some(shot) = self.pending.pop_front() {
+            let (buf, blur_samples) = self.worker.collect()?;
+            ready.push((
+                buf,
+                Shot {
+                    blur_samples,
+                    ..shot
+                },
+            ));
+        }
+        Ok(())
     }
 }

@@ -158,3 +158,51 @@ fn the_camera_worker_renders_exactly_what_synchronous_rendering_does() {
     }
     assert_eq!(compared, 3);
 }
+
+#[test]
+fn the_camera_pipeline_hands_frames_back_in_order_at_their_publish_time() {
+    use crate::camera_worker::CameraPipeline;
+    let scn = crate::scenario::load("obstacle-demo", &deploy()).expect("scenario");
+    let place = |sim: &mut Simulator| {
+        let above_pad =
+            crate::quadrotor::VehicleState::at_rest(nalgebra::Vector3::new(6.0, -0.5, 1.9), 0.0);
+        sim.world_mut().set_vehicle_state(above_pad).expect("place");
+    };
+    let mut sync = Simulator::new(&scn, 5).expect("sim");
+    let mut piped = Simulator::new(&scn, 5).expect("sim");
+    place(&mut sync);
+    place(&mut piped);
+    let mut pipeline = CameraPipeline::from_simulator(&mut piped)
+        .expect("spawn")
+        .expect("a camera");
+    let mut expected = std::collections::VecDeque::new();
+    let mut ready = Vec::new();
+    let mut delivered = 0;
+    for _ in 0..80 {
+        let a = sync.step().expect("step");
+        let b = piped.step().expect("step");
+        if a.camera_due {
+            let mut image = vec![0u8; sync.down_camera().expect("camera").frame_len()];
+            let shot = sync
+                .render_camera_into(&mut image)
+                .expect("render")
+                .expect("shot");
+            expected.push_back((image, shot));
+        }
+        pipeline.on_step(&piped, &b, &mut ready).expect("pipeline");
+        for (frame, shot) in ready.drain(..) {
+            let (image, want) = expected.pop_front().expect("a frame was captured");
+            assert_eq!(shot.capture_ns, want.capture_ns);
+            assert!(shot.publish_ns <= piped.time_ns(), "not handed back early");
+            assert_eq!(
+                frame, image,
+                "frame {delivered} differs from synchronous rendering"
+            );
+            pipeline.recycle(frame);
+            delivered += 1;
+        }
+    }
+    pipeline.drain(&mut ready).expect("drain");
+    assert_eq!(delivered + ready.len(), 4, "30 Hz over 0.16 s");
+    assert!(delivered >= 3);
+}

@@ -7,7 +7,6 @@
 //! and publish time, as the lockstep runner does; the single-thread figure is also given.
 //! Render times are measured in the single-thread flights.
 
-use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -17,7 +16,7 @@ use ipc_types::runtime::config::deploy_dir;
 use mavlink::MavHeader;
 use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd, MavMessage};
 use serde_json::json;
-use sim::camera_worker::CameraWorker;
+use sim::camera_worker::CameraPipeline;
 use sim::lockstep::Simulator;
 
 use crate::stats::percentile;
@@ -68,47 +67,31 @@ fn command(sim: &mut Simulator, command: MavCmd, param1: f32, param7: f32) {
 }
 
 /// Flies `seconds` of `scenario`. Synchronous: every render on this thread, timed.
-/// Pipelined: the camera renders on a [`CameraWorker`] between capture and publish time,
+/// Pipelined: the camera renders on a [`CameraPipeline`] between capture and publish time,
 /// as the lockstep runner does, while physics and depth run here.
 fn fly(scenario: &str, seconds: f64, deploy: &std::path::Path, pipelined: bool) -> Result<Flight> {
     let scn = sim::scenario::load(scenario, deploy)?;
-    let latency_ns = (scn.scenario.camera.sensor.latency_s.max(0.0) * 1e9) as u64;
     let mut sim = Simulator::new(&scn, 1).context("building the simulator")?;
     command(&mut sim, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0);
     command(&mut sim, MavCmd::MAV_CMD_NAV_TAKEOFF, 0.0, 2.0);
-    let mut worker = if pipelined {
-        sim.take_down_camera()
-            .map(CameraWorker::spawn)
-            .transpose()?
+    let mut camera = if pipelined {
+        CameraPipeline::from_simulator(&mut sim)?
     } else {
         None
     };
+    let mut ready = Vec::new();
     let mut image = vec![0u8; sim.down_camera().map_or(0, |c| c.frame_len())];
     let mut depth = vec![0u16; sim.depth_camera().map_or(0, |c| c.frame_len())];
-    let mut pending: VecDeque<u64> = VecDeque::new();
-    let mut spare: Vec<Vec<u8>> = Vec::new();
     let (mut render_ms, mut depth_ms) = (Vec::new(), Vec::new());
     let end_ns = (seconds * 1e9) as u64;
     let start = Instant::now();
     while sim.time_ns() < end_ns {
         let r = sim.step()?;
         let _ = sim.take_mavlink();
-        let now = sim.time_ns();
-        if let Some(w) = worker.as_mut() {
-            // Frames are collected at their publish time (or, at the latest, when the
-            // next one is due), as the pipeline would receive them.
-            while pending
-                .front()
-                .is_some_and(|&at| at <= now || (r.camera_due && w.in_flight() > 0))
-            {
-                pending.pop_front();
-                let (buf, _) = w.collect()?;
-                spare.push(buf);
-            }
-            if r.camera_due {
-                let (body, pad) = sim.camera_view();
-                w.submit(body, pad, spare.pop().unwrap_or_default())?;
-                pending.push_back(now + latency_ns);
+        if let Some(c) = camera.as_mut() {
+            c.on_step(&sim, &r, &mut ready)?;
+            for (buf, _) in ready.drain(..) {
+                c.recycle(buf);
             }
         } else if r.camera_due {
             let t = Instant::now();
@@ -121,10 +104,8 @@ fn fly(scenario: &str, seconds: f64, deploy: &std::path::Path, pipelined: bool) 
             depth_ms.push(t.elapsed().as_secs_f64() * 1e3);
         }
     }
-    if let Some(w) = worker.as_mut() {
-        while w.in_flight() > 0 {
-            w.collect()?;
-        }
+    if let Some(c) = camera.as_mut() {
+        c.drain(&mut ready)?;
     }
     let wall = start.elapsed().as_secs_f64();
     Ok(Flight {
