@@ -13,7 +13,10 @@
 //! shadows, no sky model).
 
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
-use opencv::core::{BORDER_REPLICATE, CV_8UC1, CV_8UC3, CV_32FC1, Mat, Scalar};
+use opencv::core::{
+    BORDER_REPLICATE, CV_8UC1, CV_8UC3, CV_16SC2, CV_16UC1, Mat, Scalar, ToInputArray,
+    ToOutputArray, Vec2s,
+};
 use opencv::imgproc;
 use opencv::prelude::*;
 use optics::{CameraCalibration, PadModel};
@@ -63,6 +66,11 @@ pub enum CameraError {
     /// The image is wider than the renderer's bands allow.
     #[error("camera: image width {0} px is above the supported 4096 px")]
     TooWide(u32),
+    /// The pad texture is too fine for `remap`'s 16-bit coordinates.
+    #[error(
+        "camera: texture atlas {0} x {1} px is above 32767 px a side (lower pad_texture_px_per_m)"
+    )]
+    AtlasTooLarge(usize, usize),
     /// The output buffer does not hold exactly one frame.
     #[error("camera: output buffer holds {got} bytes, a frame is {want}")]
     BufferSize {
@@ -486,6 +494,9 @@ impl Atlas {
         let (gw, gh) = column(ground);
         let width = pw + gw + 4;
         let height = ph.max(gh + 4);
+        if width > i16::MAX as usize || height > i16::MAX as usize {
+            return Err(CameraError::AtlasTooLarge(width, height));
+        }
         let mut mat = Mat::new_rows_cols_with_default(
             height as i32,
             width as i32,
@@ -877,6 +888,7 @@ pub const TILE_ROWS: usize = 240;
 /// whether it can see the pad. Divides [`TILE_ROWS`].
 const STRIP_ROWS: usize = 16;
 const _: () = assert!(TILE_ROWS.is_multiple_of(STRIP_ROWS));
+const STRIPS_PER_TILE: usize = TILE_ROWS / STRIP_ROWS;
 /// Widest image: a band of it must fit in one noise slice.
 const MAX_WIDTH: usize = 4096;
 const _: () = assert!(MAX_WIDTH * TILE_ROWS <= MAX_SLICE);
@@ -936,11 +948,20 @@ impl Tile {
 
     fn resize(&mut self, rows: usize, cols: usize) -> Result<(), CameraError> {
         if (rows, cols) != (self.rows, self.cols) {
-            for m in &mut self.maps {
+            for (k, m) in self.maps.iter_mut().enumerate() {
+                let kind = if k % 2 == 0 { CV_16SC2 } else { CV_16UC1 };
                 *m = Mat::new_rows_cols_with_default(
                     rows as i32,
                     cols as i32,
-                    CV_32FC1,
+                    kind,
+                    Scalar::all(0.0),
+                )?;
+            }
+            for m in &mut self.sampled {
+                *m = Mat::new_rows_cols_with_default(
+                    rows as i32,
+                    cols as i32,
+                    CV_8UC1,
                     Scalar::all(0.0),
                 )?;
             }
@@ -961,12 +982,27 @@ impl Tile {
         rays: &[[f32; 2]],
         band: &[[[f32; 2]; 2]],
     ) -> Result<f32, CameraError> {
+        let strip = STRIP_ROWS * self.cols.max(1);
+        let strips = rays.len().div_ceil(strip).min(STRIPS_PER_TILE);
+        // Which strips can see the board; the coarse level is needed only
+        // from the first to the last of them (the pad is usually a small part
+        // of the frame, and a second full-band remap was a third of the render).
+        let mut pad_in = [false; STRIPS_PER_TILE];
+        for (k, seen) in pad_in.iter_mut().enumerate().take(strips) {
+            *seen = pass.pad.is_some_and(|p| {
+                band.get(k).is_none_or(|[lo, hi]| {
+                    (0..2).all(|k| p.view_min[k] <= hi[k] && lo[k] <= p.view_max[k])
+                })
+            });
+        }
+        let first = pad_in.iter().position(|&b| b).unwrap_or(strips);
+        let last = pad_in.iter().rposition(|&b| b).map_or(first, |k| k + 1);
+        let blended = pass.pad.is_some_and(|p| p.blend > 0.0);
         let [mfx, mfy, mcx, mcy] = &mut self.maps;
-        let (fx, fy) = (mfx.data_typed_mut::<f32>()?, mfy.data_typed_mut::<f32>()?);
-        let (cx, cy) = (mcx.data_typed_mut::<f32>()?, mcy.data_typed_mut::<f32>()?);
+        let (fx, fy) = (mfx.data_typed_mut::<Vec2s>()?, mfy.data_typed_mut::<u16>()?);
+        let (cx, cy) = (mcx.data_typed_mut::<Vec2s>()?, mcy.data_typed_mut::<u16>()?);
         // Strip by strip, so the pad arithmetic is skipped where it cannot be
         // and the strip's rays and maps are still in cache for the next loop.
-        let strip = STRIP_ROWS * self.cols.max(1);
         let mut any_pad = false;
         for (k, ((((rays, fx), fy), cx), cy)) in rays
             .chunks(strip)
@@ -976,22 +1012,31 @@ impl Tile {
             .zip(cy.chunks_mut(strip))
             .enumerate()
         {
-            let pad_in_strip = pass.pad.is_some_and(|p| {
-                band.get(k).is_none_or(|[lo, hi]| {
-                    (0..2).all(|k| p.view_min[k] <= hi[k] && lo[k] <= p.view_max[k])
-                })
-            });
-            any_pad |= fill_maps(atlas, pass, rays, [fx, fy, cx, cy], pad_in_strip);
+            let pad_in_strip = pad_in.get(k).copied().unwrap_or(true);
+            let coarse = blended && (first..last).contains(&k);
+            any_pad |= fill_maps(
+                atlas,
+                pass,
+                rays,
+                Maps { fx, fy, cx, cy },
+                pad_in_strip,
+                coarse,
+            );
         }
-        let blend = if any_pad {
+        let blend = if any_pad && blended {
             pass.pad.map_or(0.0, |p| p.blend)
         } else {
             0.0
         };
         let [fine, coarse] = &mut self.sampled;
-        let remap = |mx: &Mat, my: &Mat, dst: &mut Mat| {
+        fn remap(
+            atlas: &Mat,
+            mx: &impl ToInputArray,
+            my: &impl ToInputArray,
+            dst: &mut impl ToOutputArray,
+        ) -> opencv::Result<()> {
             imgproc::remap(
-                &atlas.mat,
+                atlas,
                 dst,
                 mx,
                 my,
@@ -999,11 +1044,28 @@ impl Tile {
                 BORDER_REPLICATE,
                 Scalar::all(0.0),
             )
-        };
-        remap(&self.maps[0], &self.maps[1], fine)?;
+        }
+        remap(&atlas.mat, &self.maps[0], &self.maps[1], fine)?;
         self.coarse_valid = blend > 0.0;
         if self.coarse_valid {
-            remap(&self.maps[2], &self.maps[3], coarse)?;
+            // Coarse = fine outside the strips that can see the pad (the
+            // ground has one level), so only those rows are sampled twice.
+            let (r0, r1) = (first * STRIP_ROWS, (last * STRIP_ROWS).min(self.rows));
+            let rows = opencv::core::Range::new(r0 as i32, r1 as i32)?;
+            let mut dst = coarse.row_range_mut(&rows)?;
+            remap(
+                &atlas.mat,
+                &self.maps[2].row_range(&rows)?,
+                &self.maps[3].row_range(&rows)?,
+                &mut dst,
+            )?;
+            let cols = self.cols;
+            let (src, dst) = (fine.data_bytes()?, coarse.data_bytes_mut()?);
+            for range in [0..r0 * cols, r1 * cols..self.rows * cols] {
+                if let (Some(d), Some(s)) = (dst.get_mut(range.clone()), src.get(range)) {
+                    d.copy_from_slice(s);
+                }
+            }
         }
         Ok(if self.coarse_valid { blend } else { 0.0 })
     }
@@ -1030,13 +1092,13 @@ fn fill_maps(
     atlas: &Atlas,
     pass: &Pass,
     rays: &[[f32; 2]],
-    maps: [&mut [f32]; 4],
+    maps: Maps<'_>,
     pad_in_band: bool,
+    coarse: bool,
 ) -> bool {
-    // With a blended pad level the coarse maps are sampled over the whole
-    // band, so strips that cannot see the pad still write them (= fine).
-    let blended = pass.pad.is_some_and(|p| p.blend > 0.0);
-    match (pass.pad.is_some() && pad_in_band, blended) {
+    // The coarse maps are sampled over every strip from the first to the last
+    // that can see the pad, so such strips write them even without the pad (= fine).
+    match (pass.pad.is_some() && pad_in_band, coarse) {
         (false, false) => fill_maps_ground(atlas, pass, rays, maps),
         (false, true) => fill_maps_ground_coarse(atlas, pass, rays, maps),
         (true, false) => fill_maps_fine(atlas, pass, rays, maps),
@@ -1046,28 +1108,23 @@ fn fill_maps(
 
 avx2_dispatch!(
     /// Ground and sky only (fine maps).
-    fn fill_maps_ground => fill_maps_ground_avx2, fill_maps_ground_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
+    fn fill_maps_ground => fill_maps_ground_avx2, fill_maps_ground_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: Maps<'_>) -> bool
 );
 avx2_dispatch!(
     /// Ground and sky only (fine and coarse maps).
-    fn fill_maps_ground_coarse => fill_maps_ground_coarse_avx2, fill_maps_ground_coarse_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
+    fn fill_maps_ground_coarse => fill_maps_ground_coarse_avx2, fill_maps_ground_coarse_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: Maps<'_>) -> bool
 );
 avx2_dispatch!(
     /// Pad at one level, ground, sky (fine maps).
-    fn fill_maps_fine => fill_maps_fine_avx2, fill_maps_fine_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
+    fn fill_maps_fine => fill_maps_fine_avx2, fill_maps_fine_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: Maps<'_>) -> bool
 );
 avx2_dispatch!(
     /// Pad at two levels, ground, sky (fine and coarse maps).
-    fn fill_maps_trilinear => fill_maps_trilinear_avx2, fill_maps_trilinear_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: [&mut [f32]; 4]) -> bool
+    fn fill_maps_trilinear => fill_maps_trilinear_avx2, fill_maps_trilinear_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: Maps<'_>) -> bool
 );
 
 #[inline(always)]
-fn fill_maps_ground_generic(
-    atlas: &Atlas,
-    pass: &Pass,
-    rays: &[[f32; 2]],
-    maps: [&mut [f32]; 4],
-) -> bool {
+fn fill_maps_ground_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: Maps<'_>) -> bool {
     fill_maps_generic::<false, false>(atlas, pass, rays, maps)
 }
 
@@ -1076,18 +1133,13 @@ fn fill_maps_ground_coarse_generic(
     atlas: &Atlas,
     pass: &Pass,
     rays: &[[f32; 2]],
-    maps: [&mut [f32]; 4],
+    maps: Maps<'_>,
 ) -> bool {
     fill_maps_generic::<false, true>(atlas, pass, rays, maps)
 }
 
 #[inline(always)]
-fn fill_maps_fine_generic(
-    atlas: &Atlas,
-    pass: &Pass,
-    rays: &[[f32; 2]],
-    maps: [&mut [f32]; 4],
-) -> bool {
+fn fill_maps_fine_generic(atlas: &Atlas, pass: &Pass, rays: &[[f32; 2]], maps: Maps<'_>) -> bool {
     fill_maps_generic::<true, false>(atlas, pass, rays, maps)
 }
 
@@ -1096,7 +1148,7 @@ fn fill_maps_trilinear_generic(
     atlas: &Atlas,
     pass: &Pass,
     rays: &[[f32; 2]],
-    maps: [&mut [f32]; 4],
+    maps: Maps<'_>,
 ) -> bool {
     fill_maps_generic::<true, true>(atlas, pass, rays, maps)
 }
@@ -1112,9 +1164,9 @@ fn fill_maps_generic<const PAD: bool, const COARSE: bool>(
     atlas: &Atlas,
     pass: &Pass,
     rays: &[[f32; 2]],
-    maps: [&mut [f32]; 4],
+    maps: Maps<'_>,
 ) -> bool {
-    let [fx, fy, cx, cy] = maps;
+    let Maps { fx, fy, cx, cy } = maps;
     let n = rays
         .len()
         .min(fx.len())
@@ -1200,15 +1252,53 @@ fn fill_maps_generic<const PAD: bool, const COARSE: bool>(
         } else {
             skyy
         };
-        fx[i] = if on_pad { ufine } else { ug };
-        fy[i] = if on_pad { vfine } else { vg };
+        (fx[i], fy[i]) = fixed_point(
+            if on_pad { ufine } else { ug },
+            if on_pad { vfine } else { vg },
+        );
         if COARSE {
-            cx[i] = if on_pad { ucoarse } else { ug };
-            cy[i] = if on_pad { vcoarse } else { vg };
+            (cx[i], cy[i]) = fixed_point(
+                if on_pad { ucoarse } else { ug },
+                if on_pad { vcoarse } else { vg },
+            );
         }
         any_pad |= on_pad;
     }
     any_pad
+}
+
+/// Atlas coordinates of one pixel for every map of a band, in the fixed-point
+/// form `remap` samples directly: integer (x, y) and the 1/32-pixel
+/// fraction index. Float maps made OpenCV convert them to this on every call,
+/// which was about a third of the remap time.
+struct Maps<'a> {
+    fx: &'a mut [Vec2s],
+    fy: &'a mut [u16],
+    cx: &'a mut [Vec2s],
+    cy: &'a mut [u16],
+}
+
+/// `INTER_TAB_SIZE`: OpenCV's bilinear weights come in 1/32 pixel steps.
+const REMAP_FRACTION_BITS: u32 = 5;
+
+/// Atlas point (u, v) (both >= 0 and far below 2^16, as every atlas
+/// coordinate is) to `remap`'s fixed-point pair, rounded as `convertMaps`
+/// rounds (to nearest, ties to even) so the image is the one float maps gave.
+#[inline(always)]
+fn fixed_point(u: f32, v: f32) -> (Vec2s, u16) {
+    const ROUND: f32 = 12_582_912.0;
+    const SCALE: f32 = (1u32 << REMAP_FRACTION_BITS) as f32;
+    const MASK: u32 = (1 << 22) - 1;
+    const FRACTION: u32 = (1 << REMAP_FRACTION_BITS) - 1;
+    let x = ((u * SCALE).max(0.0) + ROUND).to_bits() & MASK;
+    let y = ((v * SCALE).max(0.0) + ROUND).to_bits() & MASK;
+    (
+        Vec2s::from([
+            (x >> REMAP_FRACTION_BITS) as i16,
+            (y >> REMAP_FRACTION_BITS) as i16,
+        ]),
+        (((y & FRACTION) << REMAP_FRACTION_BITS) | (x & FRACTION)) as u16,
+    )
 }
 
 /// Rounds (half to even) and saturates a grey level to a byte. Adding

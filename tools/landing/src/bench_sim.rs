@@ -37,7 +37,11 @@ pub struct SimArgs {
 
 /// What one flight measured.
 struct Flight {
+    /// Median over one-second windows of simulated time: this shared VM's
+    /// neighbours steal whole bursts of CPU, which the median sets aside.
     realtime_factor: f64,
+    /// Simulated time over wall time for the whole flight.
+    realtime_factor_overall: f64,
     render_ms: Vec<f64>,
     depth_ms: Vec<f64>,
 }
@@ -85,7 +89,14 @@ fn fly(scenario: &str, seconds: f64, deploy: &std::path::Path, pipelined: bool) 
     let (mut render_ms, mut depth_ms) = (Vec::new(), Vec::new());
     let end_ns = (seconds * 1e9) as u64;
     let start = Instant::now();
+    let (mut window_start, mut window_end_ns) = (start, WINDOW_NS);
+    let mut window_factors = Vec::new();
     while sim.time_ns() < end_ns {
+        if sim.time_ns() >= window_end_ns {
+            let now = Instant::now();
+            window_factors.push(1.0 / (now - window_start).as_secs_f64().max(1e-9));
+            (window_start, window_end_ns) = (now, window_end_ns + WINDOW_NS);
+        }
         let r = sim.step()?;
         let _ = sim.take_mavlink();
         if let Some(c) = camera.as_mut() {
@@ -109,11 +120,15 @@ fn fly(scenario: &str, seconds: f64, deploy: &std::path::Path, pipelined: bool) 
     }
     let wall = start.elapsed().as_secs_f64();
     Ok(Flight {
-        realtime_factor: seconds / wall.max(1e-9),
+        realtime_factor: percentile(&window_factors, 50.0),
+        realtime_factor_overall: seconds / wall.max(1e-9),
         render_ms,
         depth_ms,
     })
 }
+
+/// Simulated time per real-time-factor window.
+const WINDOW_NS: u64 = 1_000_000_000;
 
 fn round3(x: f64) -> f64 {
     (x * 1000.0).round() / 1000.0
@@ -144,6 +159,7 @@ pub fn run(args: &SimArgs) -> Result<()> {
         "realtime_factor_single_thread": round3(small.realtime_factor),
         "realtime_factor_1280x720": round3(large_piped.realtime_factor),
         "realtime_factor_1280x720_single_thread": round3(large.realtime_factor),
+        "realtime_factor_overall": round3(small_piped.realtime_factor_overall),
         "render_ms_p50_640x480": round3(percentile(&small.render_ms, 50.0)),
         "render_ms_p50_1280x720": round3(percentile(&large.render_ms, 50.0)),
         "depth_ms_p50": round3(percentile(&depth_all, 50.0)),
@@ -154,8 +170,9 @@ pub fn run(args: &SimArgs) -> Result<()> {
     } else {
         println!(
             "real-time factor, physics 500 Hz + 640x480 camera 30 Hz + depth 30 Hz: {:.1} \
-             (camera on its render worker; {:.1} all on one thread)",
-            small_piped.realtime_factor, small.realtime_factor
+             (median of 1 s windows, camera on its render worker; {:.1} over the whole \
+             flight; {:.1} all on one thread)",
+            small_piped.realtime_factor, small_piped.realtime_factor_overall, small.realtime_factor
         );
         println!(
             "real-time factor with the 1280x720 camera: {:.1} ({:.1} on one thread)",
