@@ -312,8 +312,9 @@ pub struct PadObservation {
     pub reprojection_error_px: f64,
     /// Number of valid entries in `marker_ids`.
     pub marker_count: u32,
-    /// Keeps the layout free of implicit padding.
-    pub reserved: u32,
+    /// 1 when `world_from_pad` and its covariance hold: a vehicle state covered the
+    /// capture time. 0: only `camera_from_pad` is meaningful.
+    pub world_valid: u32,
     /// Ids of the markers whose corners went into the pose.
     pub marker_ids: [u32; MAX_MARKERS],
 }
@@ -327,7 +328,7 @@ impl Default for PadObservation {
             covariance: [0.0; 36],
             reprojection_error_px: 0.0,
             marker_count: 0,
-            reserved: 0,
+            world_valid: 0,
             marker_ids: [0; MAX_MARKERS],
         }
     }

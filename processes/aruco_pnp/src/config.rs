@@ -1,0 +1,79 @@
+//! The `[aruco_pnp]` section of the stack configuration.
+
+use ipc_types::runtime::config::{Invalid, Validate, check_range};
+use serde::Deserialize;
+
+use crate::{DetectSettings, EstimatorSettings, PoseSettings};
+
+/// What aruco-pnp reads from `landing.toml`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ArucoConfig {
+    /// Camera calibration (OpenCV YAML), relative to the deploy `config/` directory
+    /// unless absolute.
+    pub camera: String,
+    /// Pad layout, relative to the deploy `config/` directory unless absolute.
+    pub pad: String,
+    /// Optical centre of the down camera in the body frame (FLU), m.
+    pub camera_position_in_body_m: [f64; 3],
+    /// A marker whose own RMS reprojection error exceeds this (and 3x the median of
+    /// the others) is dropped, px.
+    pub outlier_px: f64,
+    /// The search region grows by this fraction of its size on every side.
+    pub region_margin: f64,
+    /// Adaptive threshold window, px (odd, 3 to 51).
+    pub threshold_window_px: i32,
+    /// A frame newer than the newest vehicle state by more than this gets no
+    /// world pose, ms.
+    pub max_state_age_ms: u64,
+}
+
+impl Default for ArucoConfig {
+    fn default() -> Self {
+        let s = EstimatorSettings::default();
+        Self {
+            camera: "camera_down_640x480.yaml".into(),
+            pad: "pad.toml".into(),
+            camera_position_in_body_m: [0.05, 0.0, -0.05],
+            outlier_px: s.pose.outlier_px,
+            region_margin: s.region_margin,
+            threshold_window_px: s.detect.threshold_window_px,
+            max_state_age_ms: 50,
+        }
+    }
+}
+
+impl ArucoConfig {
+    /// The estimator settings these values give.
+    pub fn settings(&self) -> EstimatorSettings {
+        let d = EstimatorSettings::default();
+        EstimatorSettings {
+            detect: DetectSettings {
+                threshold_window_px: self.threshold_window_px | 1,
+                ..d.detect
+            },
+            pose: PoseSettings {
+                outlier_px: self.outlier_px,
+                ..d.pose
+            },
+            region_margin: self.region_margin,
+            ..d
+        }
+    }
+}
+
+impl Validate for ArucoConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        for (i, v) in self.camera_position_in_body_m.iter().enumerate() {
+            check_range(&format!("camera_position_in_body_m[{i}]"), *v, -2.0, 2.0)?;
+        }
+        check_range("outlier_px", self.outlier_px, 0.1, 50.0)?;
+        check_range("region_margin", self.region_margin, 0.0, 5.0)?;
+        check_range("threshold_window_px", self.threshold_window_px, 3, 51)?;
+        check_range("max_state_age_ms", self.max_state_age_ms, 0, 1000)?;
+        if self.camera.is_empty() || self.pad.is_empty() {
+            return Err(Invalid::new("camera", "camera and pad must name files"));
+        }
+        Ok(())
+    }
+}
