@@ -62,6 +62,9 @@ impl Default for DetectSettings {
     }
 }
 
+/// Side in px a marker keeps in the downscaled image ArUco3 searches.
+const CANONICAL_PX: i32 = 20;
+
 /// ARUCO_ORIGINAL detection with the pad's settings.
 pub struct Detector {
     dictionary: Ptr<aruco::Dictionary>,
@@ -108,6 +111,7 @@ impl Detector {
         &mut self,
         image: &impl MatTraitConst,
         region: Option<Rect>,
+        smallest_px: Option<f64>,
     ) -> Result<Vec<Marker>, DetectError> {
         let full = Rect::new(0, 0, image.cols(), image.rows());
         let region = region.map_or(full, |r| r & full);
@@ -119,6 +123,21 @@ impl Detector {
         let longest = f64::from(region.width.max(region.height));
         self.params
             .set_min_marker_perimeter_rate((4.0 * self.settings.min_marker_px / longest).min(1.0));
+        // ArUco3: when the smallest marker expected is large, OpenCV thresholds and
+        // traces a downscaled image in which it is still `min_side_length_canonical_img`
+        // px (our edge refinement then places the corners at full resolution).
+        match smallest_px.filter(|s| *s > 2.0 * f64::from(CANONICAL_PX)) {
+            Some(s) => {
+                self.params.set_use_aruco3_detection(true);
+                self.params.set_min_side_length_canonical_img(CANONICAL_PX);
+                self.params
+                    .set_min_marker_length_ratio_original_img((0.7 * s / longest).min(1.0) as f32);
+            }
+            None => {
+                self.params.set_use_aruco3_detection(false);
+                self.params.set_min_marker_length_ratio_original_img(0.0);
+            }
+        }
         self.corners.clear();
         self.ids.clear();
         self.rejected.clear();

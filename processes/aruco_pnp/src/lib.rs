@@ -279,9 +279,13 @@ impl PadEstimator {
             imgproc::cvt_color_def(&colour, &mut self.gray, code)?;
         }
         let gray = &self.gray;
-        let look = |detector: &mut Detector, region: Option<Rect>| match code {
-            None => detector.detect(&pixels, region),
-            Some(_) => detector.detect(gray, region),
+        let smallest = self.track.as_ref().and_then(|t| self.smallest_active_px(t));
+        let look = |detector: &mut Detector, region: Option<Rect>| {
+            let hint = region.and(smallest);
+            match code {
+                None => detector.detect(&pixels, region, hint),
+                Some(_) => detector.detect(gray, region, hint),
+            }
         };
         let mut search = Search::Full;
         let mut found = Vec::new();
@@ -450,6 +454,22 @@ impl PadEstimator {
         } else {
             keep
         }
+    }
+
+    /// Side in px of the smallest marker in range at the tracked distance.
+    fn smallest_active_px(&self, track: &Track) -> Option<f64> {
+        let d = track.camera_from_pad.translation.vector.norm();
+        let slack = self.settings.range_slack * 2.0;
+        let f = 0.5 * (self.calibration.fx + self.calibration.fy);
+        self.pad
+            .markers
+            .iter()
+            .filter(|m| {
+                let [a, b] = m.active_range_m;
+                d >= a * (1.0 - slack) && d <= b * (1.0 + slack)
+            })
+            .map(|m| f * m.size_m / d.max(1e-3))
+            .min_by(f64::total_cmp)
     }
 
     /// Bounding box of the markers that should be in range at the tracked distance,

@@ -1,5 +1,6 @@
 //! `landing`: the one user-facing command of the landing stack.
 
+mod bench_aruco;
 mod bench_ipc;
 mod bench_sim;
 mod config_cmd;
@@ -39,6 +40,8 @@ enum BenchCommand {
     Ipc(bench_ipc::IpcArgs),
     /// Real-time factor of the simulator with both cameras, and render times.
     Sim(bench_sim::SimArgs),
+    /// Pad detection + pose time per frame, ours against plain OpenCV, same frames.
+    Aruco(bench_aruco::ArucoArgs),
     /// Internal: the publishing side of `bench ipc`, started by it in a second process.
     #[command(hide = true)]
     IpcPeer(bench_ipc::PeerArgs),
@@ -60,6 +63,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Bench(BenchCommand::Ipc(args)) => bench_ipc::run(&args, cli.ipc_prefix.as_deref()),
         Command::Bench(BenchCommand::Sim(args)) => bench_sim::run(&args),
+        Command::Bench(BenchCommand::Aruco(args)) => bench_aruco::run(&args),
         Command::Bench(BenchCommand::IpcPeer(args)) => {
             bench_ipc::run_peer(&args, cli.ipc_prefix.as_deref())
         }
