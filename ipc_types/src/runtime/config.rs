@@ -194,6 +194,50 @@ impl Validate for IpcConfig {
     }
 }
 
+/// What a process reads from the stack file: `[ipc]` and its own section, each strictly
+/// (unknown keys are errors) and each defaulted when absent; the other processes'
+/// sections are not its business. Errors name the key with its section (`aruco_pnp.x`).
+pub fn load_process<T>(path: &Path, section: &str) -> Result<(IpcConfig, T), ConfigError>
+where
+    T: DeserializeOwned + Validate + Default,
+{
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let table: toml::Table = toml::from_str(&text).map_err(|e| syntax_error(&text, path, &e))?;
+    let ipc = section_of(&table, "ipc", path)?;
+    let own = section_of(&table, section, path)?;
+    Ok((ipc, own))
+}
+
+fn section_of<T>(table: &toml::Table, name: &str, origin: &Path) -> Result<T, ConfigError>
+where
+    T: DeserializeOwned + Validate + Default,
+{
+    let Some(value) = table.get(name) else {
+        return Ok(T::default());
+    };
+    let value: T = serde_path_to_error::deserialize(value.clone()).map_err(|e| {
+        let key = e.path().to_string();
+        ConfigError::Key {
+            path: origin.to_path_buf(),
+            key: if key == "." {
+                name.to_string()
+            } else {
+                format!("{name}.{key}")
+            },
+            message: one_line(e.into_inner().message()),
+        }
+    })?;
+    value.validate().map_err(|inv| ConfigError::Invalid {
+        path: origin.to_path_buf(),
+        key: format!("{name}.{}", inv.key),
+        message: inv.message,
+    })?;
+    Ok(value)
+}
+
 /// Environment variable naming the deploy directory (scenarios, config, calibration).
 pub const DEPLOY_DIR_ENV: &str = "LANDING_DEPLOY_DIR";
 

@@ -74,8 +74,8 @@ fn render(file: &str, n: usize, deploy: &std::path::Path, pad: &PadModel) -> Res
         let s = k as f64 / (n.max(2) - 1) as f64;
         let h = 3.0 * (0.15f64 / 3.0).powf(s);
         let drift = 0.15 * h;
-        let centre = state.world_from_pad
-            * Point3::new(drift * (6.0 * s).sin(), drift * (4.0 * s).cos(), h);
+        let centre =
+            state.world_from_pad * Point3::new(drift * (6.0 * s).sin(), drift * (4.0 * s).cos(), h);
         let rotation = state.world_from_pad.rotation
             * UnitQuaternion::from_euler_angles(
                 0.08 * (9.0 * s).sin(),
@@ -151,7 +151,14 @@ fn plain_opencv(seq: &Sequence, pad: &PadModel) -> Result<Run> {
         let mut corners = Vector::<Vector<Point2f>>::new();
         let mut ids = Vector::<i32>::new();
         let mut rejected = Vector::<Vector<Point2f>>::new();
-        aruco::detect_markers(&image, &dict, &mut corners, &mut ids, &params, &mut rejected)?;
+        aruco::detect_markers(
+            &image,
+            &dict,
+            &mut corners,
+            &mut ids,
+            &params,
+            &mut rejected,
+        )?;
         let mut object = Vector::<Point3f>::new();
         let mut points = Vector::<Point2f>::new();
         for (id, c) in ids.iter().zip(corners.iter()) {
@@ -175,7 +182,11 @@ fn plain_opencv(seq: &Sequence, pad: &PadModel) -> Result<Run> {
                 false,
                 calib3d::SOLVEPNP_ITERATIVE,
             )? {
-                pose = Some([*tvec.at::<f64>(0)?, *tvec.at::<f64>(1)?, *tvec.at::<f64>(2)?]);
+                pose = Some([
+                    *tvec.at::<f64>(0)?,
+                    *tvec.at::<f64>(1)?,
+                    *tvec.at::<f64>(2)?,
+                ]);
             }
         }
         run.ms.push(t.elapsed().as_secs_f64() * 1e3);
@@ -195,7 +206,10 @@ fn round3(x: f64) -> f64 {
 /// Runs the benchmark and prints the figures.
 pub fn run(args: &ArucoArgs) -> Result<()> {
     if !(10..=5000).contains(&args.frames) {
-        anyhow::bail!("--frames {} is not allowed (allowed: 10 to 5000)", args.frames);
+        anyhow::bail!(
+            "--frames {} is not allowed (allowed: 10 to 5000)",
+            args.frames
+        );
     }
     let deploy = args.deploy_dir.clone().unwrap_or_else(deploy_dir);
     let pad = PadModel::load(deploy.join("config").join("pad.toml")).context("pad layout")?;
@@ -205,7 +219,10 @@ pub fn run(args: &ArucoArgs) -> Result<()> {
         ("camera_down_640x480.yaml", "640x480"),
         ("camera_down_1280x720.yaml", "1280x720"),
     ] {
-        eprintln!("bench aruco: rendering a {}-frame descent at {tag}...", args.frames);
+        eprintln!(
+            "bench aruco: rendering a {}-frame descent at {tag}...",
+            args.frames
+        );
         let seq = render(file, args.frames, &deploy, &pad)?;
         eprintln!("bench aruco: ours, then plain OpenCV, on the same frames...");
         let a = ours(&seq, &pad)?;
@@ -213,7 +230,10 @@ pub fn run(args: &ArucoArgs) -> Result<()> {
         let (pa, pb) = (percentile(&a.ms, 50.0), percentile(&b.ms, 50.0));
         out.insert(format!("ours_ms_p50_{tag}"), json!(round3(pa)));
         out.insert(format!("opencv_ms_p50_{tag}"), json!(round3(pb)));
-        out.insert(format!("ours_ms_p99_{tag}"), json!(round3(percentile(&a.ms, 99.0))));
+        out.insert(
+            format!("ours_ms_p99_{tag}"),
+            json!(round3(percentile(&a.ms, 99.0))),
+        );
         out.insert(format!("speedup_{tag}"), json!(round3(pb / pa.max(1e-9))));
         out.insert(format!("ours_found_{tag}"), json!(a.found));
         out.insert(format!("opencv_found_{tag}"), json!(b.found));

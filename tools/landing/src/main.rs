@@ -4,6 +4,7 @@ mod bench_aruco;
 mod bench_ipc;
 mod bench_sim;
 mod config_cmd;
+mod pad_detect;
 mod stats;
 
 use std::path::PathBuf;
@@ -31,6 +32,15 @@ enum Command {
     /// Work with configuration files.
     #[command(subcommand)]
     Config(ConfigCommand),
+    /// The landing pad: find it in an image.
+    #[command(subcommand)]
+    Pad(PadCommand),
+}
+
+#[derive(Debug, Subcommand)]
+enum PadCommand {
+    /// Find the pad in one image and print its pose (exit code 3 when there is none).
+    Detect(pad_detect::DetectArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -68,6 +78,10 @@ fn main() -> ExitCode {
             bench_ipc::run_peer(&args, cli.ipc_prefix.as_deref())
         }
         Command::Config(ConfigCommand::Check { file }) => config_cmd::check(&file),
+        Command::Pad(PadCommand::Detect(args)) => match pad_detect::run(&args) {
+            Ok(false) => return ExitCode::from(pad_detect::NOT_FOUND),
+            other => other.map(|_| ()),
+        },
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -23,6 +23,9 @@ fn every_subcommand_has_help() {
         vec!["bench"],
         vec!["bench", "ipc"],
         vec!["bench", "sim"],
+        vec!["bench", "aruco"],
+        vec!["pad"],
+        vec!["pad", "detect"],
         vec!["config"],
         vec!["config", "check"],
     ] {
@@ -159,4 +162,21 @@ fn the_sim_benchmark_prints_the_documented_json() {
         let x = v[key].as_f64().unwrap_or(-1.0);
         assert!(x > 0.0, "{key} = {x}");
     }
+}
+
+#[test]
+fn the_aruco_benchmark_prints_the_documented_json() {
+    let o = landing(&["bench", "aruco", "--json", "--frames", "10"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    for key in [
+        "ours_ms_p50_640x480",
+        "opencv_ms_p50_640x480",
+        "ours_ms_p50_1280x720",
+        "opencv_ms_p50_1280x720",
+    ] {
+        let x = v[key].as_f64().unwrap_or(-1.0);
+        assert!(x > 0.0, "{key} = {x}");
+    }
+    assert!(v["ours_found_640x480"].as_u64().unwrap_or(0) > 0);
 }
