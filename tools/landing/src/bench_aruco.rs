@@ -56,7 +56,7 @@ struct Sequence {
 
 fn render(file: &str, n: usize, deploy: &std::path::Path, pad: &PadModel) -> Result<Sequence> {
     let calibration = CameraCalibration::load(deploy.join("config").join(file))?;
-    let mut cam = DownCamera::new(DownCameraParams::default(), calibration.clone(), pad)?;
+    let mut cam = DownCamera::new(DownCameraParams::default(), calibration, pad)?;
     let state = PadState {
         world_from_pad: Isometry3::from_parts(
             Translation3::new(3.0, -2.0, 0.4),
@@ -100,7 +100,7 @@ fn render(file: &str, n: usize, deploy: &std::path::Path, pad: &PadModel) -> Res
 
 fn ours(seq: &Sequence, pad: &PadModel) -> Result<Run> {
     let mut est = PadEstimator::new(
-        seq.calibration.clone(),
+        seq.calibration,
         pad.clone(),
         seq.camera_from_body,
         EstimatorSettings::default(),

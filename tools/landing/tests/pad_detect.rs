@@ -43,7 +43,7 @@ fn a_rendered_pad_image_gives_its_ids_and_pose_as_json() {
     let cam_file = config("camera_down_640x480.yaml");
     let calib = CameraCalibration::load(&cam_file).unwrap();
     let pad = PadModel::load(config("pad.toml")).unwrap();
-    let mut cam = DownCamera::new(DownCameraParams::default(), calib.clone(), &pad).unwrap();
+    let mut cam = DownCamera::new(DownCameraParams::default(), calib, &pad).unwrap();
     let state = PadState {
         world_from_pad: Isometry3::from_parts(
             Translation3::new(1.0, 2.0, 0.4),
