@@ -16,8 +16,8 @@ pub struct ArucoConfig {
     pub pad: String,
     /// Optical centre of the down camera in the body frame (FLU), m.
     pub camera_position_in_body_m: [f64; 3],
-    /// A marker whose own RMS reprojection error exceeds this (and 3x the median of
-    /// the others) is dropped, px.
+    /// Above this joint RMS reprojection error, the marker without which the others fit
+    /// best is dropped as an outlier, px.
     pub outlier_px: f64,
     /// The search region grows by this fraction of its size on every side.
     pub region_margin: f64,

@@ -44,8 +44,8 @@ pub struct MarkerCorners {
 /// Solver settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PoseSettings {
-    /// A marker whose RMS reprojection error exceeds this (and three times the median
-    /// of the others) is dropped as an outlier, px.
+    /// When the joint fit's RMS reprojection error exceeds this, the marker without
+    /// which the rest fit best is dropped as an outlier (if that halves the error), px.
     pub outlier_px: f64,
     /// Floor of the corner noise assumed for the covariance, px: a perfect fit must
     /// not claim a perfect pose.
@@ -120,25 +120,30 @@ pub fn solve(
     let mut pose = initial_pose(&problem(&used))?;
     loop {
         pose = refine(&problem(&used), pose, settings.max_iterations)?;
-        // Per-marker RMS; drop the worst if it stands out and others remain.
-        let errors: Vec<f64> = used
-            .iter()
-            .map(|m| marker_rms(calibration, &pose, m))
-            .collect();
-        if used.len() < 2 {
+        // A fit worse than the outlier threshold: find the marker without which the
+        // others fit best (leave one out; only then, so good frames pay nothing) and
+        // drop it if that halves the error. One bad marker pulls a joint fit, so the
+        // markers' own errors alone do not point at it.
+        let rms = rms_of(calibration, &pose, &used);
+        if used.len() < 2 || rms <= settings.outlier_px {
             break;
         }
-        let mut sorted = errors.clone();
-        sorted.sort_by(f64::total_cmp);
-        let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
-        let worst = errors
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1))
-            .map(|(k, e)| (k, *e));
-        match worst {
-            Some((k, e)) if e > settings.outlier_px && e > 3.0 * median => {
+        let mut best: Option<(usize, f64, Isometry3<f64>)> = None;
+        for k in 0..used.len() {
+            let mut rest = used.clone();
+            rest.remove(k);
+            let Ok(p) = refine(&problem(&rest), pose, settings.max_iterations) else {
+                continue;
+            };
+            let e = rms_of(calibration, &p, &rest);
+            if best.as_ref().is_none_or(|(_, b, _)| e < *b) {
+                best = Some((k, e, p));
+            }
+        }
+        match best {
+            Some((k, e, p)) if e < 0.5 * rms => {
                 rejected.push(used.remove(k).id);
+                pose = p;
             }
             _ => break,
         }
@@ -151,12 +156,7 @@ pub fn solve(
         .try_inverse()
         .map(|inv| inv * sigma2)
         .ok_or(PoseError::Diverged)?;
-    let rms_px = (used
-        .iter()
-        .map(|m| marker_rms(calibration, &pose, m).powi(2))
-        .sum::<f64>()
-        / used.len().max(1) as f64)
-        .sqrt();
+    let rms_px = rms_of(calibration, &pose, &used);
     if !(rms_px.is_finite() && covariance.iter().all(|v| v.is_finite())) {
         return Err(PoseError::Diverged);
     }
@@ -167,6 +167,16 @@ pub fn solve(
         used: used.iter().map(|m| m.id).collect(),
         rejected,
     })
+}
+
+/// RMS reprojection error over every corner of `markers`, px.
+fn rms_of(calibration: &CameraCalibration, pose: &Isometry3<f64>, markers: &[MarkerCorners]) -> f64 {
+    (markers
+        .iter()
+        .map(|m| marker_rms(calibration, pose, m).powi(2))
+        .sum::<f64>()
+        / markers.len().max(1) as f64)
+        .sqrt()
 }
 
 /// RMS reprojection error of one marker's corners, px.
