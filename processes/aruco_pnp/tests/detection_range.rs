@@ -9,7 +9,6 @@ mod common;
 use aruco_pnp::{DetectSettings, Detector};
 use common::*;
 use opencv::core::Mat;
-use opencv::prelude::*;
 
 /// The paper's table (1280x720, fx 369.5): highest detected height per marker size, m.
 const PAPER: [(&str, &[u32], f64); 4] = [
