@@ -84,7 +84,6 @@ fn blank_and_noise_frames_give_no_pad_and_no_panic() {
 #[test]
 fn a_colour_frame_with_padded_rows_is_read_like_the_grey_one() {
     let mut cam = camera(CAM);
-    let cal = calibration(CAM);
     let pad = pad_state();
     let v = View {
         height: 1.0,
