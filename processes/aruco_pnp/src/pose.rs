@@ -170,7 +170,11 @@ pub fn solve(
 }
 
 /// RMS reprojection error over every corner of `markers`, px.
-fn rms_of(calibration: &CameraCalibration, pose: &Isometry3<f64>, markers: &[MarkerCorners]) -> f64 {
+fn rms_of(
+    calibration: &CameraCalibration,
+    pose: &Isometry3<f64>,
+    markers: &[MarkerCorners],
+) -> f64 {
     (markers
         .iter()
         .map(|m| marker_rms(calibration, pose, m).powi(2))

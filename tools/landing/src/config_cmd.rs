@@ -13,11 +13,15 @@ use serde::Deserialize;
 pub struct StackConfig {
     /// How processes find each other and prove they are alive.
     pub ipc: IpcConfig,
+    /// The pad estimator.
+    #[serde(default)]
+    pub aruco_pnp: aruco_pnp::ArucoConfig,
 }
 
 impl Validate for StackConfig {
     fn validate(&self) -> Result<(), Invalid> {
-        self.ipc.validate().map_err(|e| e.under("ipc"))
+        self.ipc.validate().map_err(|e| e.under("ipc"))?;
+        self.aruco_pnp.validate().map_err(|e| e.under("aruco_pnp"))
     }
 }
 

@@ -2,6 +2,7 @@
 
 mod bench_aruco;
 mod bench_ipc;
+mod bench_perception;
 mod bench_sim;
 mod config_cmd;
 mod pad_detect;
@@ -52,6 +53,8 @@ enum BenchCommand {
     Sim(bench_sim::SimArgs),
     /// Pad detection + pose time per frame, ours against plain OpenCV, same frames.
     Aruco(bench_aruco::ArucoArgs),
+    /// sim -> camera-ingest -> aruco-pnp as processes: observation rate and latency.
+    Perception(bench_perception::PerceptionArgs),
     /// Internal: the publishing side of `bench ipc`, started by it in a second process.
     #[command(hide = true)]
     IpcPeer(bench_ipc::PeerArgs),
@@ -74,6 +77,9 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::Ipc(args)) => bench_ipc::run(&args, cli.ipc_prefix.as_deref()),
         Command::Bench(BenchCommand::Sim(args)) => bench_sim::run(&args),
         Command::Bench(BenchCommand::Aruco(args)) => bench_aruco::run(&args),
+        Command::Bench(BenchCommand::Perception(args)) => {
+            bench_perception::run(&args, cli.ipc_prefix.as_deref())
+        }
         Command::Bench(BenchCommand::IpcPeer(args)) => {
             bench_ipc::run_peer(&args, cli.ipc_prefix.as_deref())
         }
