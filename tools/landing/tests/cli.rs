@@ -25,6 +25,8 @@ fn every_subcommand_has_help() {
         vec!["bench", "sim"],
         vec!["config"],
         vec!["config", "check"],
+        vec!["pad"],
+        vec!["pad", "print"],
     ] {
         let mut a = args.clone();
         a.push("--help");
