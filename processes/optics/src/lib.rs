@@ -11,4 +11,4 @@ pub mod calibration;
 pub mod pad;
 
 pub use calibration::{CalibrationError, CameraCalibration};
-pub use pad::{Board, Marker, PadError, PadModel};
+pub use pad::{Board, MARKER_CELLS, Marker, PadError, PadModel, marker_cells};

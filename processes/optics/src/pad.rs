@@ -22,6 +22,18 @@ pub const ARUCO_ORIGINAL_SIZE: u32 = 1024;
 /// written for another dictionary is rejected instead of silently misread.
 pub const DICTIONARY_NAME: &str = "ARUCO_ORIGINAL";
 
+/// Cells along a side of an ARUCO_ORIGINAL marker as printed: 5 data bits plus a
+/// one-cell black border on each side.
+pub const MARKER_CELLS: usize = 7;
+
+/// How far from symmetric about the origin the board may be (m): rounding in a
+/// hand-written file, not a design choice.
+const BOARD_CENTRE_TOLERANCE_M: f64 = 1e-9;
+
+/// Texture scales [`PadModel::render_texture`] accepts (pixels per metre): from a
+/// coarse mip level to a 1200 dpi print (47 244 px/m).
+pub const TEXTURE_PX_PER_M: std::ops::RangeInclusive<f64> = 100.0..=50_000.0;
+
 /// Why a pad model could not be loaded or drawn.
 #[derive(Debug, Error)]
 pub enum PadError {
@@ -82,7 +94,8 @@ pub struct Marker {
     pub active_range_m: [f64; 2],
 }
 
-/// The rectangle of the printed board in the pad frame.
+/// The rectangle of the printed board in the pad frame, centred on the pad origin
+/// (`validate` insists) so the sheet's centre is the landing point.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Board {
@@ -128,9 +141,21 @@ impl PadModel {
 
     /// Parses and validates a pad from TOML text.
     pub fn from_toml(text: &str) -> Result<Self, PadError> {
-        let file: PadFile = toml::from_str(text).map_err(|e| PadError::Parse {
-            path: PathBuf::new(),
-            message: e.to_string(),
+        // One line (the CLI prints errors as one line): the line number and the
+        // parser's message, without toml's multi-line source excerpt.
+        let file: PadFile = toml::from_str(text).map_err(|e| {
+            let message = e.message().split_whitespace().collect::<Vec<_>>().join(" ");
+            let line = e
+                .span()
+                .and_then(|s| text.get(..s.start))
+                .map(|before| before.matches('\n').count() + 1);
+            PadError::Parse {
+                path: PathBuf::new(),
+                message: match line {
+                    Some(l) => format!("line {l}: {message}"),
+                    None => message,
+                },
+            }
         })?;
         if file.dictionary != DICTIONARY_NAME {
             return Err(invalid(
@@ -148,7 +173,7 @@ impl PadModel {
     }
 
     /// Checks the layout: finite numbers, ids valid and unique, markers inside
-    /// the board and not overlapping, the pad origin on the board.
+    /// the board and not overlapping, the board centred on the pad origin.
     pub fn validate(&self) -> Result<(), PadError> {
         let b = &self.board;
         for i in 0..2 {
@@ -166,11 +191,18 @@ impl PadModel {
                     format!("must be finite and > board.min_m[{i}] ({})", b.min_m[i]),
                 ));
             }
-            if !(b.min_m[i] <= 0.0 && b.max_m[i] >= 0.0) {
+            // Centred: the printed sheet's centre is then the landing point, which is
+            // how the sheet is mounted on the carrier and what `landing pad print`
+            // promises. It also keeps the origin on the board.
+            if (b.max_m[i] + b.min_m[i]).abs() > BOARD_CENTRE_TOLERANCE_M {
                 return Err(invalid(
-                    format!("board.min_m[{i}]"),
-                    b.min_m[i],
-                    "the board must contain the pad origin (the landing point)",
+                    format!("board.max_m[{i}]"),
+                    b.max_m[i],
+                    format!(
+                        "must be -board.min_m[{i}] ({}): the board is centred on the pad \
+                         origin (the landing point)",
+                        -b.min_m[i]
+                    ),
                 ));
             }
         }
@@ -274,31 +306,72 @@ impl PadModel {
     /// Draws the pad as seen from above (mono8, white board, black markers from
     /// OpenCV's own ARUCO_ORIGINAL dictionary). Column 0 is the board's min x,
     /// row 0 its max y; texel (c, r) covers pad x = min_x + (c .. c+1) / ppm,
-    /// y = max_y - (r .. r+1) / ppm. Used to print the pad and to render it.
+    /// y = max_y - (r .. r+1) / ppm. Every marker cell is filled with whole
+    /// texels, its edges at the texel boundary nearest their true position (off
+    /// by at most half a texel, no blur), so a texel is black exactly when its
+    /// centre lies in a black cell. Used to print the pad and to render it.
     pub fn render_texture(&self, pixels_per_metre: f64) -> Result<Mat, PadError> {
-        if !(100.0..=20000.0).contains(&pixels_per_metre) {
+        if !TEXTURE_PX_PER_M.contains(&pixels_per_metre) {
             return Err(invalid(
                 "pixels_per_metre",
                 pixels_per_metre,
-                "must be in [100, 20000]",
+                format!(
+                    "must be in [{}, {}]",
+                    TEXTURE_PX_PER_M.start(),
+                    TEXTURE_PX_PER_M.end()
+                ),
             ));
         }
         let (w, h) = self.texture_size(pixels_per_metre);
         let mut tex = Mat::new_rows_cols_with_default(h, w, CV_8UC1, Scalar::all(255.0))?;
-        let dict = aruco::get_predefined_dictionary(
-            aruco::PREDEFINED_DICTIONARY_NAME::DICT_ARUCO_ORIGINAL,
-        )?;
+        let [min_x, max_y] = [self.board.min_m[0], self.board.max_m[1]];
+        // Texel boundary nearest to a distance in metres from the board's left or
+        // top edge, kept on the texture.
+        let edge =
+            |metres: f64, limit: i32| ((metres * pixels_per_metre).round() as i32).clamp(0, limit);
         for m in &self.markers {
-            let side = (m.size_m * pixels_per_metre).round() as i32;
-            let left = ((m.centre_m[0] - m.size_m / 2.0 - self.board.min_m[0]) * pixels_per_metre)
-                .round() as i32;
-            let top = ((self.board.max_m[1] - (m.centre_m[1] + m.size_m / 2.0)) * pixels_per_metre)
-                .round() as i32;
-            let mut img = Mat::default();
-            aruco::draw_marker(&dict, m.id as i32, side, &mut img, 1)?;
-            let mut roi = Mat::roi_mut(&mut tex, Rect::new(left, top, side, side))?;
-            img.copy_to(&mut roi)?;
+            let cells = marker_cells(m.id)?;
+            let cell = m.size_m / MARKER_CELLS as f64;
+            let left = m.centre_m[0] - m.size_m / 2.0 - min_x;
+            let top = max_y - (m.centre_m[1] + m.size_m / 2.0);
+            let cols: Vec<i32> = (0..=MARKER_CELLS)
+                .map(|k| edge(left + cell * k as f64, w))
+                .collect();
+            let rows: Vec<i32> = (0..=MARKER_CELLS)
+                .map(|k| edge(top + cell * k as f64, h))
+                .collect();
+            for (r, row) in cells.iter().enumerate() {
+                for (c, &black) in row.iter().enumerate() {
+                    let (cw, ch) = (cols[c + 1] - cols[c], rows[r + 1] - rows[r]);
+                    if black && cw > 0 && ch > 0 {
+                        let mut roi = Mat::roi_mut(&mut tex, Rect::new(cols[c], rows[r], cw, ch))?;
+                        roi.set_to_def(&Scalar::all(0.0))?;
+                    }
+                }
+            }
         }
         Ok(tex)
     }
+}
+
+/// The cells of ARUCO_ORIGINAL marker `id` as printed, row 0 at the top of the
+/// image, `true` for black (the border cells are all black). Taken from OpenCV's
+/// own dictionary so the printed pad, the simulator's texture and the detector
+/// agree bit for bit.
+pub fn marker_cells(id: u32) -> Result<[[bool; MARKER_CELLS]; MARKER_CELLS], PadError> {
+    if id >= ARUCO_ORIGINAL_SIZE {
+        return Err(PadError::UnknownMarker(id));
+    }
+    let dict =
+        aruco::get_predefined_dictionary(aruco::PREDEFINED_DICTIONARY_NAME::DICT_ARUCO_ORIGINAL)?;
+    let mut img = Mat::default();
+    // One pixel per cell: the drawn image is the bit matrix itself.
+    aruco::draw_marker(&dict, id as i32, MARKER_CELLS as i32, &mut img, 1)?;
+    let mut cells = [[false; MARKER_CELLS]; MARKER_CELLS];
+    for (r, row) in cells.iter_mut().enumerate() {
+        for (c, cell) in row.iter_mut().enumerate() {
+            *cell = *img.at_2d::<u8>(r as i32, c as i32)? < 128;
+        }
+    }
+    Ok(cells)
 }

@@ -7,7 +7,7 @@ use nalgebra::{Point2, Point3};
 use opencv::aruco;
 use opencv::core::{Point2f, Vector};
 use opencv::prelude::*;
-use optics::{CalibrationError, CameraCalibration, PadError, PadModel};
+use optics::{CalibrationError, CameraCalibration, MARKER_CELLS, PadError, PadModel, marker_cells};
 
 fn config(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -228,6 +228,10 @@ fn pad_validation_errors_name_the_key() {
             "board.max_m[0]",
         ),
         (
+            text.replacen("max_m = [0.42, 0.42]", "max_m = [0.42, 0.5]", 1),
+            "board.max_m[1] = 0.5: must be -board.min_m[1] (0.42): the board is centred",
+        ),
+        (
             text.replacen("\"ARUCO_ORIGINAL\"", "\"DICT_4X4_50\"", 1),
             "dictionary",
         ),
@@ -263,4 +267,120 @@ fn the_pad_texture_decodes_to_every_marker_with_opencvs_detector() {
         (f64::from(tl.x) - expect_u).abs() < 1.5 && (f64::from(tl.y) - expect_v).abs() < 1.5,
         "{tl:?} vs ({expect_u}, {expect_v})"
     );
+}
+
+#[test]
+fn the_shipped_board_is_centred_on_the_landing_point() {
+    let b = pad().board;
+    assert_eq!(b.min_m, [-b.max_m[0], -b.max_m[1]]);
+}
+
+/// The colour the model gives pad point (x, y): `Some(true)` for black, `None`
+/// within `tie` of a cell edge (where rounding may go either way).
+fn model_is_black(
+    pad: &PadModel,
+    cells: &[[[bool; MARKER_CELLS]; MARKER_CELLS]],
+    x: f64,
+    y: f64,
+    tie: f64,
+) -> Option<bool> {
+    for (m, cells) in pad.markers.iter().zip(cells) {
+        let cell = m.size_m / MARKER_CELLS as f64;
+        let u = (x - (m.centre_m[0] - m.size_m / 2.0)) / cell;
+        let v = ((m.centre_m[1] + m.size_m / 2.0) - y) / cell;
+        let n = MARKER_CELLS as f64;
+        if u < -tie || v < -tie || u > n + tie || v > n + tie {
+            continue;
+        }
+        let near_edge = |t: f64| (t - t.round()).abs() * cell < tie;
+        if near_edge(u) || near_edge(v) {
+            return None;
+        }
+        if u < 0.0 || v < 0.0 || u > n || v > n {
+            continue;
+        }
+        return Some(cells[v as usize][u as usize]);
+    }
+    Some(false)
+}
+
+#[test]
+fn every_texel_is_black_exactly_when_its_centre_is_in_a_black_cell() {
+    let pad = pad();
+    let cells: Vec<_> = pad
+        .markers
+        .iter()
+        .map(|m| marker_cells(m.id).unwrap())
+        .collect();
+    for ppm in [100.0, 1000.0, 150.0 / 0.0254, 2000.0] {
+        let tex = pad.render_texture(ppm).unwrap();
+        let bytes = tex.data_bytes().unwrap();
+        let cols = tex.cols() as usize;
+        let tie = 1e-6 / ppm;
+        let (mut checked, mut black) = (0, 0);
+        for (i, &texel) in bytes.iter().enumerate() {
+            let (c, r) = (i % cols, i / cols);
+            let x = pad.board.min_m[0] + (c as f64 + 0.5) / ppm;
+            let y = pad.board.max_m[1] - (r as f64 + 0.5) / ppm;
+            assert!(
+                texel == 0 || texel == 255,
+                "texel ({c}, {r}) = {texel}: no blur"
+            );
+            if let Some(expect) = model_is_black(&pad, &cells, x, y, tie) {
+                assert_eq!(texel == 0, expect, "ppm {ppm}: texel ({c}, {r})");
+                checked += 1;
+                black += usize::from(expect);
+            }
+        }
+        assert!(black > 0 && checked > bytes.len() * 99 / 100);
+    }
+}
+
+#[test]
+fn a_marker_drawn_one_pixel_per_cell_is_its_cell_matrix() {
+    let cells = marker_cells(43).unwrap();
+    // The border is black all round; the 5 x 5 data bits are not all one colour.
+    let last = MARKER_CELLS - 1;
+    assert!(cells[0].iter().chain(&cells[last]).all(|&b| b));
+    assert!(cells.iter().all(|row| row[0] && row[last]));
+    let data: usize = (1..6)
+        .flat_map(|r| (1..6).map(move |c| (r, c)))
+        .filter(|&(r, c)| cells[r][c])
+        .count();
+    assert!(data > 0 && data < 25, "{data}");
+    assert!(matches!(
+        marker_cells(1024),
+        Err(PadError::UnknownMarker(1024))
+    ));
+}
+
+#[test]
+fn the_texture_at_a_print_resolution_is_the_board_in_whole_dots() {
+    let pad = pad();
+    let (w, h) = (
+        pad.board.max_m[0] - pad.board.min_m[0],
+        pad.board.max_m[1] - pad.board.min_m[1],
+    );
+    for dpi in (50..=1200).map(f64::from).chain([72.5, 96.0, 299.9]) {
+        let expect = (
+            (w / 0.0254 * dpi).round() as i32,
+            (h / 0.0254 * dpi).round() as i32,
+        );
+        assert_eq!(pad.texture_size(dpi / 0.0254), expect, "{dpi} dpi");
+    }
+    assert!(pad.render_texture(1200.0 / 0.0254 * 1.1).is_err());
+}
+
+#[test]
+fn a_pad_file_that_does_not_parse_is_one_line_naming_the_file_and_the_line() {
+    let text = std::fs::read_to_string(config("pad.toml")).unwrap();
+    let p = temp_file(
+        "bad_pad.toml",
+        &text.replacen("size_m = 0.064", "size_m = \"big\"", 1),
+    );
+    let err = PadModel::load(&p).unwrap_err().to_string();
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains(p.to_str().unwrap()), "{err}");
+    let line = text.lines().position(|l| l == "size_m = 0.064").unwrap() + 1;
+    assert!(err.contains(&format!("line {line}: ")), "{err}");
 }

@@ -6,6 +6,7 @@ mod bench_perception;
 mod bench_sim;
 mod config_cmd;
 mod pad_detect;
+mod pad_print;
 mod stats;
 
 use std::path::PathBuf;
@@ -33,7 +34,7 @@ enum Command {
     /// Work with configuration files.
     #[command(subcommand)]
     Config(ConfigCommand),
-    /// The landing pad: find it in an image.
+    /// The landing pad: print it, find it in an image.
     #[command(subcommand)]
     Pad(PadCommand),
 }
@@ -42,6 +43,30 @@ enum Command {
 enum PadCommand {
     /// Find the pad in one image and print its pose (exit code 3 when there is none).
     Detect(pad_detect::DetectArgs),
+    /// Write the landing pad as a PNG and an SVG to print at true scale.
+    ///
+    /// The PNG covers exactly the board of the pad file (deploy/config/pad.toml), edge to
+    /// edge: round(board width / 25.4 mm * DPI) x round(board height / 25.4 mm * DPI)
+    /// pixels, black and white only (1 bit per pixel), the DPI recorded in its pHYs chunk
+    /// so a print dialog at 100% prints it actual size. Image right is pad +x (the
+    /// carrier's heading), image up is pad +y. The board is centred on the pad origin
+    /// (the landing point; the pad file is refused otherwise), so the image centre is the
+    /// landing point: a point u px right and v px down from the top-left corner of the
+    /// image is pad x = min_x + u * 25.4 mm / DPI, y = max_y - v * 25.4 mm / DPI (OpenCV's
+    /// pixel (c, r) has its centre at u = c + 0.5, v = r + 0.5). Every marker cell edge
+    /// lies on the pixel boundary nearest its true position (off by at most half a
+    /// pixel, no blur); a DPI that makes the cells whole numbers of pixels makes them all
+    /// the same size.
+    ///
+    /// The SVG (default: --out with the extension .svg) is in millimetres: the board
+    /// with every black marker cell as a rectangle (bits from OpenCV's ARUCO_ORIGINAL
+    /// dictionary), a small red cross at the pad origin, and below the board a 10 cm scale
+    /// bar and a caption naming the marker ids and sizes. Print either at 100%, then
+    /// check the scale bar (SVG) or the board size (PNG) with a ruler.
+    ///
+    /// The shipped 84 x 84 cm board is 9921 px a side at 300 dpi; at 1200 dpi it is
+    /// 39685 px a side and takes about 1.6 GB of memory to write.
+    Print(pad_print::PrintArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -88,6 +113,7 @@ fn main() -> ExitCode {
             Ok(false) => return ExitCode::from(pad_detect::NOT_FOUND),
             other => other.map(|_| ()),
         },
+        Command::Pad(PadCommand::Print(args)) => pad_print::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -28,6 +28,8 @@ fn every_subcommand_has_help() {
         vec!["pad", "detect"],
         vec!["config"],
         vec!["config", "check"],
+        vec!["pad"],
+        vec!["pad", "print"],
     ] {
         let mut a = args.clone();
         a.push("--help");
