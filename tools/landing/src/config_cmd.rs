@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use anyhow::Result;
+use camera_ingest::CameraIngestConfig;
 use ipc_types::runtime::config::{self, Invalid, IpcConfig, Validate};
 use serde::Deserialize;
 
@@ -13,11 +14,18 @@ use serde::Deserialize;
 pub struct StackConfig {
     /// How processes find each other and prove they are alive.
     pub ipc: IpcConfig,
+    /// camera-ingest: where frames come from, the calibration, undistortion.
+    #[serde(default)]
+    pub camera_ingest: Option<CameraIngestConfig>,
 }
 
 impl Validate for StackConfig {
     fn validate(&self) -> Result<(), Invalid> {
-        self.ipc.validate().map_err(|e| e.under("ipc"))
+        self.ipc.validate().map_err(|e| e.under("ipc"))?;
+        if let Some(c) = &self.camera_ingest {
+            c.validate().map_err(|e| e.under("camera_ingest"))?;
+        }
+        Ok(())
     }
 }
 
