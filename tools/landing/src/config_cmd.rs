@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use anyhow::Result;
+use camera_ingest::CameraIngestConfig;
 use ipc_types::runtime::config::{self, Invalid, IpcConfig, Validate};
 use serde::Deserialize;
 
@@ -16,12 +17,19 @@ pub struct StackConfig {
     /// The pad estimator.
     #[serde(default)]
     pub aruco_pnp: aruco_pnp::ArucoConfig,
+    /// camera-ingest: where frames come from, the calibration, undistortion.
+    #[serde(default)]
+    pub camera_ingest: Option<CameraIngestConfig>,
 }
 
 impl Validate for StackConfig {
     fn validate(&self) -> Result<(), Invalid> {
         self.ipc.validate().map_err(|e| e.under("ipc"))?;
-        self.aruco_pnp.validate().map_err(|e| e.under("aruco_pnp"))
+        self.aruco_pnp.validate().map_err(|e| e.under("aruco_pnp"))?;
+        if let Some(c) = &self.camera_ingest {
+            c.validate().map_err(|e| e.under("camera_ingest"))?;
+        }
+        Ok(())
     }
 }
 

@@ -95,6 +95,17 @@ fn an_out_of_range_value_is_one_line_naming_the_range() {
 }
 
 #[test]
+fn an_unknown_camera_source_is_one_line_naming_the_allowed_sources() {
+    check_bad_config(
+        "bad_source.toml",
+        "[ipc]\nprefix = \"a\"\nheartbeat_period_ms = 100\nheartbeat_deadline_ms = 500\n\
+         [camera_ingest]\nsource = \"usb:0\"\n",
+        "camera_ingest.source",
+        "allowed: sim, v4l2:/dev/videoN",
+    );
+}
+
+#[test]
 fn the_shipped_config_is_valid() {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
