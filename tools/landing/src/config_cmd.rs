@@ -25,7 +25,9 @@ pub struct StackConfig {
 impl Validate for StackConfig {
     fn validate(&self) -> Result<(), Invalid> {
         self.ipc.validate().map_err(|e| e.under("ipc"))?;
-        self.aruco_pnp.validate().map_err(|e| e.under("aruco_pnp"))?;
+        self.aruco_pnp
+            .validate()
+            .map_err(|e| e.under("aruco_pnp"))?;
         if let Some(c) = &self.camera_ingest {
             c.validate().map_err(|e| e.under("camera_ingest"))?;
         }
