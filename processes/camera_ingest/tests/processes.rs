@@ -601,3 +601,68 @@ fn a_missing_calibration_or_unknown_source_is_one_line_and_exit_code_2() {
         assert!(out.contains(flag), "--help lists {flag}");
     }
 }
+
+/// A GStreamer pipeline that delivers `n` frames of 640x480 and then stops, as a camera
+/// that disconnects does.
+fn test_camera_pipeline(n: u32) -> String {
+    format!(
+        "videotestsrc num-buffers={n} ! video/x-raw,width={WIDTH},height={HEIGHT},framerate=30/1 ! videoconvert ! appsink"
+    )
+}
+
+/// Whether this machine's OpenCV can run GStreamer's test source (GStreamer support and the
+/// base plugins); the Jetson CSI path needs the same.
+fn gstreamer_available() -> bool {
+    use opencv::prelude::*;
+    opencv::videoio::VideoCapture::from_file(
+        test_camera_pipeline(1),
+        opencv::videoio::CAP_GSTREAMER,
+    )
+    .and_then(|c| c.is_opened())
+    .unwrap_or(false)
+}
+
+#[test]
+fn a_camera_that_stops_delivering_is_reopened_and_the_process_keeps_heartbeating() {
+    if !gstreamer_available() {
+        eprintln!(
+            "SKIPPED: OpenCV cannot run `videotestsrc ! appsink` here (no GStreamer support or base plugins)"
+        );
+        return;
+    }
+    let prefix = IpcPrefix::unique("ingestgst");
+    let ipc = Ipc::open("ingest-test", &prefix).unwrap();
+    let heartbeat = ipc
+        .heartbeat_listener("camera-ingest", Duration::from_millis(500))
+        .unwrap();
+    let source = format!("gst:{}", test_camera_pipeline(15));
+    let mut ingest = start_ingest(&prefix, &["--source", &source]);
+    ingest.wait_for("camera-ingest running", Duration::from_secs(30));
+
+    // Each connection yields 15 frames (half a second), then the camera "disconnects".
+    let (seen, _) = collect(&ipc, Duration::from_secs(3), false, &ingest);
+    let mut beats = 0u64;
+    heartbeat.try_wait(|_| beats += 1).unwrap();
+
+    assert!(ingest.is_running(), "camera-ingest died:\n{}", ingest.log());
+    assert!(beats > 0, "the heartbeat went on");
+    assert!(
+        seen.len() > 30,
+        "{} frames in 3 s: the camera was reopened after each loss",
+        seen.len()
+    );
+    for f in &seen {
+        let h = &f.header;
+        assert_eq!((h.width, h.height, h.stride), (WIDTH, HEIGHT, WIDTH * 3));
+        assert_eq!(h.encoding, PixelEncoding::Bgr8 as u32);
+        assert_eq!(h.msg.stages()[0].stage, Stage::CameraIngest as u32);
+        assert!(
+            h.msg.stages()[0].enter_ns == h.msg.capture_ns,
+            "the stage starts at the grab"
+        );
+    }
+    assert!(ingest.terminate().success(), "{}", ingest.log());
+    let log = ingest.log();
+    assert!(log.contains("camera lost; reopening"), "{log}");
+    assert!(summary_count(&log, "source_errors") >= 2, "{log}");
+}
