@@ -204,6 +204,8 @@ impl Ipc {
                 name: process.to_string(),
                 reason: format!("{e:?}"),
             })?;
+        // After the node: iceoryx2 installs its own handlers when it creates one.
+        crate::runtime::shutdown::install();
         let cleaned = node.try_cleanup_dead_nodes();
         if cleaned.cleanups > 0 {
             tracing::info!(
@@ -215,6 +217,13 @@ impl Ipc {
             node,
             process: process.to_string(),
         })
+    }
+
+    /// True once SIGTERM or SIGINT arrived (see [`crate::runtime::shutdown`]). Not
+    /// `Node::wait`: iceoryx2 (re)installs its own handlers there, which remember only
+    /// the last signal.
+    pub fn shutdown_requested(&self) -> bool {
+        crate::runtime::shutdown::requested()
     }
 
     /// The iceoryx2 node (for node listing and dead-node detection).
@@ -812,6 +821,11 @@ pub fn run_wait_loop(
     let waitset = WaitSetBuilder::new()
         .create::<Svc>()
         .map_err(|e| IpcError::WaitSet(format!("{e:?}")))?;
+    // Again after the wait set: whatever iceoryx2 installed, ours handles the stop.
+    crate::runtime::shutdown::install();
+    if crate::runtime::shutdown::requested() {
+        return Ok(LoopExit::Signal);
+    }
     let mut data_guards = Vec::with_capacity(listeners.len());
     for l in listeners {
         data_guards.push(
@@ -869,7 +883,11 @@ pub fn run_wait_loop(
             Ok(WaitSetRunResult::TerminationRequest) => return Ok(LoopExit::Signal),
             // Any signal interrupts the wait; the next call returns TerminationRequest if it
             // was SIGINT or SIGTERM, and waits on otherwise (SIGCHLD must not end a process).
-            Ok(WaitSetRunResult::Interrupt) | Ok(WaitSetRunResult::AllEventsHandled) => {}
+            Ok(WaitSetRunResult::Interrupt) | Ok(WaitSetRunResult::AllEventsHandled) => {
+                if crate::runtime::shutdown::requested() {
+                    return Ok(LoopExit::Signal);
+                }
+            }
             Ok(WaitSetRunResult::StopRequest) => return Ok(LoopExit::Stopped),
             Err(e) => return Err(IpcError::WaitSet(format!("{e:?}"))),
         }

@@ -8,6 +8,7 @@ pub mod clock;
 pub mod config;
 pub mod ipc;
 pub mod logging;
+pub mod shutdown;
 
 pub use clock::{Clock, MonotonicClock, SimClock, monotonic_ns};
 pub use config::{ConfigError, Invalid, IpcConfig, Validate};

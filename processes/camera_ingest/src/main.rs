@@ -271,7 +271,7 @@ impl Output {
         self.heartbeat.beat()?;
         self.next_beat_ns = now + self.period_ns;
         self.log.maybe_log(self.ingest.counters(), now);
-        if ipc.node().wait(Duration::ZERO).is_err() {
+        if ipc.shutdown_requested() {
             tracing::info!("signal: stopping");
             return Ok(false);
         }

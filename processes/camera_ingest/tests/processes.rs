@@ -513,9 +513,11 @@ fn an_image_directory_is_played_at_the_given_rate_and_an_unreadable_image_is_cou
 
     let (seen, _) = collect(&ipc, Duration::from_secs(2), false, &ingest);
 
-    // 20 Hz for 2 s, one slot in five lost to the broken file: about 32 frames.
+    // 20 Hz for 2 s, one slot in five lost to the broken file: about 32 frames. The
+    // upper bound shows the pacing; the lower one is loose, as a loaded 2-core machine
+    // (a parallel build) can starve the player for a while.
     assert!(
-        (20..=45).contains(&seen.len()),
+        (10..=45).contains(&seen.len()),
         "{} frames in 2 s",
         seen.len()
     );

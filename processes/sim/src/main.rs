@@ -210,7 +210,7 @@ fn run(args: &Args) -> Result<()> {
                     return false;
                 }
                 // SIGINT/SIGTERM end the run cleanly.
-                if ipc.node().wait(Duration::ZERO).is_err() {
+                if ipc.shutdown_requested() {
                     tracing::info!("signal: stopping");
                     return false;
                 }
