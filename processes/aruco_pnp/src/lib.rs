@@ -13,7 +13,7 @@ pub mod edges;
 pub mod pose;
 
 use ipc_types::msg::{Header, MAX_MARKERS, PadObservation, PixelEncoding, Pose};
-use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Matrix6, Point3};
 use opencv::core::{Mat, Rect};
 use opencv::imgproc;
 use opencv::prelude::*;
@@ -511,18 +511,4 @@ impl PadEstimator {
     }
 }
 
-/// camera_from_body for a camera looking straight down from `position` (body FLU, m):
-/// optical z = -body z, image up = body forward (optical x = -body y, optical
-/// y = -body x), the mount the simulator's down camera has.
-pub fn down_camera_from_body(position: [f64; 3]) -> Isometry3<f64> {
-    let r = nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::new(
-        0.0, -1.0, 0.0, //
-        -1.0, 0.0, 0.0, //
-        0.0, 0.0, -1.0,
-    ));
-    Isometry3::from_parts(
-        Translation3::new(position[0], position[1], position[2]),
-        UnitQuaternion::from_rotation_matrix(&r),
-    )
-    .inverse()
-}
+pub use optics::down_camera_from_body;

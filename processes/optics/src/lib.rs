@@ -8,7 +8,9 @@
 //! asked to load one.
 
 pub mod calibration;
+pub mod mount;
 pub mod pad;
 
 pub use calibration::{CalibrationError, CameraCalibration};
+pub use mount::down_camera_from_body;
 pub use pad::{Board, MARKER_CELLS, Marker, PadError, PadModel, marker_cells};

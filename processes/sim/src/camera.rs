@@ -173,22 +173,8 @@ impl DownCameraParams {
 
     /// The mount: maps body-frame points into the optical frame.
     pub fn camera_from_body(&self) -> Isometry3<f64> {
-        body_from_down_camera(self.position_in_body_m).inverse()
+        optics::down_camera_from_body(self.position_in_body_m)
     }
-}
-
-/// Pose of a downward-looking optical frame at `position` in the body frame:
-/// optical x = -body y, optical y = -body x, optical z = -body z.
-fn body_from_down_camera(position: [f64; 3]) -> Isometry3<f64> {
-    let r = nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::new(
-        0.0, -1.0, 0.0, //
-        -1.0, 0.0, 0.0, //
-        0.0, 0.0, -1.0,
-    ));
-    Isometry3::from_parts(
-        Translation3::new(position[0], position[1], position[2]),
-        UnitQuaternion::from_rotation_matrix(&r),
-    )
 }
 
 /// The body's true motion at the middle of the exposure.
