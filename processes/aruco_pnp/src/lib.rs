@@ -64,6 +64,9 @@ pub struct Frame<'a> {
     pub encoding: PixelEncoding,
     /// The pixels.
     pub data: &'a [u8],
+    /// True when camera-ingest already undistorted the frame (ideal pinhole with the
+    /// calibration's camera matrix): the lens model must not be applied again.
+    pub undistorted: bool,
 }
 
 /// Where the detector looked.
@@ -199,6 +202,10 @@ impl Default for EstimatorSettings {
 #[derive(Debug)]
 pub struct PadEstimator {
     calibration: CameraCalibration,
+    /// The same camera matrix without distortion, for undistorted frames.
+    pinhole: CameraCalibration,
+    /// Which of the two the current frame uses.
+    undistorted: bool,
     pad: PadModel,
     camera_from_body: Isometry3<f64>,
     settings: EstimatorSettings,
@@ -216,9 +223,13 @@ impl PadEstimator {
         camera_from_body: Isometry3<f64>,
         settings: EstimatorSettings,
     ) -> Result<Self, EstimateError> {
+        let mut pinhole = calibration;
+        pinhole.distortion = [0.0; 5];
         Ok(Self {
             detector: Detector::new(settings.detect)?,
             calibration,
+            pinhole,
+            undistorted: false,
             pad,
             camera_from_body,
             settings,
@@ -253,6 +264,7 @@ impl PadEstimator {
     ) -> Result<Option<Estimate>, EstimateError> {
         self.check(frame)?;
         self.counters.frames += 1;
+        self.undistorted = frame.undistorted;
         if self.track.is_some_and(|t| {
             capture_ns.saturating_sub(t.capture_ns) > self.settings.track_timeout_ns
         }) {
@@ -323,7 +335,7 @@ impl PadEstimator {
         };
         if self.settings.edge_refinement {
             for m in &mut found {
-                if let Some(c) = edges::refine(&gray, &self.calibration, &m.corners) {
+                if let Some(c) = edges::refine(&gray, self.lens(), &m.corners) {
                     m.corners = c;
                 }
             }
@@ -348,12 +360,8 @@ impl PadEstimator {
                 world_from_camera: w.rotation.to_rotation_matrix(),
                 sigma_rad: self.settings.level_sigma_rad,
             });
-        let solution = match pose::solve(
-            &self.calibration,
-            &corners,
-            &self.settings.pose,
-            level.as_ref(),
-        ) {
+        let solution = match pose::solve(self.lens(), &corners, &self.settings.pose, level.as_ref())
+        {
             Ok(s) => s,
             Err(e) => {
                 tracing::debug!(error = %e, "no pose from the detected markers");
@@ -404,6 +412,15 @@ impl PadEstimator {
             return Err(EstimateError::Layout("fewer bytes than the header says"));
         }
         Ok(())
+    }
+
+    /// The lens model of the current frame.
+    fn lens(&self) -> &CameraCalibration {
+        if self.undistorted {
+            &self.pinhole
+        } else {
+            &self.calibration
+        }
     }
 
     /// Only markers of this pad.
@@ -485,7 +502,7 @@ impl PadEstimator {
                 continue;
             }
             for c in self.pad.marker_corners_pad(m.id).ok()? {
-                let p = self.calibration.project(
+                let p = self.lens().project(
                     &track
                         .camera_from_pad
                         .transform_point(&Point3::from(c.coords)),

@@ -240,5 +240,6 @@ fn frame_of<'a>(header: &CameraFrameHeader, payload: &'a [u8]) -> Option<Frame<'
         stride: header.stride,
         encoding: PixelEncoding::from_raw(header.encoding)?,
         data,
+        undistorted: header.undistorted == 1,
     })
 }

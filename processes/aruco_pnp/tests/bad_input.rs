@@ -22,6 +22,7 @@ fn a_frame_of_the_wrong_size_is_an_error_naming_both_sizes() {
         stride: 320,
         encoding: PixelEncoding::Mono8,
         data: &data,
+        undistorted: false,
     };
     let e = est.process(&f, 0, None).unwrap_err();
     assert!(matches!(e, EstimateError::FrameSize { .. }));
@@ -42,6 +43,7 @@ fn a_stride_shorter_than_a_row_or_too_few_bytes_is_a_layout_error() {
         stride: 600,
         encoding: PixelEncoding::Mono8,
         data: &data,
+        undistorted: false,
     };
     assert!(matches!(
         est.process(&short_stride, 0, None),
@@ -109,6 +111,7 @@ fn a_colour_frame_with_padded_rows_is_read_like_the_grey_one() {
         stride: stride as u32,
         encoding: PixelEncoding::Bgr8,
         data: &bgr,
+        undistorted: false,
     };
     let e = est
         .process(&f, 0, None)

@@ -117,6 +117,7 @@ fn ours(seq: &Sequence, pad: &PadModel) -> Result<Run> {
             stride: seq.calibration.width,
             encoding: PixelEncoding::Mono8,
             data,
+            undistorted: false,
         };
         let t = Instant::now();
         let e = est.process(&frame, k as u64 * 33_333_333, Some(body))?;

@@ -71,6 +71,7 @@ pub fn run(args: &DetectArgs) -> Result<bool> {
         stride: w,
         encoding: PixelEncoding::Mono8,
         data,
+        undistorted: false,
     };
     let mut est = PadEstimator::new(
         calibration,

@@ -93,6 +93,7 @@ pub fn frame<'a>(cal: &CameraCalibration, data: &'a [u8]) -> Frame<'a> {
         stride: cal.width,
         encoding: PixelEncoding::Mono8,
         data,
+        undistorted: false,
     }
 }
 
