@@ -1,0 +1,540 @@
+//! The companion side of the link, as a pure state machine: messages and time in,
+//! messages to send and the vehicle state out. The binary owns the socket or serial port
+//! and the clock; tests drive it against the simulator's autopilot in simulated time.
+
+use std::collections::VecDeque;
+
+use ipc_types::msg::{FlightMode, Header, LandedState, LinkHealth, Pose, Setpoint, VehicleState};
+use mavlink::MavHeader;
+use mavlink::dialects::common::{
+    COMMAND_LONG_DATA, HEARTBEAT_DATA, MavAutopilot, MavCmd, MavFrame, MavLandedState, MavMessage,
+    MavModeFlag, MavResult, MavState, MavType, PositionTargetTypemask,
+    SET_POSITION_TARGET_LOCAL_NED_DATA,
+};
+use nalgebra::{UnitQuaternion, Vector3};
+
+use crate::frames::{enu_from_ned, flu_from_frd, ned_from_enu, ned_yaw, world_from_body_enu};
+use crate::mode::{OFFBOARD, flight_mode};
+
+/// What the stack asks of the autopilot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Request {
+    /// Arm the motors.
+    Arm,
+    /// Disarm (refused by PX4 in flight).
+    Disarm,
+    /// AUTO.TAKEOFF to this height above the take-off point, m.
+    Takeoff {
+        /// Height, m.
+        altitude_m: f32,
+    },
+    /// Switch to OFFBOARD: sent only after the setpoint stream has run long enough.
+    Offboard,
+    /// AUTO.LAND where the vehicle is.
+    Land,
+    /// AUTO.LOITER where the vehicle is.
+    Hold,
+}
+
+/// How a request ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Outcome {
+    /// COMMAND_ACK accepted.
+    Accepted,
+    /// COMMAND_ACK with another result: PX4 refused.
+    Rejected(MavResult),
+    /// No answer after every retry.
+    TimedOut,
+    /// OFFBOARD asked but the setpoint stream stopped before it could be sent.
+    NoSetpointStream,
+}
+
+/// Timing and identity of the link.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinkSettings {
+    /// Our MAVLink system id (the autopilot's, as companions use).
+    pub system_id: u8,
+    /// Our component id (MAV_COMP_ID_ONBOARD_COMPUTER = 191).
+    pub component_id: u8,
+    /// The autopilot's system and component ids.
+    pub target: (u8, u8),
+    /// Our heartbeat period, ns (MAVLink: 1 Hz).
+    pub heartbeat_period_ns: u64,
+    /// Setpoint stream period, ns (PX4 needs > 2 Hz; we send 20 Hz or more).
+    pub setpoint_period_ns: u64,
+    /// A setpoint older than this is not streamed (the mission stopped): PX4's
+    /// offboard-loss failsafe must then act, not a stale setpoint, ns.
+    pub setpoint_max_age_ns: u64,
+    /// OFFBOARD is asked only after the stream has run this long, ns (PX4 refuses it
+    /// without a prior stream).
+    pub offboard_stream_ns: u64,
+    /// Wait for a COMMAND_ACK this long before resending, ns.
+    pub command_timeout_ns: u64,
+    /// Sends of one command before it counts as timed out.
+    pub command_attempts: u32,
+    /// The autopilot counts as disconnected without a heartbeat this long, ns.
+    pub heartbeat_timeout_ns: u64,
+    /// Telemetry rates asked of the autopilot: LOCAL_POSITION_NED, ATTITUDE_QUATERNION,
+    /// EXTENDED_SYS_STATE, Hz.
+    pub telemetry_hz: [f32; 3],
+}
+
+impl Default for LinkSettings {
+    fn default() -> Self {
+        Self {
+            system_id: 1,
+            component_id: 191,
+            target: (1, 1),
+            heartbeat_period_ns: 1_000_000_000,
+            setpoint_period_ns: 40_000_000,
+            setpoint_max_age_ns: 300_000_000,
+            offboard_stream_ns: 1_000_000_000,
+            command_timeout_ns: 500_000_000,
+            command_attempts: 4,
+            heartbeat_timeout_ns: 1_500_000_000,
+            telemetry_hz: [30.0, 50.0, 5.0],
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    request: Request,
+    command: MavCmd,
+    params: [f32; 7],
+    sent_ns: u64,
+    attempts: u32,
+}
+
+/// The autopilot's last word on each subject.
+#[derive(Debug, Clone, Copy, Default)]
+struct Telemetry {
+    position: Option<(Vector3<f64>, Vector3<f64>)>,
+    attitude: Option<(UnitQuaternion<f64>, Vector3<f64>)>,
+    custom_mode: u32,
+    armed: bool,
+    landed: Option<MavLandedState>,
+    last_heartbeat_ns: Option<u64>,
+    last_telemetry_ns: u64,
+    last_seq: Option<u8>,
+    lost: u64,
+}
+
+/// What the link knows of the autopilot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Status {
+    /// Heartbeats arrive.
+    pub connected: bool,
+    /// Armed, per the heartbeat.
+    pub armed: bool,
+    /// Flight mode, per the heartbeat (OFFBOARD counts only when this says so).
+    pub mode: FlightMode,
+    /// Landed state, per EXTENDED_SYS_STATE.
+    pub landed: LandedState,
+    /// A request is waiting for its answer.
+    pub busy: bool,
+}
+
+/// The link.
+#[derive(Debug, Clone)]
+pub struct Px4Link {
+    settings: LinkSettings,
+    telemetry: Telemetry,
+    pending: Option<Pending>,
+    queue: VecDeque<Request>,
+    outcomes: Vec<(Request, Outcome)>,
+    setpoint: Option<(u64, Setpoint)>,
+    stream_since_ns: Option<u64>,
+    last_setpoint_sent_ns: Option<u64>,
+    last_heartbeat_sent_ns: Option<u64>,
+    intervals_requested: bool,
+    parse_errors: u32,
+    state_seq: u64,
+    out: Vec<MavMessage>,
+}
+
+impl Px4Link {
+    /// A link that has heard nothing yet.
+    pub fn new(settings: LinkSettings) -> Self {
+        Self {
+            settings,
+            telemetry: Telemetry::default(),
+            pending: None,
+            queue: VecDeque::new(),
+            outcomes: Vec::new(),
+            setpoint: None,
+            stream_since_ns: None,
+            last_setpoint_sent_ns: None,
+            last_heartbeat_sent_ns: None,
+            intervals_requested: false,
+            parse_errors: 0,
+            state_seq: 0,
+            out: Vec::new(),
+        }
+    }
+
+    /// The MAVLink header our messages carry (the sequence is the transport's business).
+    pub fn header(&self, sequence: u8) -> MavHeader {
+        MavHeader {
+            system_id: u32::from(self.settings.system_id),
+            component_id: self.settings.component_id,
+            sequence,
+        }
+    }
+
+    /// Counts a datagram or frame that did not parse (reported in link health).
+    pub fn parse_error(&mut self) {
+        self.parse_errors = self.parse_errors.saturating_add(1);
+    }
+
+    /// Queues a request; requests go out one at a time, in order.
+    pub fn request(&mut self, request: Request) {
+        self.queue.push_back(request);
+    }
+
+    /// Drops every queued and pending request (an abort must not wait behind them).
+    pub fn clear_requests(&mut self) {
+        self.queue.clear();
+        self.pending = None;
+    }
+
+    /// Requests that ended since the last call, with how.
+    pub fn take_outcomes(&mut self) -> Vec<(Request, Outcome)> {
+        std::mem::take(&mut self.outcomes)
+    }
+
+    /// The setpoint to stream (ENU), received at `now_ns`. A non-finite field is
+    /// dropped from the setpoint (its valid bit cleared), never sent.
+    pub fn set_setpoint(&mut self, now_ns: u64, setpoint: &Setpoint) {
+        let mut sp = *setpoint;
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        if !finite(&sp.position) {
+            sp.valid &= !Setpoint::POSITION;
+        }
+        if !finite(&sp.velocity) {
+            sp.valid &= !Setpoint::VELOCITY;
+        }
+        if !finite(&sp.acceleration) {
+            sp.valid &= !Setpoint::ACCELERATION;
+        }
+        if !sp.yaw.is_finite() {
+            sp.valid &= !Setpoint::YAW;
+        }
+        if sp.valid & (Setpoint::POSITION | Setpoint::VELOCITY) == 0 {
+            return;
+        }
+        self.setpoint = Some((now_ns, sp));
+    }
+
+    /// Takes in one message from the autopilot, received at `now_ns`.
+    pub fn on_message(&mut self, now_ns: u64, header: &MavHeader, msg: &MavMessage) {
+        let (sys, comp) = self.settings.target;
+        if (header.system_id, header.component_id) != (u32::from(sys), comp) {
+            return;
+        }
+        if let Some(last) = self.telemetry.last_seq {
+            let gap = header.sequence.wrapping_sub(last).wrapping_sub(1);
+            // A big jump is a restart of the autopilot rather than 200 lost messages.
+            if gap < 128 {
+                self.telemetry.lost += u64::from(gap);
+            }
+        }
+        self.telemetry.last_seq = Some(header.sequence);
+        match msg {
+            MavMessage::HEARTBEAT(h) => {
+                if h.autopilot == MavAutopilot::MAV_AUTOPILOT_INVALID {
+                    return;
+                }
+                self.telemetry.custom_mode = h.custom_mode;
+                self.telemetry.armed = h
+                    .base_mode
+                    .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+                self.telemetry.last_heartbeat_ns = Some(now_ns);
+            }
+            MavMessage::LOCAL_POSITION_NED(p) => {
+                let pos = enu_from_ned([f64::from(p.x), f64::from(p.y), f64::from(p.z)]);
+                let vel = enu_from_ned([f64::from(p.vx), f64::from(p.vy), f64::from(p.vz)]);
+                if pos.iter().chain(vel.iter()).all(|v| v.is_finite()) {
+                    self.telemetry.position = Some((pos, vel));
+                    self.telemetry.last_telemetry_ns = now_ns;
+                }
+            }
+            MavMessage::ATTITUDE_QUATERNION(a) => {
+                if let Some(q) = world_from_body_enu([a.q1, a.q2, a.q3, a.q4]) {
+                    let rates = flu_from_frd([a.rollspeed, a.pitchspeed, a.yawspeed]);
+                    if rates.iter().all(|v| v.is_finite()) {
+                        self.telemetry.attitude = Some((q, rates));
+                        self.telemetry.last_telemetry_ns = now_ns;
+                    }
+                }
+            }
+            MavMessage::EXTENDED_SYS_STATE(s) => self.telemetry.landed = Some(s.landed_state),
+            MavMessage::COMMAND_ACK(ack) => self.on_ack(ack.command, ack.result),
+            _ => {}
+        }
+    }
+
+    fn on_ack(&mut self, command: MavCmd, result: MavResult) {
+        let Some(p) = self.pending else { return };
+        if p.command != command || result == MavResult::MAV_RESULT_IN_PROGRESS {
+            return;
+        }
+        let outcome = if result == MavResult::MAV_RESULT_ACCEPTED {
+            Outcome::Accepted
+        } else {
+            Outcome::Rejected(result)
+        };
+        self.outcomes.push((p.request, outcome));
+        self.pending = None;
+    }
+
+    /// What the link knows now.
+    pub fn status(&self, now_ns: u64) -> Status {
+        Status {
+            connected: self.connected(now_ns),
+            armed: self.telemetry.armed,
+            mode: flight_mode(self.telemetry.custom_mode),
+            landed: match self.telemetry.landed {
+                Some(MavLandedState::MAV_LANDED_STATE_ON_GROUND) => LandedState::OnGround,
+                Some(MavLandedState::MAV_LANDED_STATE_IN_AIR) => LandedState::InAir,
+                Some(MavLandedState::MAV_LANDED_STATE_TAKEOFF) => LandedState::Takeoff,
+                Some(MavLandedState::MAV_LANDED_STATE_LANDING) => LandedState::Landing,
+                _ => LandedState::Unknown,
+            },
+            busy: self.pending.is_some() || !self.queue.is_empty(),
+        }
+    }
+
+    fn connected(&self, now_ns: u64) -> bool {
+        self.telemetry
+            .last_heartbeat_ns
+            .is_some_and(|t| now_ns.saturating_sub(t) <= self.settings.heartbeat_timeout_ns)
+    }
+
+    /// The vehicle state in ENU/FLU, once both position and attitude have arrived.
+    pub fn vehicle_state(&self, now_ns: u64) -> Option<VehicleState> {
+        let (pos, vel) = self.telemetry.position?;
+        let (q, rates) = self.telemetry.attitude?;
+        let status = self.status(now_ns);
+        Some(VehicleState {
+            msg: Header {
+                seq: self.state_seq,
+                ..Header::captured_at(self.telemetry.last_telemetry_ns)
+            },
+            world_from_body: Pose {
+                translation: [pos.x, pos.y, pos.z],
+                rotation_xyzw: [q.i, q.j, q.k, q.w],
+            },
+            velocity: [vel.x, vel.y, vel.z],
+            body_rates: [rates.x, rates.y, rates.z],
+            armed: u32::from(status.armed),
+            flight_mode: status.mode as u32,
+            landed_state: status.landed as u32,
+            reserved: 0,
+            link: LinkHealth {
+                connected: u32::from(status.connected),
+                parse_errors: self.parse_errors,
+                last_heartbeat_ns: self.telemetry.last_heartbeat_ns.unwrap_or(0),
+                last_telemetry_ns: self.telemetry.last_telemetry_ns,
+                messages_lost: self.telemetry.lost,
+            },
+        })
+    }
+
+    /// Advances time: returns what to send now (heartbeat, telemetry rate requests,
+    /// setpoints, commands and their retries).
+    pub fn poll(&mut self, now_ns: u64) -> &[MavMessage] {
+        self.out.clear();
+        let s = self.settings;
+        if self
+            .last_heartbeat_sent_ns
+            .is_none_or(|t| now_ns.saturating_sub(t) >= s.heartbeat_period_ns)
+        {
+            self.last_heartbeat_sent_ns = Some(now_ns);
+            self.out.push(MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                custom_mode: 0,
+                mavtype: MavType::MAV_TYPE_ONBOARD_CONTROLLER,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+                base_mode: MavModeFlag::empty(),
+                system_status: MavState::MAV_STATE_ACTIVE,
+                mavlink_version: 3,
+            }));
+        }
+        if !self.intervals_requested && self.connected(now_ns) {
+            self.intervals_requested = true;
+            for (id, hz) in [32u32, 31, 245].iter().zip(s.telemetry_hz) {
+                let interval_us = if hz > 0.0 { 1e6 / hz } else { -1.0 };
+                self.out.push(self.command_long(
+                    MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                    [*id as f32, interval_us, 0.0, 0.0, 0.0, 0.0, 0.0],
+                ));
+            }
+        }
+        self.stream(now_ns);
+        self.commands(now_ns);
+        &self.out
+    }
+
+    fn stream(&mut self, now_ns: u64) {
+        let s = self.settings;
+        let fresh = self
+            .setpoint
+            .filter(|(t, _)| now_ns.saturating_sub(*t) <= s.setpoint_max_age_ns);
+        let Some((_, sp)) = fresh else {
+            self.stream_since_ns = None;
+            return;
+        };
+        if self
+            .last_setpoint_sent_ns
+            .is_some_and(|t| now_ns.saturating_sub(t) < s.setpoint_period_ns)
+        {
+            return;
+        }
+        self.stream_since_ns.get_or_insert(now_ns);
+        self.last_setpoint_sent_ns = Some(now_ns);
+        let mut mask = PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE;
+        if sp.valid & Setpoint::POSITION == 0 {
+            mask |= PositionTargetTypemask::POSITION_TARGET_TYPEMASK_X_IGNORE
+                | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_Y_IGNORE
+                | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_Z_IGNORE;
+        }
+        if sp.valid & Setpoint::VELOCITY == 0 {
+            mask |= PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
+                | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
+                | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE;
+        }
+        if sp.valid & Setpoint::ACCELERATION == 0 {
+            mask |= PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
+                | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AY_IGNORE
+                | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE;
+        }
+        if sp.valid & Setpoint::YAW == 0 {
+            mask |= PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_IGNORE;
+        }
+        // Ignored fields go out as 0, never NaN.
+        let pick = |bit: u32, v: &[f64; 3]| {
+            if sp.valid & bit != 0 {
+                ned_from_enu(&Vector3::from(*v)).map(|x| x as f32)
+            } else {
+                [0.0; 3]
+            }
+        };
+        let (p, v, a) = (
+            pick(Setpoint::POSITION, &sp.position),
+            pick(Setpoint::VELOCITY, &sp.velocity),
+            pick(Setpoint::ACCELERATION, &sp.acceleration),
+        );
+        let yaw = if sp.valid & Setpoint::YAW != 0 {
+            ned_yaw(sp.yaw) as f32
+        } else {
+            0.0
+        };
+        self.out.push(MavMessage::SET_POSITION_TARGET_LOCAL_NED(
+            SET_POSITION_TARGET_LOCAL_NED_DATA {
+                time_boot_ms: (now_ns / 1_000_000) as u32,
+                x: p[0],
+                y: p[1],
+                z: p[2],
+                vx: v[0],
+                vy: v[1],
+                vz: v[2],
+                afx: a[0],
+                afy: a[1],
+                afz: a[2],
+                yaw,
+                yaw_rate: 0.0,
+                type_mask: mask,
+                target_system: s.target.0,
+                target_component: s.target.1,
+                coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+            },
+        ));
+    }
+
+    fn commands(&mut self, now_ns: u64) {
+        let s = self.settings;
+        if let Some(mut p) = self.pending {
+            if now_ns.saturating_sub(p.sent_ns) < s.command_timeout_ns {
+                return;
+            }
+            if p.attempts >= s.command_attempts {
+                self.outcomes.push((p.request, Outcome::TimedOut));
+                self.pending = None;
+            } else {
+                p.attempts += 1;
+                p.sent_ns = now_ns;
+                self.pending = Some(p);
+                self.out
+                    .push(self.command_long_confirm(p.command, p.params, p.attempts - 1));
+                return;
+            }
+        }
+        let Some(&next) = self.queue.front() else {
+            return;
+        };
+        if next == Request::Offboard {
+            match self.stream_since_ns {
+                Some(t) if now_ns.saturating_sub(t) >= s.offboard_stream_ns => {}
+                Some(_) => return, // wait for the stream to have run long enough
+                None if self.setpoint.is_some() => return,
+                None => {
+                    self.queue.pop_front();
+                    self.outcomes.push((next, Outcome::NoSetpointStream));
+                    return;
+                }
+            }
+        }
+        self.queue.pop_front();
+        let (command, params) = match next {
+            Request::Arm => (
+                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            ),
+            Request::Disarm => (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]),
+            Request::Takeoff { altitude_m } => (
+                MavCmd::MAV_CMD_NAV_TAKEOFF,
+                [f32::NAN, 0.0, 0.0, f32::NAN, f32::NAN, f32::NAN, altitude_m],
+            ),
+            Request::Offboard => (
+                MavCmd::MAV_CMD_DO_SET_MODE,
+                [OFFBOARD.0, OFFBOARD.1, OFFBOARD.2, 0.0, 0.0, 0.0, 0.0],
+            ),
+            Request::Land => (
+                MavCmd::MAV_CMD_NAV_LAND,
+                [0.0, 0.0, 0.0, f32::NAN, f32::NAN, f32::NAN, f32::NAN],
+            ),
+            Request::Hold => (
+                MavCmd::MAV_CMD_DO_SET_MODE,
+                [1.0, 4.0, 3.0, 0.0, 0.0, 0.0, 0.0],
+            ),
+        };
+        self.pending = Some(Pending {
+            request: next,
+            command,
+            params,
+            sent_ns: now_ns,
+            attempts: 1,
+        });
+        self.out.push(self.command_long(command, params));
+    }
+
+    fn command_long(&self, command: MavCmd, p: [f32; 7]) -> MavMessage {
+        self.command_long_confirm(command, p, 0)
+    }
+
+    fn command_long_confirm(&self, command: MavCmd, p: [f32; 7], confirmation: u32) -> MavMessage {
+        MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            param1: p[0],
+            param2: p[1],
+            param3: p[2],
+            param4: p[3],
+            param5: p[4],
+            param6: p[5],
+            param7: p[6],
+            command,
+            target_system: self.settings.target.0,
+            target_component: self.settings.target.1,
+            confirmation: confirmation.min(255) as u8,
+        })
+    }
+}
