@@ -771,6 +771,92 @@ impl SafetyAction {
     }
 }
 
+/// What the mission asks of the autopilot through px4-link.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LinkRequestKind {
+    /// Arm the motors.
+    Arm = 1,
+    /// Disarm.
+    Disarm = 2,
+    /// AUTO.TAKEOFF to `altitude_m`.
+    Takeoff = 3,
+    /// OFFBOARD (px4-link sends it once its setpoint stream has run 1 s).
+    Offboard = 4,
+    /// AUTO.LAND.
+    Land = 5,
+    /// AUTO.LOITER.
+    Hold = 6,
+}
+
+impl LinkRequestKind {
+    /// Decodes a raw kind; `None` for a value no kind has (the request is refused, not
+    /// guessed: arming by accident is not a safe reading).
+    pub fn from_raw(raw: u32) -> Option<Self> {
+        Some(match raw {
+            1 => Self::Arm,
+            2 => Self::Disarm,
+            3 => Self::Takeoff,
+            4 => Self::Offboard,
+            5 => Self::Land,
+            6 => Self::Hold,
+            _ => return None,
+        })
+    }
+}
+
+/// A request to px4-link (fsm -> px4-link); answered by a [`LinkOutcome`] with its id.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::LinkRequest/v1")]
+pub struct LinkRequest {
+    /// Sequence, issue time, stage stamps.
+    pub msg: Header,
+    /// Chosen by the requester; echoed in the outcome.
+    pub id: u64,
+    /// Raw [`LinkRequestKind`].
+    pub kind: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+    /// Take-off height, m (Takeoff only).
+    pub altitude_m: f64,
+}
+
+/// How a [`LinkRequest`] ended.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LinkOutcomeKind {
+    /// The autopilot accepted it.
+    Accepted = 1,
+    /// The autopilot refused it (`result` holds PX4's MAV_RESULT).
+    Rejected = 2,
+    /// No answer after every retry.
+    TimedOut = 3,
+    /// OFFBOARD asked without a setpoint stream.
+    NoSetpointStream = 4,
+    /// px4-link could not read the request.
+    Invalid = 5,
+}
+
+/// px4-link's answer to a [`LinkRequest`].
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::LinkOutcome/v1")]
+pub struct LinkOutcome {
+    /// Sequence, time, stage stamps.
+    pub msg: Header,
+    /// The request's id.
+    pub id: u64,
+    /// Raw [`LinkRequestKind`] of the request.
+    pub kind: u32,
+    /// Raw [`LinkOutcomeKind`].
+    pub outcome: u32,
+    /// The autopilot's MAV_RESULT when it answered.
+    pub result: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+}
+
 /// An order from the watchdog or an operator, executed at once by px4-link and fsm.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]

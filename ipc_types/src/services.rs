@@ -27,6 +27,10 @@ pub const PLANNER_GOAL: &str = "landing/planner/goal";
 pub const PLANNER_TRAJECTORY: &str = "landing/planner/trajectory";
 /// Planning statistics (planner).
 pub const PLANNER_STATS: &str = "landing/planner/stats";
+/// Requests to the autopilot (fsm -> px4-link).
+pub const PX4_REQUEST: &str = "landing/px4/request";
+/// Outcomes of those requests (px4-link -> fsm).
+pub const PX4_OUTCOME: &str = "landing/px4/outcome";
 /// Setpoints for the autopilot (fsm).
 pub const FSM_SETPOINT: &str = "landing/fsm/setpoint";
 /// Mission status (fsm).
@@ -58,6 +62,8 @@ pub const PIPELINE_TOPICS: &[&str] = &[
     PLANNER_GOAL,
     PLANNER_TRAJECTORY,
     PLANNER_STATS,
+    PX4_REQUEST,
+    PX4_OUTCOME,
     FSM_SETPOINT,
     FSM_STATUS,
     SAFETY_COMMAND,

@@ -4,6 +4,8 @@
 //! messages and the vehicle state out); the `px4-link` binary owns the UDP socket or
 //! serial port and the clock. NED and FRD appear only in this crate ([`frames`]).
 
+pub mod codec;
+pub mod config;
 pub mod frames;
 pub mod link;
 pub mod mode;

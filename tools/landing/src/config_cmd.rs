@@ -17,6 +17,9 @@ pub struct StackConfig {
     /// The pad estimator.
     #[serde(default)]
     pub aruco_pnp: aruco_pnp::ArucoConfig,
+    /// The autopilot link.
+    #[serde(default)]
+    pub px4_link: px4_link::config::Px4LinkConfig,
     /// camera-ingest: where frames come from, the calibration, undistortion.
     #[serde(default)]
     pub camera_ingest: Option<CameraIngestConfig>,
@@ -28,6 +31,7 @@ impl Validate for StackConfig {
         self.aruco_pnp
             .validate()
             .map_err(|e| e.under("aruco_pnp"))?;
+        self.px4_link.validate().map_err(|e| e.under("px4_link"))?;
         if let Some(c) = &self.camera_ingest {
             c.validate().map_err(|e| e.under("camera_ingest"))?;
         }

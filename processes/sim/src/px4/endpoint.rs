@@ -17,9 +17,8 @@ use std::net::{SocketAddr, UdpSocket};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
-use mavlink::error::MessageReadError;
-use mavlink::{MavHeader, MavlinkReader};
 use serde::Deserialize;
 use thiserror::Error;
 
@@ -223,25 +222,7 @@ impl Endpoint {
     }
 }
 
-/// Decodes every MAVLink (1 or 2) frame in one datagram into `out`; returns
-/// how many frames failed to parse. Bytes that are not a frame are skipped.
-pub fn decode_datagram(data: &[u8], out: &mut Vec<(MavHeader, MavMessage)>) -> u64 {
-    let mut reader = MavlinkReader::new(data);
-    let mut errors = 0;
-    // Each iteration consumes at least one frame or ends the datagram; the
-    // bound only guards against a decoder that would not advance.
-    for _ in 0..=data.len() {
-        match reader.read_any_message::<MavMessage>() {
-            Ok(m) => out.push(m),
-            Err(MessageReadError::Parse(e)) => {
-                errors += 1;
-                tracing::debug!(error = %e, "MAVLink parse error");
-            }
-            Err(_) => break,
-        }
-    }
-    errors
-}
+pub use px4_link::codec::decode_datagram;
 
 /// A simulated PX4 vehicle reachable over UDP: the lockstep [`Simulator`] (world +
 /// commander + sensor schedules) behind an [`Endpoint`].

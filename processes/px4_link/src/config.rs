@@ -1,0 +1,102 @@
+//! The `[px4_link]` section of the stack configuration.
+
+use std::net::SocketAddr;
+
+use ipc_types::runtime::config::{Invalid, Validate, check_range};
+use serde::Deserialize;
+
+use crate::LinkSettings;
+
+/// Where the autopilot is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LinkAddress {
+    /// UDP: listen here; answer whoever the autopilot's datagrams come from.
+    Udp(SocketAddr),
+}
+
+/// What px4-link reads from `landing.toml`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Px4LinkConfig {
+    /// `udp:HOST:PORT` to listen on (PX4 SITL and the simulator send to 14540).
+    pub link: String,
+    /// Where to send before the autopilot has been heard (the simulator and PX4 SITL
+    /// listen on 14580).
+    pub remote: String,
+    /// Setpoint stream rate, Hz (PX4 needs more than 2 Hz).
+    pub setpoint_rate_hz: f64,
+    /// Wait this long for a COMMAND_ACK before resending, ms.
+    pub command_timeout_ms: u64,
+    /// Sends of one command before it counts as timed out.
+    pub command_attempts: u32,
+    /// The autopilot counts as disconnected without a heartbeat this long, ms.
+    pub heartbeat_timeout_ms: u64,
+}
+
+impl Default for Px4LinkConfig {
+    fn default() -> Self {
+        Self {
+            link: "udp:127.0.0.1:14540".into(),
+            remote: "127.0.0.1:14580".into(),
+            setpoint_rate_hz: 25.0,
+            command_timeout_ms: 500,
+            command_attempts: 4,
+            heartbeat_timeout_ms: 1500,
+        }
+    }
+}
+
+/// Links this build can open.
+pub const ALLOWED_LINKS: &str = "udp:HOST:PORT (serial:/dev/ttyX:BAUD is not built yet)";
+
+impl Px4LinkConfig {
+    /// The link address, or what is wrong with it.
+    pub fn address(&self) -> Result<LinkAddress, Invalid> {
+        match self.link.split_once(':') {
+            Some(("udp", addr)) => addr.parse().map(LinkAddress::Udp).map_err(|_| {
+                Invalid::new(
+                    "link",
+                    format!("`{}`: not HOST:PORT (allowed: {ALLOWED_LINKS})", self.link),
+                )
+            }),
+            _ => Err(Invalid::new(
+                "link",
+                format!("`{}` is not allowed (allowed: {ALLOWED_LINKS})", self.link),
+            )),
+        }
+    }
+
+    /// The first peer to send to.
+    pub fn remote_address(&self) -> Result<SocketAddr, Invalid> {
+        self.remote
+            .parse()
+            .map_err(|_| Invalid::new("remote", format!("`{}`: not HOST:PORT", self.remote)))
+    }
+
+    /// The link settings these values give.
+    pub fn settings(&self) -> LinkSettings {
+        LinkSettings {
+            setpoint_period_ns: (1e9 / self.setpoint_rate_hz.max(1.0)) as u64,
+            command_timeout_ns: self.command_timeout_ms * 1_000_000,
+            command_attempts: self.command_attempts,
+            heartbeat_timeout_ns: self.heartbeat_timeout_ms * 1_000_000,
+            ..LinkSettings::default()
+        }
+    }
+}
+
+impl Validate for Px4LinkConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        self.address()?;
+        self.remote_address()?;
+        check_range("setpoint_rate_hz", self.setpoint_rate_hz, 5.0, 200.0)?;
+        check_range("command_timeout_ms", self.command_timeout_ms, 50, 10_000)?;
+        check_range("command_attempts", self.command_attempts, 1, 20)?;
+        check_range(
+            "heartbeat_timeout_ms",
+            self.heartbeat_timeout_ms,
+            300,
+            60_000,
+        )
+    }
+}

@@ -1,0 +1,169 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! px4-link as a process against the `sim` process over real UDP, driven through
+//! iceoryx2 as fsm and the watchdog would: requests answered, the state climbing in ENU,
+//! a safety order landing it at once, a clean stop on SIGTERM.
+//!
+//! The `sim` binary is found next to this test's executable (`target/release/sim`);
+//! `cargo test --release --workspace` builds it.
+
+use std::net::UdpSocket;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command};
+use std::time::{Duration, Instant};
+
+use ipc_types::msg::{
+    FlightMode, Header, LinkOutcome, LinkOutcomeKind, LinkRequest, LinkRequestKind, SafetyAction,
+    SafetyCommand, Text, VehicleState,
+};
+use ipc_types::runtime::{Ipc, IpcPrefix};
+use ipc_types::services;
+
+fn sim_binary() -> PathBuf {
+    let exe = std::env::current_exe().unwrap();
+    let dir = exe.parent().and_then(Path::parent).unwrap();
+    let sim = dir.join("sim");
+    assert!(
+        sim.is_file(),
+        "{} missing: run cargo test --release --workspace",
+        sim.display()
+    );
+    sim
+}
+
+struct Kill(Child);
+
+impl Drop for Kill {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn free_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+#[test]
+fn px4_link_flies_the_sim_process_on_requests_and_lands_it_on_a_safety_order() {
+    let (sim_port, link_port) = (free_port(), free_port());
+    let prefix = IpcPrefix::unique("px4link");
+    let _sim = Kill(
+        Command::new(sim_binary())
+            .args(["--scenario", "indoor-static", "--duration-s", "120"])
+            .args(["--mavlink-listen", &format!("127.0.0.1:{sim_port}")])
+            .args(["--mavlink-remote", &format!("127.0.0.1:{link_port}")])
+            .args(["--ipc-prefix", prefix.as_str()])
+            .env("LANDING_LOG", "warn")
+            .spawn()
+            .unwrap(),
+    );
+    let mut link = Kill(
+        Command::new(env!("CARGO_BIN_EXE_px4-link"))
+            .args(["--link", &format!("udp:127.0.0.1:{link_port}")])
+            .args(["--remote", &format!("127.0.0.1:{sim_port}")])
+            .args(["--ipc-prefix", prefix.as_str()])
+            .env("LANDING_LOG", "warn")
+            .spawn()
+            .unwrap(),
+    );
+    let ipc = Ipc::open("test-fsm", &prefix).unwrap();
+    let states = ipc
+        .subscriber::<VehicleState>(services::VEHICLE_STATE)
+        .unwrap();
+    let outcomes = ipc
+        .subscriber::<LinkOutcome>(services::PX4_OUTCOME)
+        .unwrap();
+    let mut requests = ipc.publisher::<LinkRequest>(services::PX4_REQUEST).unwrap();
+    let mut safety = ipc
+        .publisher::<SafetyCommand>(services::SAFETY_COMMAND)
+        .unwrap();
+
+    let latest = |timeout: Duration| -> Option<VehicleState> {
+        let end = Instant::now() + timeout;
+        let mut last = None;
+        while Instant::now() < end {
+            while let Ok(Some(s)) = states.receive() {
+                last = Some(*s.payload());
+            }
+            if last.is_some() {
+                return last;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        last
+    };
+    let state = latest(Duration::from_secs(10)).expect("vehicle state from px4-link");
+    assert_eq!(state.link.connected, 1);
+
+    let ask = |requests: &mut ipc_types::runtime::Publisher<LinkRequest>, id, kind: u32| {
+        let r = LinkRequest {
+            msg: Header::default(),
+            id,
+            kind,
+            reserved: 0,
+            altitude_m: 2.0,
+        };
+        requests.send(r.msg, &r).unwrap();
+    };
+    let answer = |id: u64| -> LinkOutcome {
+        let end = Instant::now() + Duration::from_secs(5);
+        while Instant::now() < end {
+            while let Ok(Some(o)) = outcomes.receive() {
+                if o.payload().id == id {
+                    return *o.payload();
+                }
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        panic!("no outcome for request {id}");
+    };
+    ask(&mut requests, 1, LinkRequestKind::Arm as u32);
+    assert_eq!(answer(1).outcome, LinkOutcomeKind::Accepted as u32);
+    ask(&mut requests, 2, LinkRequestKind::Takeoff as u32);
+    assert_eq!(answer(2).outcome, LinkOutcomeKind::Accepted as u32);
+    // An unreadable request is refused, not guessed.
+    ask(&mut requests, 3, 99);
+    assert_eq!(answer(3).outcome, LinkOutcomeKind::Invalid as u32);
+
+    let end = Instant::now() + Duration::from_secs(15);
+    let mut height = 0.0;
+    while Instant::now() < end && height < 1.7 {
+        if let Some(s) = latest(Duration::from_millis(200)) {
+            height = s.world_from_body.translation[2];
+        }
+    }
+    assert!(height >= 1.7, "climbed to {height} m (ENU up)");
+
+    let order = SafetyCommand {
+        msg: Header::default(),
+        action: SafetyAction::SafeLand as u32,
+        reserved: 0,
+        source: Text::default(),
+        reason: Text::default(),
+    };
+    safety.send(order.msg, &order).unwrap();
+    let end = Instant::now() + Duration::from_secs(5);
+    let mut mode = FlightMode::Unknown;
+    while Instant::now() < end && mode != FlightMode::Land {
+        if let Some(s) = latest(Duration::from_millis(200)) {
+            mode = FlightMode::from_raw(s.flight_mode);
+        }
+    }
+    assert_eq!(mode, FlightMode::Land);
+
+    // SAFETY: signalling our own child.
+    unsafe { libc::kill(link.0.id() as i32, libc::SIGTERM) };
+    let end = Instant::now() + Duration::from_secs(3);
+    let status = loop {
+        if let Some(s) = link.0.try_wait().unwrap() {
+            break s;
+        }
+        assert!(Instant::now() < end, "px4-link ignored SIGTERM");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(status.success(), "{status}");
+}
