@@ -1,27 +1,24 @@
 //! `landing bench perception`: sim -> camera-ingest -> aruco-pnp as three OS processes
 //! over iceoryx2; observation rate and frame-to-observation latency.
 //!
-//! The simulator is flown over MAVLink (arm, take off to 2 m next to the indoor pad) so
-//! the camera sees the pad; once observations flow they are received here for
-//! `--seconds` and timed from the stamps the processes leave in each header: the frame's
-//! publication by camera-ingest to the observation's arrival at a consumer (this one).
+//! px4-link runs too, so aruco-pnp has the vehicle state and publishes world poses; the
+//! vehicle is flown through px4-link's request topic (arm, take off to 2 m next to the
+//! indoor pad) so the camera sees the pad. Once observations flow they are received here
+//! for `--seconds` and timed from the stamps the processes leave in each header: the
+//! frame's publication by camera-ingest to the observation's arrival at a consumer (this
+//! one).
 
-use std::net::{SocketAddr, UdpSocket};
+use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use clap::Args;
-use ipc_types::msg::{PadObservation, Stage};
+use ipc_types::msg::{Header, LinkRequest, LinkRequestKind, PadObservation, Stage};
 use ipc_types::runtime::ipc::{Wake, run_wait_loop};
 use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
-use mavlink::MavHeader;
-use mavlink::dialects::common::{
-    COMMAND_LONG_DATA, HEARTBEAT_DATA, MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavState,
-    MavType,
-};
 use serde_json::json;
 
 use crate::stats::percentile;
@@ -80,35 +77,6 @@ fn binary(name: &str) -> Result<PathBuf> {
     Ok(p)
 }
 
-fn mavlink_command(sock: &UdpSocket, to: SocketAddr, seq: &mut u8, msg: &MavMessage) -> Result<()> {
-    let header = MavHeader {
-        system_id: 1,
-        component_id: 191,
-        sequence: *seq,
-    };
-    *seq = seq.wrapping_add(1);
-    let mut buf = Vec::new();
-    mavlink::write_v2_msg(&mut buf, header, msg)?;
-    sock.send_to(&buf, to)?;
-    Ok(())
-}
-
-fn command(cmd: MavCmd, param1: f32, param7: f32) -> MavMessage {
-    MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-        param1,
-        param2: 0.0,
-        param3: 0.0,
-        param4: f32::NAN,
-        param5: f32::NAN,
-        param6: f32::NAN,
-        param7,
-        command: cmd,
-        target_system: 1,
-        target_component: 1,
-        confirmation: 0,
-    })
-}
-
 /// Runs the benchmark and prints the figures.
 pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
     if !(args.seconds.is_finite() && (1.0..=600.0).contains(&args.seconds)) {
@@ -121,16 +89,17 @@ pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
         Some(p) => IpcPrefix::new(p)?,
         None => IpcPrefix::unique("perception"),
     };
-    let (sim, ingest, aruco) = (
+    let (sim, ingest, aruco, link) = (
         binary("sim")?,
         binary("camera-ingest")?,
         binary("aruco-pnp")?,
+        binary("px4-link")?,
     );
-    let companion = UdpSocket::bind("127.0.0.1:0")?;
-    let sim_port = UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port();
-    let sim_addr: SocketAddr = format!("127.0.0.1:{sim_port}").parse()?;
+    let port = || -> Result<u16> { Ok(UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port()) };
+    let (sim_port, link_port) = (port()?, port()?);
     let ipc = Ipc::open("bench-perception", &prefix)?;
     let observations = ipc.subscriber::<PadObservation>(services::PAD_OBSERVATION)?;
+    let mut requests = ipc.publisher::<LinkRequest>(services::PX4_REQUEST)?;
     let spawn = |path: &Path, extra: &[&str]| -> Result<Child> {
         Command::new(path)
             .args(extra)
@@ -141,7 +110,7 @@ pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
             .with_context(|| format!("starting {}", path.display()))
     };
     eprintln!(
-        "bench perception: starting sim ({}), camera-ingest, aruco-pnp...",
+        "bench perception: starting sim ({}), camera-ingest, aruco-pnp, px4-link...",
         args.scenario
     );
     let mut children = Children(Vec::new());
@@ -153,38 +122,34 @@ pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
             "--duration-s",
             "600",
             "--mavlink-listen",
-            &sim_addr.to_string(),
+            &format!("127.0.0.1:{sim_port}"),
             "--mavlink-remote",
-            &companion.local_addr()?.to_string(),
+            &format!("127.0.0.1:{link_port}"),
         ],
     )?);
     children.0.push(spawn(&ingest, &["--source", "sim"])?);
     children.0.push(spawn(&aruco, &[])?);
-    std::thread::sleep(Duration::from_millis(700));
-    eprintln!("bench perception: arming and taking off to 2 m over MAVLink...");
-    let mut seq = 0u8;
-    let heartbeat = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-        custom_mode: 0,
-        mavtype: MavType::MAV_TYPE_ONBOARD_CONTROLLER,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
-        base_mode: MavModeFlag::empty(),
-        system_status: MavState::MAV_STATE_ACTIVE,
-        mavlink_version: 3,
-    });
-    mavlink_command(&companion, sim_addr, &mut seq, &heartbeat)?;
-    mavlink_command(
-        &companion,
-        sim_addr,
-        &mut seq,
-        &command(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0),
-    )?;
-    std::thread::sleep(Duration::from_millis(200));
-    mavlink_command(
-        &companion,
-        sim_addr,
-        &mut seq,
-        &command(MavCmd::MAV_CMD_NAV_TAKEOFF, 0.0, 2.0),
-    )?;
+    children.0.push(spawn(
+        &link,
+        &[
+            "--link",
+            &format!("udp:127.0.0.1:{link_port}"),
+            "--remote",
+            &format!("127.0.0.1:{sim_port}"),
+        ],
+    )?);
+    std::thread::sleep(Duration::from_millis(1500));
+    eprintln!("bench perception: arming and taking off to 2 m through px4-link...");
+    for (id, kind) in [(1, LinkRequestKind::Arm), (2, LinkRequestKind::Takeoff)] {
+        let r = LinkRequest {
+            msg: Header::captured_at(monotonic_ns()),
+            id,
+            kind: kind as u32,
+            reserved: 0,
+            altitude_m: 2.0,
+        };
+        requests.send(r.msg, &r)?;
+    }
 
     // Wait for the pad to come into view, then measure.
     let measure_ns = (args.seconds * 1e9) as u64;
@@ -192,6 +157,8 @@ pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
     let mut first: Option<(u64, u64)> = None; // (local time, seq)
     let (mut latency_ms, mut aruco_ms, mut capture_ms) = (Vec::new(), Vec::new(), Vec::new());
     let mut count = 0u64;
+    let mut world = 0u64;
+    let mut world_xyz: Vec<[f64; 3]> = Vec::new();
     let mut last_seq = 0u64;
     let mut timed_out = false;
     run_wait_loop(
@@ -209,6 +176,10 @@ pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
                         break;
                     }
                     count += 1;
+                    world += u64::from(obs.world_valid == 1);
+                    if obs.world_valid == 1 {
+                        world_xyz.push(obs.world_from_pad.translation);
+                    }
                     last_seq = obs.msg.seq;
                     let stage = |st: Stage| {
                         obs.msg
@@ -247,8 +218,19 @@ pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
     let seconds = args.seconds;
     let rate = count as f64 / seconds;
     let skipped = last_seq.saturating_sub(first.map_or(0, |f| f.1) + count - 1);
+    // The indoor pad stands still: the spread of its world position is the whole chain's
+    // noise (detection, vehicle estimate, timing), per axis, 1 sigma.
+    let spread = (0..3)
+        .map(|k| {
+            let n = world_xyz.len().max(1) as f64;
+            let mean = world_xyz.iter().map(|p| p[k]).sum::<f64>() / n;
+            (world_xyz.iter().map(|p| (p[k] - mean).powi(2)).sum::<f64>() / n).sqrt()
+        })
+        .fold(0.0f64, f64::max);
     let out = json!({
+        "world_position_sigma_m": (spread * 1e4).round() / 1e4,
         "observations": count,
+        "with_world_pose": world,
         "rate_hz": (rate * 100.0).round() / 100.0,
         "seq_gaps": skipped,
         "latency_ms_p50": percentile(&latency_ms, 50.0),
@@ -261,7 +243,7 @@ pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
         println!("{out}");
     } else {
         println!(
-            "{count} observations in {seconds:.0} s ({rate:.1} Hz); frame published -> observation received: p50 {:.3} ms, p99 {:.3} ms; aruco-pnp per frame p50 {:.3} ms, p99 {:.3} ms; capture -> observation p50 {:.1} ms (includes the simulated camera's exposure-to-publish latency)",
+            "{count} observations in {seconds:.0} s ({rate:.1} Hz, {world} with a world pose); frame published -> observation received: p50 {:.3} ms, p99 {:.3} ms; aruco-pnp per frame p50 {:.3} ms, p99 {:.3} ms; capture -> observation p50 {:.1} ms (includes the simulated camera's exposure-to-publish latency)",
             percentile(&latency_ms, 50.0),
             percentile(&latency_ms, 99.0),
             percentile(&aruco_ms, 50.0),

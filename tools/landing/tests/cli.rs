@@ -195,7 +195,7 @@ fn the_aruco_benchmark_prints_the_documented_json() {
     assert!(v["ours_found_640x480"].as_u64().unwrap_or(0) > 0);
 }
 
-/// sim -> camera-ingest -> aruco-pnp as real processes over iceoryx2 (the binaries
+/// sim -> camera-ingest -> aruco-pnp (+ px4-link) as real processes over iceoryx2 (the binaries
 /// `cargo test --workspace` builds next to `landing`): observations flow at the camera
 /// rate, without gaps, each carrying the stage stamps of the processes it went through.
 /// The latency figures themselves are the benchmark's to measure, not this test's.
@@ -207,6 +207,8 @@ fn the_perception_chain_publishes_pad_observations_at_the_camera_rate() {
     let rate = v["rate_hz"].as_f64().unwrap_or(0.0);
     // 30 Hz camera; a loaded 2-core machine may drop a few frames, never most of them.
     assert!(rate > 20.0, "{v}");
+    // px4-link's vehicle state reaches aruco-pnp: observations carry world poses.
+    assert!(v["with_world_pose"].as_u64().unwrap_or(0) > 0, "{v}");
     for key in ["latency_ms_p50", "latency_ms_p99", "aruco_ms_p50"] {
         let x = v[key].as_f64().unwrap_or(-1.0);
         assert!(x > 0.0, "{key} = {x}");
