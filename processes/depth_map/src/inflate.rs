@@ -53,11 +53,20 @@ impl BitGrid {
         }
     }
 
-    /// The words of row (y, z).
-    #[inline]
-    pub(crate) fn row(&self, y: usize, z: usize) -> &[u64] {
-        let s = self.row_start(y, z);
-        &self.data[s..s + self.words]
+    /// Calls `f(x, y, z)` for every set bit, in storage order.
+    pub(crate) fn for_each_set(&self, f: &mut impl FnMut(usize, usize, usize)) {
+        let ny = self.dims[1];
+        for (r, row) in self.data.chunks_exact(self.words).enumerate() {
+            let (y, z) = (r % ny, r / ny);
+            for (w, &word) in row.iter().enumerate() {
+                let mut bits = word;
+                while bits != 0 {
+                    let b = bits.trailing_zeros() as usize;
+                    f(w * 64 + b, y, z);
+                    bits &= bits - 1;
+                }
+            }
+        }
     }
 
     pub(crate) fn clear(&mut self) {
@@ -182,17 +191,30 @@ impl Inflater {
             };
             let (y0, y1) = (0.max(-dy), ny.min(ny - dy));
             let (z0, z1) = (0.max(-dz), nz.min(nz - dz));
+            if y0 >= y1 {
+                continue;
+            }
+            // For one z, rows y0..y1 are one contiguous block in both grids.
+            let len = (y1 - y0) as usize * words;
             for z in z0..z1 {
-                for y in y0..y1 {
-                    let from = src.row_start((y + dy) as usize, (z + dz) as usize);
-                    let to = self.inflated.row_start(y as usize, z as usize);
-                    let (s, d) = (&src.data[from..from + words], to);
-                    for (i, w) in s.iter().enumerate() {
-                        self.inflated.data[d + i] |= *w;
-                    }
+                let from = src.row_start((y0 + dy) as usize, (z + dz) as usize);
+                let to = self.inflated.row_start(y0 as usize, z as usize);
+                let (Some(s), Some(d)) = (
+                    src.data.get(from..from + len),
+                    self.inflated.data.get_mut(to..to + len),
+                ) else {
+                    continue;
+                };
+                for (d, s) in d.iter_mut().zip(s) {
+                    *d |= *s;
                 }
             }
         }
+    }
+
+    /// Calls `f(x, y, z)` for every inflated cell.
+    pub(crate) fn for_each_inflated(&self, mut f: impl FnMut(usize, usize, usize)) {
+        self.inflated.for_each_set(&mut f);
     }
 
     /// Bytes of scratch and result.

@@ -239,7 +239,9 @@ pub struct IntegrateStats {
     pub clipped: u32,
     /// Rays not cast because another ray of the frame already ended in the same cell.
     pub shared_ends: u32,
-    /// Cells whose log-odds changed.
+    /// Cells a ray ended in or passed through (each updated once).
+    pub cells_touched: u32,
+    /// Cells whose log-odds changed (not already at a clamp).
     pub cells_updated: u32,
     /// Cells that became occupied.
     pub became_occupied: u32,
@@ -621,6 +623,10 @@ impl OccupancyMap {
         let free_no_return = rs.no_return_as_free;
         let hi = self.dims.map(|d| d as f32 - EDGE_EPS);
         let mut ri = 0;
+        // Neighbouring pixels mostly end in the same cell: the last ray's end cell and
+        // whether it was a hit, checked before touching the flags.
+        let mut last_end = usize::MAX;
+        let mut last_hit = false;
         for v in (0..h).step_by(step) {
             for u in (0..w).step_by(step) {
                 let Some(&[x, y, len]) = self.rays.get(ri) else {
@@ -677,7 +683,16 @@ impl OccupancyMap {
                     hit = false;
                     stats.clipped += 1;
                 }
-                self.mark_ray(cam, end, hit, stats);
+                // `end` is inside the window (clipped), so truncation is floor.
+                let e = end.map(|v| v as usize);
+                let idx = e[0] + self.dims[0] * (e[1] + self.dims[1] * e[2]);
+                if idx == last_end && (last_hit || !hit) {
+                    stats.shared_ends += 1;
+                    continue;
+                }
+                last_end = idx;
+                last_hit = hit;
+                self.mark_ray(cam, end, e, hit, stats);
             }
         }
     }
@@ -685,9 +700,14 @@ impl OccupancyMap {
     /// Marks the end cell (hit or miss) and walks back to the camera, marking misses,
     /// until it meets a cell another ray of this frame already walked through.
     #[inline(always)]
-    fn mark_ray(&mut self, cam: [f32; 3], end: [f32; 3], hit: bool, stats: &mut IntegrateStats) {
-        // `end` is inside the window (clipped), so truncation is floor.
-        let e = end.map(|v| v as usize);
+    fn mark_ray(
+        &mut self,
+        cam: [f32; 3],
+        end: [f32; 3],
+        e: [usize; 3],
+        hit: bool,
+        stats: &mut IntegrateStats,
+    ) {
         if !(0..3).all(|i| e[i] < self.dims[i]) {
             return;
         }
@@ -707,17 +727,14 @@ impl OccupancyMap {
         if old & TOUCHED == 0 {
             self.touched.push(idx as u32);
         }
-        let dda = Dda::new(end, cam);
-        let n = self.flags.len();
+        let dda = Dda::with_strides(end, cam, self.strides);
         let stop = self.s.rays.shared_run_to_stop;
         let mut run = 0;
         for step in dda {
-            let next = idx as isize + step.dir as isize * self.strides[step.axis];
-            if next < 0 || next as usize >= n {
+            idx = idx.wrapping_add_signed(step.offset);
+            let Some(f) = self.flags.get_mut(idx) else {
                 break;
-            }
-            idx = next as usize;
-            let f = &mut self.flags[idx];
+            };
             let old = *f;
             if old & TRAV != 0 {
                 run += 1;
@@ -737,6 +754,7 @@ impl OccupancyMap {
     /// Applies the frame's marks to the log-odds and clears them.
     fn apply(&mut self, stats: &mut IntegrateStats) {
         let q = self.q;
+        stats.cells_touched = self.touched.len() as u32;
         let (nx, ny) = (self.dims[0], self.dims[1]);
         for &i in &self.touched {
             let i = i as usize;
@@ -841,31 +859,29 @@ impl OccupancyMap {
                 want: self.cell_count(),
             });
         }
-        let (nx, ny, nz) = (self.dims[0], self.dims[1], self.dims[2]);
-        let inflated = &self.inflater.inflated;
-        for z in 0..nz {
-            for y in 0..ny {
-                let row = nx * (y + ny * z);
-                let occ = self.occupied.row(y, z);
-                let inf = inflated.row(y, z);
-                let cells = &self.log_odds[row..row + nx];
-                let dst = &mut out[row..row + nx];
-                for (x, (o, &lo)) in dst.iter_mut().zip(cells).enumerate() {
-                    let (w, b) = (x / 64, x % 64);
-                    let is_occ = occ.get(w).is_some_and(|v| v >> b & 1 == 1);
-                    let is_inf = inf.get(w).is_some_and(|v| v >> b & 1 == 1);
-                    *o = if is_occ {
-                        CellState::Occupied as u8
-                    } else if is_inf {
-                        CellState::Inflated as u8
-                    } else if lo == UNKNOWN {
-                        CellState::Unknown as u8
-                    } else {
-                        CellState::Free as u8
-                    };
+        // Known or not for every cell (a compare the compiler vectorizes), then the
+        // inflated and occupied cells, visited bit by bit (a few thousand).
+        for (o, &lo) in out.iter_mut().zip(&self.log_odds) {
+            *o = if lo == UNKNOWN {
+                CellState::Unknown as u8
+            } else {
+                CellState::Free as u8
+            };
+        }
+        let (nx, ny) = (self.dims[0], self.dims[1]);
+        let put = |state: CellState| {
+            move |out: &mut [u8], x: usize, y: usize, z: usize| {
+                if let Some(o) = out.get_mut(x + nx * (y + ny * z)) {
+                    *o = state as u8;
                 }
             }
-        }
+        };
+        let inflated = put(CellState::Inflated);
+        self.inflater
+            .for_each_inflated(|x, y, z| inflated(out, x, y, z));
+        let occupied = put(CellState::Occupied);
+        self.occupied
+            .for_each_set(&mut |x, y, z| occupied(out, x, y, z));
         Ok(self.wire_header())
     }
 

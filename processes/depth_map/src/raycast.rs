@@ -6,8 +6,9 @@
 //! (an axis that has reached the end voxel's coordinate is never stepped again): a
 //! ray can neither overshoot nor loop.
 
-/// One step of the walk: the voxel entered, and which axis moved in which direction
-/// (so a caller can update a linear index with one add).
+/// One step of the walk: the voxel entered, which axis moved in which direction, and
+/// what that step adds to a linear cell index (so a caller updates its index with one
+/// add).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Step {
     /// The voxel entered.
@@ -16,6 +17,68 @@ pub struct Step {
     pub axis: usize,
     /// +1 or -1.
     pub dir: i32,
+    /// `dir` times the stride of `axis` given to [`Dda::with_strides`] (0 without).
+    pub offset: isize,
+}
+
+/// One axis of the walk. Scalar fields (no arrays indexed by a run-time axis) let the
+/// compiler keep the whole walk in registers.
+#[derive(Debug, Clone, Copy)]
+struct Axis {
+    voxel: i32,
+    step: i32,
+    /// Steps left along this axis.
+    left: u32,
+    /// Ray parameter at the next boundary; infinity once the axis is done.
+    t_max: f32,
+    t_delta: f32,
+    offset: isize,
+}
+
+impl Axis {
+    #[inline(always)]
+    fn new(from: f32, to: f32, stride: isize) -> Self {
+        let voxel = floor_i32(from);
+        let target = floor_i32(to);
+        if voxel == target {
+            return Self {
+                voxel,
+                step: 0,
+                left: 0,
+                t_max: f32::INFINITY,
+                t_delta: f32::INFINITY,
+                offset: 0,
+            };
+        }
+        // The voxels differ; keep the sign of their difference (not of the rounded
+        // delta), which is what termination relies on.
+        let step = if target > voxel { 1 } else { -1 };
+        let ad = (to - from).abs().max(f32::MIN_POSITIVE);
+        let boundary = if step > 0 {
+            voxel as f32 + 1.0
+        } else {
+            voxel as f32
+        };
+        Self {
+            voxel,
+            step,
+            left: target.abs_diff(voxel),
+            t_max: ((boundary - from) / ad * step as f32).max(0.0),
+            t_delta: 1.0 / ad,
+            offset: step as isize * stride,
+        }
+    }
+
+    #[inline(always)]
+    fn advance(&mut self) {
+        self.voxel += self.step;
+        self.left -= 1;
+        self.t_max = if self.left == 0 {
+            f32::INFINITY
+        } else {
+            self.t_max + self.t_delta
+        };
+    }
 }
 
 /// The walk from the voxel containing `from` to the voxel containing `to`. The start
@@ -23,11 +86,9 @@ pub struct Step {
 /// the end voxel.
 #[derive(Debug, Clone)]
 pub struct Dda {
-    voxel: [i32; 3],
-    target: [i32; 3],
-    step: [i32; 3],
-    t_max: [f32; 3],
-    t_delta: [f32; 3],
+    x: Axis,
+    y: Axis,
+    z: Axis,
 }
 
 impl Dda {
@@ -35,52 +96,28 @@ impl Dda {
     /// checks: the mapper only casts rays it has clipped to its window).
     #[inline(always)]
     pub fn new(from: [f32; 3], to: [f32; 3]) -> Self {
-        let mut voxel = [0i32; 3];
-        let mut target = [0i32; 3];
-        let mut step = [0i32; 3];
-        let mut t_max = [f32::INFINITY; 3];
-        let mut t_delta = [f32::INFINITY; 3];
-        for i in 0..3 {
-            voxel[i] = floor_i32(from[i]);
-            target[i] = floor_i32(to[i]);
-            let d = to[i] - from[i];
-            if voxel[i] == target[i] {
-                continue;
-            }
-            // The voxels differ, so d is not 0 (up to rounding: keep the sign of the
-            // voxel difference, which is what termination relies on).
-            step[i] = if target[i] > voxel[i] { 1 } else { -1 };
-            let ad = d.abs().max(f32::MIN_POSITIVE);
-            t_delta[i] = 1.0 / ad;
-            let boundary = if step[i] > 0 {
-                voxel[i] as f32 + 1.0
-            } else {
-                voxel[i] as f32
-            };
-            t_max[i] = ((boundary - from[i]) / ad * step[i] as f32).max(0.0);
-        }
+        Self::with_strides(from, to, [0, 0, 0])
+    }
+
+    /// As [`Dda::new`], each step also giving the change of a linear index whose axes
+    /// have these strides.
+    #[inline(always)]
+    pub fn with_strides(from: [f32; 3], to: [f32; 3], strides: [isize; 3]) -> Self {
         Self {
-            voxel,
-            target,
-            step,
-            t_max,
-            t_delta,
+            x: Axis::new(from[0], to[0], strides[0]),
+            y: Axis::new(from[1], to[1], strides[1]),
+            z: Axis::new(from[2], to[2], strides[2]),
         }
     }
 
-    /// The voxel the walk starts in (the one containing `from`).
+    /// The voxel the walk is in (the one containing `from` before the first step).
     pub fn start(&self) -> [i32; 3] {
-        self.voxel
-    }
-
-    /// The voxel the walk ends in (the one containing `to`).
-    pub fn end(&self) -> [i32; 3] {
-        self.target
+        [self.x.voxel, self.y.voxel, self.z.voxel]
     }
 
     /// Steps left before the end voxel is reached.
     pub fn remaining(&self) -> u32 {
-        (0..3).map(|i| self.target[i].abs_diff(self.voxel[i])).sum()
+        self.x.left + self.y.left + self.z.left
     }
 }
 
@@ -95,31 +132,27 @@ pub fn floor_i32(x: f32) -> i32 {
 impl Iterator for Dda {
     type Item = Step;
 
-    #[inline]
+    #[inline(always)]
     fn next(&mut self) -> Option<Step> {
         // Axes already at the end voxel have t_max = infinity; all three at infinity
         // means the end voxel has been reached.
-        let [a, b, c] = self.t_max;
-        let axis = if a <= b && a <= c {
-            0
-        } else if b <= c {
-            1
+        let (axis, a) = if self.x.t_max <= self.y.t_max && self.x.t_max <= self.z.t_max {
+            (0, &mut self.x)
+        } else if self.y.t_max <= self.z.t_max {
+            (1, &mut self.y)
         } else {
-            2
+            (2, &mut self.z)
         };
-        if self.t_max[axis] == f32::INFINITY {
+        if a.t_max == f32::INFINITY {
             return None;
         }
-        self.voxel[axis] += self.step[axis];
-        self.t_max[axis] = if self.voxel[axis] == self.target[axis] {
-            f32::INFINITY
-        } else {
-            self.t_max[axis] + self.t_delta[axis]
-        };
+        a.advance();
+        let (dir, offset) = (a.step, a.offset);
         Some(Step {
-            voxel: self.voxel,
+            voxel: [self.x.voxel, self.y.voxel, self.z.voxel],
             axis,
-            dir: self.step[axis],
+            dir,
+            offset,
         })
     }
 

@@ -75,6 +75,20 @@ fn every_voxel_the_segment_passes_through_is_visited() {
 }
 
 #[test]
+fn steps_carry_the_change_of_a_linear_index() {
+    let strides = [1isize, 10, 100];
+    let (from, to) = ([0.5f32, 8.5, 3.5], [6.2f32, 2.7, 0.1]);
+    let d = Dda::with_strides(from, to, strides);
+    let lin = |v: [i32; 3]| v[0] as isize + 10 * v[1] as isize + 100 * v[2] as isize;
+    let mut idx = lin(d.start());
+    for s in d {
+        idx += s.offset;
+        assert_eq!(idx, lin(s.voxel));
+        assert_eq!(s.offset, s.dir as isize * strides[s.axis]);
+    }
+}
+
+#[test]
 fn a_segment_inside_one_voxel_has_no_step() {
     let d = Dda::new([3.1, 3.2, 3.3], [3.9, 3.8, 3.7]);
     assert_eq!(d.remaining(), 0);

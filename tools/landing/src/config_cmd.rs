@@ -20,6 +20,9 @@ pub struct StackConfig {
     /// camera-ingest: where frames come from, the calibration, undistortion.
     #[serde(default)]
     pub camera_ingest: Option<CameraIngestConfig>,
+    /// depth-map: the depth camera's mount, ray casting, the window, the log-odds model.
+    #[serde(default)]
+    pub depth_map: depth_map::DepthMapConfig,
 }
 
 impl Validate for StackConfig {
@@ -28,6 +31,9 @@ impl Validate for StackConfig {
         self.aruco_pnp
             .validate()
             .map_err(|e| e.under("aruco_pnp"))?;
+        self.depth_map
+            .validate()
+            .map_err(|e| e.under("depth_map"))?;
         if let Some(c) = &self.camera_ingest {
             c.validate().map_err(|e| e.under("camera_ingest"))?;
         }

@@ -1,6 +1,7 @@
 //! `landing`: the one user-facing command of the landing stack.
 
 mod bench_aruco;
+mod bench_depth;
 mod bench_ipc;
 mod bench_perception;
 mod bench_sim;
@@ -80,6 +81,8 @@ enum BenchCommand {
     Aruco(bench_aruco::ArucoArgs),
     /// sim -> camera-ingest -> aruco-pnp as processes: observation rate and latency.
     Perception(bench_perception::PerceptionArgs),
+    /// Depth mapping: integration, inflation and wire time of one 640x480 depth frame.
+    Depth(bench_depth::DepthArgs),
     /// Internal: the publishing side of `bench ipc`, started by it in a second process.
     #[command(hide = true)]
     IpcPeer(bench_ipc::PeerArgs),
@@ -102,6 +105,7 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::Ipc(args)) => bench_ipc::run(&args, cli.ipc_prefix.as_deref()),
         Command::Bench(BenchCommand::Sim(args)) => bench_sim::run(&args),
         Command::Bench(BenchCommand::Aruco(args)) => bench_aruco::run(&args),
+        Command::Bench(BenchCommand::Depth(args)) => bench_depth::run(&args),
         Command::Bench(BenchCommand::Perception(args)) => {
             bench_perception::run(&args, cli.ipc_prefix.as_deref())
         }
