@@ -6,6 +6,7 @@ mod bench_ipc;
 mod bench_perception;
 mod bench_sim;
 mod config_cmd;
+mod map_cmd;
 mod pad_detect;
 mod pad_print;
 mod stats;
@@ -38,6 +39,10 @@ enum Command {
     /// The landing pad: print it, find it in an image.
     #[command(subcommand)]
     Pad(PadCommand),
+    /// Fly a short scripted path in the lockstep simulator, map every depth frame with
+    /// the autopilot's estimated pose, and draw the map (top and side views) into a PNG;
+    /// prints where the obstacles really are against where the map put them.
+    Map(map_cmd::MapArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -118,6 +123,7 @@ fn main() -> ExitCode {
             other => other.map(|_| ()),
         },
         Command::Pad(PadCommand::Print(args)) => pad_print::run(&args),
+        Command::Map(args) => map_cmd::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

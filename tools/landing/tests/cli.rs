@@ -25,6 +25,8 @@ fn every_subcommand_has_help() {
         vec!["bench", "sim"],
         vec!["bench", "aruco"],
         vec!["bench", "perception"],
+        vec!["bench", "depth"],
+        vec!["map"],
         vec!["pad"],
         vec!["pad", "detect"],
         vec!["config"],
@@ -107,6 +109,17 @@ fn an_unknown_camera_source_is_one_line_naming_the_allowed_sources() {
 }
 
 #[test]
+fn a_depth_map_value_out_of_range_is_one_line_naming_the_key() {
+    check_bad_config(
+        "bad_depth_map.toml",
+        "[ipc]\nprefix = \"a\"\nheartbeat_period_ms = 100\nheartbeat_deadline_ms = 500\n\
+         [depth_map]\npixel_step = 0\n",
+        "depth_map.pixel_step",
+        "allowed: 1 to 16",
+    );
+}
+
+#[test]
 fn the_shipped_config_is_valid() {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
@@ -176,6 +189,26 @@ fn the_sim_benchmark_prints_the_documented_json() {
         let x = v[key].as_f64().unwrap_or(-1.0);
         assert!(x > 0.0, "{key} = {x}");
     }
+}
+
+#[test]
+fn the_depth_benchmark_prints_the_documented_json() {
+    let o = landing(&["bench", "depth", "--json", "--frames", "30"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    for key in [
+        "integrate_ms_p50",
+        "integrate_ms_p99",
+        "inflate_ms_p50",
+        "write_wire_ms_p50",
+        "exact_integrate_ms_p50",
+        "observed_vs_exact_min",
+    ] {
+        let x = v[key].as_f64().unwrap_or(-1.0);
+        assert!(x > 0.0, "{key} = {x}");
+    }
+    assert_eq!(v["window_cells"], serde_json::json!([68, 68, 32]));
+    assert_eq!(v["rays_per_frame_p50"].as_f64(), Some(76_800.0));
 }
 
 #[test]
