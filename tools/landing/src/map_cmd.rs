@@ -9,8 +9,9 @@
 //! what a companion sees: LOCAL_POSITION_NED and ATTITUDE_QUATERNION (the estimator's
 //! output, with its noise and drift) and the depth frames, each handed over at its
 //! publish time (capture + latency). The truth (where the obstacles really are, where
-//! the vehicle really went) is used only for the printed comparison and the outlines
-//! in the figure: this is an evaluation tool.
+//! the vehicle really went) is used only to lay out the script's legs around the first
+//! obstacle (as an operator who can see it would), for the printed comparison and for
+//! the outlines in the figure: this is an evaluation tool; the map never sees it.
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};

@@ -1,7 +1,6 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a panic is a failed test
 //! `landing map`: the scripted flight past obstacle-demo's box gives a map with the box
 //! where it is (within what the estimator's drift allows) and nothing else, and a figure.
-
-#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a panic is a failed test
 
 use std::process::{Command, Output};
 
