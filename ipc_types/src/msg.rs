@@ -453,7 +453,8 @@ pub enum CellState {
     Free = 1,
     /// Observed occupied.
     Occupied = 2,
-    /// Free, but within the inflation radius of an occupied cell.
+    /// Not occupied (observed free or not observed), but within the inflation radius of
+    /// an occupied cell: the planner must not put the vehicle's centre there.
     Inflated = 3,
 }
 

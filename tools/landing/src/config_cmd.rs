@@ -23,6 +23,9 @@ pub struct StackConfig {
     /// camera-ingest: where frames come from, the calibration, undistortion.
     #[serde(default)]
     pub camera_ingest: Option<CameraIngestConfig>,
+    /// depth-map: the depth camera's mount, ray casting, the window, the log-odds model.
+    #[serde(default)]
+    pub depth_map: depth_map::DepthMapConfig,
 }
 
 impl Validate for StackConfig {
@@ -32,6 +35,9 @@ impl Validate for StackConfig {
             .validate()
             .map_err(|e| e.under("aruco_pnp"))?;
         self.px4_link.validate().map_err(|e| e.under("px4_link"))?;
+        self.depth_map
+            .validate()
+            .map_err(|e| e.under("depth_map"))?;
         if let Some(c) = &self.camera_ingest {
             c.validate().map_err(|e| e.under("camera_ingest"))?;
         }

@@ -1,10 +1,12 @@
 //! `landing`: the one user-facing command of the landing stack.
 
 mod bench_aruco;
+mod bench_depth;
 mod bench_ipc;
 mod bench_perception;
 mod bench_sim;
 mod config_cmd;
+mod map_cmd;
 mod pad_detect;
 mod pad_print;
 mod stats;
@@ -37,6 +39,10 @@ enum Command {
     /// The landing pad: print it, find it in an image.
     #[command(subcommand)]
     Pad(PadCommand),
+    /// Fly a short scripted path in the lockstep simulator, map every depth frame with
+    /// the autopilot's estimated pose, and draw the map (top and side views) into a PNG;
+    /// prints where the obstacles really are against where the map put them.
+    Map(map_cmd::MapArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -80,6 +86,8 @@ enum BenchCommand {
     Aruco(bench_aruco::ArucoArgs),
     /// sim -> camera-ingest -> aruco-pnp as processes: observation rate and latency.
     Perception(bench_perception::PerceptionArgs),
+    /// Depth mapping: integration, inflation and wire time of one 640x480 depth frame.
+    Depth(bench_depth::DepthArgs),
     /// Internal: the publishing side of `bench ipc`, started by it in a second process.
     #[command(hide = true)]
     IpcPeer(bench_ipc::PeerArgs),
@@ -102,6 +110,7 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::Ipc(args)) => bench_ipc::run(&args, cli.ipc_prefix.as_deref()),
         Command::Bench(BenchCommand::Sim(args)) => bench_sim::run(&args),
         Command::Bench(BenchCommand::Aruco(args)) => bench_aruco::run(&args),
+        Command::Bench(BenchCommand::Depth(args)) => bench_depth::run(&args),
         Command::Bench(BenchCommand::Perception(args)) => {
             bench_perception::run(&args, cli.ipc_prefix.as_deref())
         }
@@ -114,6 +123,7 @@ fn main() -> ExitCode {
             other => other.map(|_| ()),
         },
         Command::Pad(PadCommand::Print(args)) => pad_print::run(&args),
+        Command::Map(args) => map_cmd::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

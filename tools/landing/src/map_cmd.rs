@@ -1,0 +1,952 @@
+//! `landing map`: flies a short scripted path in the lockstep simulator, builds the
+//! occupancy map from every depth frame with the pose the autopilot *reports*, and draws
+//! it (top and side views) into a PNG.
+//!
+//! The vehicle is flown as px4-link will fly it: COMMAND_LONG arm and take-off, then
+//! SET_POSITION_TARGET_LOCAL_NED streamed at 20 Hz for more than a second before the
+//! switch to OFFBOARD (confirmed from the HEARTBEAT's custom mode), then slow legs that
+//! look at the obstacle from the front, both sides and above. The mapper sees only
+//! what a companion sees: LOCAL_POSITION_NED and ATTITUDE_QUATERNION (the estimator's
+//! output, with its noise and drift) and the depth frames, each handed over at its
+//! publish time (capture + latency). The truth (where the obstacles really are, where
+//! the vehicle really went) is used only to lay out the script's legs around the first
+//! obstacle (as an operator who can see it would), for the printed comparison and for
+//! the outlines in the figure: this is an evaluation tool; the map never sees it.
+
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use depth_map::{DepthMapConfig, DepthMapper, DepthPixels, DepthView, OccupancyMap};
+use ipc_types::msg::{CellState, Intrinsics};
+use ipc_types::runtime::config::{self as cfgload, deploy_dir};
+use mavlink::MavHeader;
+use mavlink::dialects::common::{
+    COMMAND_LONG_DATA, MavCmd, MavFrame, MavMessage, PositionTargetTypemask,
+    SET_POSITION_TARGET_LOCAL_NED_DATA,
+};
+use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use opencv::core::{Mat, Point, Rect, Scalar, Vector};
+use opencv::{core, imgcodecs, imgproc};
+use sim::lockstep::Simulator;
+use sim::world::Aabb;
+use state_history::{StateHistory, TimedPose};
+
+/// Arguments of `landing map`.
+#[derive(Debug, Args)]
+pub struct MapArgs {
+    /// Scenario name (from deploy/scenarios/) or TOML file.
+    #[arg(long, default_value = "obstacle-demo")]
+    scenario: String,
+    /// Where to write the figure (PNG).
+    #[arg(long, value_name = "FILE.png")]
+    png: PathBuf,
+    /// Seed of every random process (default: the scenario's).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Stack configuration to read [depth_map] from (default: the deploy directory's
+    /// config/landing.toml).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// The deploy directory (default: found above the current directory or executable).
+    #[arg(long)]
+    deploy_dir: Option<PathBuf>,
+    /// Pixels per map cell in the figure (2 to 20).
+    #[arg(long, default_value_t = 8)]
+    cell_px: i32,
+}
+
+/// Cruise height of the script, m.
+const HEIGHT_M: f64 = 1.0;
+/// Speed along the legs, m/s.
+const SPEED_M_S: f64 = 0.4;
+/// Setpoint stream period (20 Hz).
+const SETPOINT_PERIOD_NS: u64 = 50_000_000;
+/// Occupied cells whose centre is below this are the ground layer (the ground is z = 0
+/// and the cells are 0.15 m): left out of the comparison.
+const GROUND_CUT_M: f64 = 0.15;
+/// The top view shows cells whose centre is at least this high: above the ground layer
+/// and its inflation (two cells), which would otherwise cover the whole view.
+const TOP_VIEW_FROM_M: f64 = 0.45;
+/// Longest flight, simulated s.
+const MAX_FLIGHT_S: f64 = 90.0;
+
+const COMPANION: MavHeader = MavHeader {
+    system_id: 1,
+    component_id: 191,
+    sequence: 0,
+};
+
+fn command(sim: &mut Simulator, command: MavCmd, p: [f32; 7]) {
+    sim.handle_mavlink(
+        &COMPANION,
+        &MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            param1: p[0],
+            param2: p[1],
+            param3: p[2],
+            param4: p[3],
+            param5: p[4],
+            param6: p[5],
+            param7: p[6],
+            command,
+            target_system: 1,
+            target_component: 1,
+            confirmation: 0,
+        }),
+    );
+}
+
+/// Position + yaw setpoint, ENU in, NED on the wire.
+fn setpoint(sim: &mut Simulator, p: &Vector3<f64>, yaw_enu: f64) {
+    let ignore = PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AY_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE;
+    let time_boot_ms = (sim.time_ns() / 1_000_000) as u32;
+    sim.handle_mavlink(
+        &COMPANION,
+        &MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
+            time_boot_ms,
+            x: p.y as f32,
+            y: p.x as f32,
+            z: -p.z as f32,
+            vx: 0.0,
+            vy: 0.0,
+            vz: 0.0,
+            afx: 0.0,
+            afy: 0.0,
+            afz: 0.0,
+            yaw: sim::px4::frames::yaw_enu_to_ned(yaw_enu) as f32,
+            yaw_rate: 0.0,
+            type_mask: ignore,
+            target_system: 1,
+            target_component: 1,
+            coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+        }),
+    );
+}
+
+/// PX4's attitude (`ned_from_frd`, MAVLink w, x, y, z) as `world_from_body` (ENU, FLU).
+fn world_from_body_of(q_wxyz: [f32; 4]) -> Option<UnitQuaternion<f64>> {
+    let q = nalgebra::Quaternion::new(
+        f64::from(q_wxyz[0]),
+        f64::from(q_wxyz[1]),
+        f64::from(q_wxyz[2]),
+        f64::from(q_wxyz[3]),
+    );
+    if !q.coords.iter().all(|v| v.is_finite()) || q.norm() < 0.5 {
+        return None;
+    }
+    // Both frame swaps are half turns, their own inverses.
+    let enu_from_ned = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
+        Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0),
+    ));
+    let frd_from_flu = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
+        Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0),
+    ));
+    Some(enu_from_ned * UnitQuaternion::from_quaternion(q) * frd_from_flu)
+}
+
+/// What the companion knows of the vehicle, from telemetry only.
+struct Telemetry {
+    attitude: StateHistory,
+    offboard: bool,
+    latest: Option<TimedPose>,
+}
+
+impl Telemetry {
+    /// Reads the autopilot's messages; each LOCAL_POSITION_NED becomes a full state
+    /// (its position, the attitude interpolated at its time) handed to the mapper.
+    fn read(
+        &mut self,
+        msgs: &[MavMessage],
+        mapper: &mut DepthMapper,
+        path: &mut Vec<Vector3<f64>>,
+    ) {
+        for m in msgs {
+            match m {
+                MavMessage::HEARTBEAT(h) => {
+                    self.offboard = (h.custom_mode >> 16) & 0xff == 6;
+                }
+                MavMessage::ATTITUDE_QUATERNION(a) => {
+                    if let Some(r) = world_from_body_of([a.q1, a.q2, a.q3, a.q4]) {
+                        self.attitude.push(TimedPose {
+                            time_ns: u64::from(a.time_boot_ms) * 1_000_000,
+                            world_from_body: Isometry3::from_parts(Translation3::identity(), r),
+                            velocity: Vector3::zeros(),
+                        });
+                    }
+                }
+                MavMessage::LOCAL_POSITION_NED(p) => {
+                    let t = u64::from(p.time_boot_ms) * 1_000_000;
+                    let Ok(att) = self.attitude.at(t) else {
+                        continue;
+                    };
+                    let pos = sim::px4::commander::enu_from_local_ned(p.x, p.y, p.z);
+                    let vel = sim::px4::commander::enu_from_local_ned(p.vx, p.vy, p.vz);
+                    let state = TimedPose {
+                        time_ns: t,
+                        world_from_body: Isometry3::from_parts(
+                            Translation3::from(pos),
+                            att.rotation,
+                        ),
+                        velocity: vel,
+                    };
+                    if mapper.push_state(state) {
+                        if path.last().is_none_or(|l| (l - pos).norm() > 0.02) {
+                            path.push(pos);
+                        }
+                        self.latest = Some(state);
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+
+    fn position(&self) -> Option<Vector3<f64>> {
+        self.latest.map(|s| s.world_from_body.translation.vector)
+    }
+}
+
+/// The script's phases.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Phase {
+    Ground,
+    Climb,
+    Stream {
+        since_ns: u64,
+    },
+    /// Flying leg `leg`; `since_ns`: when its waypoint was reached (0: not yet).
+    Legs {
+        leg: usize,
+        since_ns: u64,
+    },
+    Done,
+}
+
+impl Phase {
+    fn name(&self) -> &'static str {
+        match self {
+            Self::Ground => "on the ground",
+            Self::Climb => "take-off",
+            Self::Stream { .. } => "setpoint stream",
+            Self::Legs { .. } => "offboard legs",
+            Self::Done => "done",
+        }
+    }
+}
+
+/// The legs: toward the obstacle, to each side of it, above it, looking at it.
+fn legs(start: Vector3<f64>, look_at: Vector3<f64>) -> Vec<Vector3<f64>> {
+    let mut ahead = look_at - start;
+    ahead.z = 0.0;
+    let dist = ahead.norm().max(1e-6);
+    let dir = ahead / dist;
+    let side = Vector3::new(-dir.y, dir.x, 0.0);
+    let near = start + dir * (0.4 * dist);
+    let near = Vector3::new(near.x, near.y, HEIGHT_M);
+    vec![
+        near,
+        near - side * 1.5,
+        near + side * 1.5,
+        near,
+        Vector3::new(near.x, near.y, HEIGHT_M + 0.6),
+    ]
+}
+
+/// Runs the flight, writes the PNG, prints the comparison.
+pub fn run(args: &MapArgs) -> Result<()> {
+    if !(2..=20).contains(&args.cell_px) {
+        bail!(
+            "--cell-px {} is not allowed (allowed: 2 to 20)",
+            args.cell_px
+        );
+    }
+    // Before a flight that takes seconds: can the figure be written there at all?
+    let parent = match args.png.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    if !parent.is_dir() {
+        bail!(
+            "{}: the directory {} does not exist",
+            args.png.display(),
+            parent.display()
+        );
+    }
+    let deploy = args.deploy_dir.clone().unwrap_or_else(deploy_dir);
+    let cfg: DepthMapConfig = match &args.config {
+        Some(p) => cfgload::load_process::<DepthMapConfig>(p, "depth_map")?.1,
+        None => {
+            let p = deploy.join("config").join("landing.toml");
+            if p.is_file() {
+                cfgload::load_process::<DepthMapConfig>(&p, "depth_map")?.1
+            } else {
+                DepthMapConfig::default()
+            }
+        }
+    };
+    let scn = sim::scenario::load(&args.scenario, &deploy)?;
+    let seed = args.seed.unwrap_or(scn.scenario.seed);
+    let mut sim = Simulator::new(&scn, seed).context("building the simulator")?;
+    let cam = sim
+        .depth_camera()
+        .context("the scenario has no depth camera")?;
+    let p = cam.params().clone();
+    let (fx, fy) = p.focal_px();
+    let (cx, cy) = p.principal_point_px();
+    let intrinsics = Intrinsics { fx, fy, cx, cy };
+    let frame_len = cam.frame_len();
+    let mut mapper = DepthMapper::from_config(&cfg)?;
+    let obstacles: Vec<Aabb> = sim.world().obstacles().to_vec();
+    let look_at = obstacles
+        .first()
+        .map(|b| {
+            Vector3::new(
+                (b.min_m[0] + b.max_m[0]) / 2.0,
+                (b.min_m[1] + b.max_m[1]) / 2.0,
+                (b.min_m[2] + b.max_m[2]) / 2.0,
+            )
+        })
+        .unwrap_or(Vector3::new(3.0, 0.0, 0.5));
+
+    let mut tele = Telemetry {
+        attitude: StateHistory::new(100, 50_000_000),
+        offboard: false,
+        latest: None,
+    };
+    let mut path: Vec<Vector3<f64>> = Vec::new();
+    let mut truth_path: Vec<Vector3<f64>> = Vec::new();
+    let mut pool: Vec<Vec<u16>> = (0..4).map(|_| vec![0u16; frame_len]).collect();
+    let mut pending: VecDeque<(Vec<u16>, u64, u64)> = VecDeque::new();
+    let mut phase = Phase::Ground;
+    let mut waypoints: Vec<Vector3<f64>> = Vec::new();
+    let mut target = Vector3::zeros();
+    let mut next_setpoint_ns = 0u64;
+    let mut next_progress_ns = 0u64;
+    let (mut skipped, mut last_error) = (0u64, None);
+    eprintln!(
+        "map: {} (seed {seed}), depth {}x{} at {} Hz, map {:?} cells of {} m",
+        scn.scenario.name,
+        p.width,
+        p.height,
+        scn.scenario.depth.rate_hz,
+        mapper.map().dims(),
+        cfg.resolution_m
+    );
+    while sim.time_ns() < (MAX_FLIGHT_S * 1e9) as u64 && phase != Phase::Done {
+        let report = sim.step()?;
+        let now = sim.time_ns();
+        let msgs = sim.take_mavlink();
+        tele.read(&msgs, &mut mapper, &mut path);
+        let truth = sim.world().truth().position;
+        if truth_path.last().is_none_or(|l| (l - truth).norm() > 0.02) {
+            truth_path.push(truth);
+        }
+        if report.depth_due {
+            let mut buf = pool.pop().unwrap_or_else(|| vec![0u16; frame_len]);
+            if let Some(shot) = sim.render_depth_into(&mut buf) {
+                pending.push_back((buf, shot.capture_ns, shot.publish_ns));
+            } else {
+                pool.push(buf);
+            }
+        }
+        // Frames go to the mapper at their publish time, as the process would get them.
+        while pending.front().is_some_and(|f| f.2 <= now) {
+            let Some((buf, capture_ns, _)) = pending.pop_front() else {
+                break;
+            };
+            let view = DepthView::new(
+                p.width,
+                p.height,
+                intrinsics,
+                DepthPixels::U16 {
+                    data: &buf,
+                    scale_m: 0.001,
+                },
+            )?;
+            if let Err(e) = mapper.process(&view, capture_ns) {
+                skipped += 1;
+                last_error = Some(e);
+            }
+            pool.push(buf);
+        }
+        phase = match phase {
+            Phase::Ground if now >= 500_000_000 => {
+                command(
+                    &mut sim,
+                    MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                    [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+                );
+                let nan = f32::NAN;
+                command(
+                    &mut sim,
+                    MavCmd::MAV_CMD_NAV_TAKEOFF,
+                    [0.0, 0.0, 0.0, nan, nan, nan, HEIGHT_M as f32],
+                );
+                Phase::Climb
+            }
+            Phase::Climb
+                if now >= 6_000_000_000
+                    && tele.position().is_some_and(|p| p.z > HEIGHT_M - 0.1) =>
+            {
+                target = tele.position().unwrap_or_default();
+                target.z = HEIGHT_M;
+                waypoints = legs(target, look_at);
+                Phase::Stream { since_ns: now }
+            }
+            Phase::Stream { .. } if tele.offboard => Phase::Legs {
+                leg: 0,
+                since_ns: 0,
+            },
+            Phase::Stream { since_ns } if now >= since_ns + 1_500_000_000 => {
+                // Once a second until the HEARTBEAT confirms OFFBOARD.
+                if (now - since_ns) % 1_000_000_000 < 2_000_000 {
+                    command(
+                        &mut sim,
+                        MavCmd::MAV_CMD_DO_SET_MODE,
+                        [1.0, 6.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+                    );
+                }
+                phase
+            }
+            Phase::Legs { leg, since_ns } => match waypoints.get(leg) {
+                Some(w) => {
+                    let to = w - target;
+                    let step = SPEED_M_S * 0.002;
+                    if to.norm() > step {
+                        target += to / to.norm() * step;
+                        phase
+                    } else {
+                        target = *w;
+                        // Hold 1.5 s at each waypoint.
+                        let arrived = if since_ns == 0 { now } else { since_ns };
+                        if now >= arrived + 1_500_000_000 {
+                            Phase::Legs {
+                                leg: leg + 1,
+                                since_ns: 0,
+                            }
+                        } else {
+                            Phase::Legs {
+                                leg,
+                                since_ns: arrived,
+                            }
+                        }
+                    }
+                }
+                None => Phase::Done,
+            },
+            other => other,
+        };
+        if matches!(phase, Phase::Stream { .. } | Phase::Legs { .. }) && now >= next_setpoint_ns {
+            let d = look_at - target;
+            setpoint(&mut sim, &target, d.y.atan2(d.x));
+            next_setpoint_ns = now + SETPOINT_PERIOD_NS;
+        }
+        if now >= next_progress_ns {
+            next_progress_ns = now + 2_000_000_000;
+            let c = mapper.counters();
+            eprintln!(
+                "map: t {:5.1} s  {:<16} frames {:4}  mapped {:4}  occupied cells {:5}",
+                now as f64 * 1e-9,
+                phase.name(),
+                c.frames,
+                c.integrated,
+                mapper.map().census().occupied
+            );
+        }
+    }
+    if phase != Phase::Done {
+        bail!(
+            "the scripted flight did not finish in {MAX_FLIGHT_S} s (stuck in `{}`)",
+            phase.name()
+        );
+    }
+    let c = mapper.counters();
+    if let Some(e) = &last_error {
+        eprintln!("map: {skipped} frames skipped, the last because: {e}");
+    }
+    let map = mapper.map();
+    let est_end = tele.position().unwrap_or_default();
+    let truth_end = sim.world().truth().position;
+    println!(
+        "flight: {:.1} s, {} depth frames, {} mapped; estimate vs truth at the end: {:.3} m apart",
+        sim.time_ns() as f64 * 1e-9,
+        c.frames,
+        c.integrated,
+        (est_end - truth_end).norm()
+    );
+    compare(map, &obstacles);
+    draw(
+        map,
+        &path,
+        &truth_path,
+        &obstacles,
+        &scn.scenario.name,
+        args,
+    )?;
+    println!("figure: {}", args.png.display());
+    Ok(())
+}
+
+/// Prints where each obstacle really is against where the map put it.
+fn compare(map: &OccupancyMap, obstacles: &[Aabb]) {
+    let [nx, ny, nz] = map.dims();
+    let r = map.resolution();
+    let mut near = vec![(0usize, [f64::INFINITY; 3], [f64::NEG_INFINITY; 3]); obstacles.len()];
+    let (mut phantoms, mut above_ground) = (0usize, 0usize);
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                if map.state_at_index([x, y, z]) != CellState::Occupied {
+                    continue;
+                }
+                let c = map.cell_centre([x, y, z]);
+                if c.z < GROUND_CUT_M {
+                    continue;
+                }
+                above_ground += 1;
+                let mut claimed = false;
+                for (b, slot) in obstacles.iter().zip(near.iter_mut()) {
+                    if distance(&c, b) <= 1.0 {
+                        slot.0 += 1;
+                        for i in 0..3 {
+                            slot.1[i] = slot.1[i].min(c[i] - r / 2.0);
+                            slot.2[i] = slot.2[i].max(c[i] + r / 2.0);
+                        }
+                    }
+                    claimed |= distance(&c, b) <= 0.5;
+                }
+                if !claimed {
+                    phantoms += 1;
+                }
+            }
+        }
+    }
+    for (k, (b, (n, lo, hi))) in obstacles.iter().zip(&near).enumerate() {
+        println!(
+            "obstacle {k} truth: x [{:.2}, {:.2}]  y [{:.2}, {:.2}]  z [{:.2}, {:.2}]",
+            b.min_m[0], b.max_m[0], b.min_m[1], b.max_m[1], b.min_m[2], b.max_m[2]
+        );
+        if *n == 0 {
+            println!(
+                "obstacle {k} map:   nothing occupied within 1 m (not seen, or outside the window)"
+            );
+            continue;
+        }
+        println!(
+            "obstacle {k} map:   x [{:.2}, {:.2}]  y [{:.2}, {:.2}]  z [{:.2}, {:.2}]  ({n} occupied cells above {GROUND_CUT_M} m within 1 m of it; faces the camera never saw are missing)",
+            lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]
+        );
+    }
+    println!(
+        "occupied cells above {GROUND_CUT_M} m: {above_ground}, of which {phantoms} farther than 0.5 m from every obstacle"
+    );
+}
+
+fn distance(p: &Point3<f64>, b: &Aabb) -> f64 {
+    let mut d2 = 0.0;
+    for i in 0..3 {
+        let c = p[i].clamp(b.min_m[i], b.max_m[i]);
+        d2 += (p[i] - c).powi(2);
+    }
+    d2.sqrt()
+}
+
+/// Colour of a cell state, BGR.
+fn colour(s: CellState) -> Scalar {
+    match s {
+        CellState::Unknown => Scalar::new(200.0, 200.0, 200.0, 0.0),
+        CellState::Free => Scalar::new(255.0, 255.0, 255.0, 0.0),
+        CellState::Inflated => Scalar::new(90.0, 170.0, 255.0, 0.0),
+        CellState::Occupied => Scalar::new(30.0, 30.0, 200.0, 0.0),
+    }
+}
+
+/// Occupied over inflated over free over unknown: what a column shows.
+fn rank(s: CellState) -> u8 {
+    match s {
+        CellState::Unknown => 0,
+        CellState::Free => 1,
+        CellState::Inflated => 2,
+        CellState::Occupied => 3,
+    }
+}
+
+fn black() -> Scalar {
+    Scalar::new(0.0, 0.0, 0.0, 0.0)
+}
+
+fn text(img: &mut Mat, s: &str, at: Point, scale: f64) -> Result<()> {
+    imgproc::put_text(
+        img,
+        s,
+        at,
+        imgproc::FONT_HERSHEY_SIMPLEX,
+        scale,
+        black(),
+        1,
+        imgproc::LINE_AA,
+        false,
+    )?;
+    Ok(())
+}
+
+/// One view: a grid of columns, each the highest-ranked state along the hidden axis.
+struct Panel {
+    left: i32,
+    top: i32,
+    cols: usize,
+    rows: usize,
+    /// World coordinate of the left and bottom edges, m.
+    origin: (f64, f64),
+}
+
+impl Panel {
+    fn px(&self, u: f64, v: f64, res: f64, s: i32) -> Point {
+        Point::new(
+            self.left + ((u - self.origin.0) / res * f64::from(s)).round() as i32,
+            self.top + self.rows as i32 * s
+                - ((v - self.origin.1) / res * f64::from(s)).round() as i32,
+        )
+    }
+
+    fn fill(&self, img: &mut Mat, cells: &[CellState], s: i32) -> Result<()> {
+        for (k, st) in cells.iter().enumerate() {
+            let (c, r) = ((k % self.cols) as i32, (k / self.cols) as i32);
+            let rect = Rect::new(
+                self.left + c * s,
+                self.top + (self.rows as i32 - 1 - r) * s,
+                s,
+                s,
+            );
+            imgproc::rectangle(img, rect, colour(*st), imgproc::FILLED, imgproc::LINE_8, 0)?;
+        }
+        imgproc::rectangle(
+            img,
+            Rect::new(
+                self.left,
+                self.top,
+                self.cols as i32 * s,
+                self.rows as i32 * s,
+            ),
+            black(),
+            1,
+            imgproc::LINE_8,
+            0,
+        )?;
+        Ok(())
+    }
+
+    /// Ticks and labels every metre along both axes.
+    fn axes(&self, img: &mut Mat, res: f64, s: i32, labels: (&str, &str)) -> Result<()> {
+        let w = self.cols as f64 * res;
+        let h = self.rows as f64 * res;
+        let mut m = self.origin.0.ceil();
+        while m <= self.origin.0 + w + 1e-9 {
+            let p = self.px(m, self.origin.1, res, s);
+            imgproc::line(
+                img,
+                p,
+                Point::new(p.x, p.y + 5),
+                black(),
+                1,
+                imgproc::LINE_8,
+                0,
+            )?;
+            // `+ 0.0` turns -0 into 0.
+            text(
+                img,
+                &format!("{:.0}", m + 0.0),
+                Point::new(p.x - 6, p.y + 18),
+                0.4,
+            )?;
+            m += 1.0;
+        }
+        let mut m = self.origin.1.ceil();
+        while m <= self.origin.1 + h + 1e-9 {
+            let p = self.px(self.origin.0, m, res, s);
+            imgproc::line(
+                img,
+                p,
+                Point::new(p.x - 5, p.y),
+                black(),
+                1,
+                imgproc::LINE_8,
+                0,
+            )?;
+            text(
+                img,
+                &format!("{:.0}", m + 0.0),
+                Point::new(p.x - 26, p.y + 4),
+                0.4,
+            )?;
+            m += 1.0;
+        }
+        let bottom = self.top + self.rows as i32 * s;
+        text(
+            img,
+            labels.0,
+            Point::new(self.left + self.cols as i32 * s / 2 - 40, bottom + 34),
+            0.45,
+        )?;
+        text(
+            img,
+            labels.1,
+            Point::new(self.left - 60, self.top - 8),
+            0.45,
+        )?;
+        Ok(())
+    }
+
+    fn path(
+        &self,
+        img: &mut Mat,
+        pts: &[(f64, f64)],
+        res: f64,
+        s: i32,
+        c: Scalar,
+        thick: i32,
+    ) -> Result<()> {
+        for w in pts.windows(2) {
+            let (a, b) = (
+                self.px(w[0].0, w[0].1, res, s),
+                self.px(w[1].0, w[1].1, res, s),
+            );
+            imgproc::line(img, a, b, c, thick, imgproc::LINE_AA, 0)?;
+        }
+        Ok(())
+    }
+
+    fn outline(
+        &self,
+        img: &mut Mat,
+        lo: (f64, f64),
+        hi: (f64, f64),
+        res: f64,
+        s: i32,
+    ) -> Result<()> {
+        let a = self.px(lo.0, hi.1, res, s);
+        let b = self.px(hi.0, lo.1, res, s);
+        imgproc::rectangle(img, Rect::from_points(a, b), black(), 1, imgproc::LINE_8, 0)?;
+        Ok(())
+    }
+}
+
+/// Writes the figure: top view (max over z above the ground layer) and side view (max
+/// over y), cells coloured by state, axes in metres, a 1 m scale bar, the estimated
+/// path, the obstacles' true outlines.
+fn draw(
+    map: &OccupancyMap,
+    path: &[Vector3<f64>],
+    truth_path: &[Vector3<f64>],
+    obstacles: &[Aabb],
+    scenario: &str,
+    args: &MapArgs,
+) -> Result<()> {
+    let s = args.cell_px;
+    let [nx, ny, nz] = map.dims();
+    let res = map.resolution();
+    let o = map.origin();
+    let mut top_cells = vec![CellState::Unknown; nx * ny];
+    let mut side_cells = vec![CellState::Unknown; nx * nz];
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                let st = map.state_at_index([x, y, z]);
+                let centre_z = o.z + (z as f64 + 0.5) * res;
+                if centre_z >= TOP_VIEW_FROM_M && rank(st) > rank(top_cells[y * nx + x]) {
+                    top_cells[y * nx + x] = st;
+                }
+                if rank(st) > rank(side_cells[z * nx + x]) {
+                    side_cells[z * nx + x] = st;
+                }
+            }
+        }
+    }
+    let left = 80;
+    let width = left + nx as i32 * s + 30;
+    let top = Panel {
+        left,
+        top: 80,
+        cols: nx,
+        rows: ny,
+        origin: (o.x, o.y),
+    };
+    let side = Panel {
+        left,
+        top: top.top + ny as i32 * s + 100,
+        cols: nx,
+        rows: nz,
+        origin: (o.x, o.z),
+    };
+    let height = side.top + nz as i32 * s + 120;
+    let mut img =
+        Mat::new_rows_cols_with_default(height, width, core::CV_8UC3, Scalar::all(255.0))?;
+    text(
+        &mut img,
+        &format!("landing map --scenario {scenario}: depth frames + estimated pose"),
+        Point::new(10, 22),
+        0.48,
+    )?;
+    text(
+        &mut img,
+        &format!(
+            "top view: max over z of the cells {TOP_VIEW_FROM_M} m and higher (above the ground and its inflation)"
+        ),
+        Point::new(10, top.top - 32),
+        0.42,
+    )?;
+    text(
+        &mut img,
+        "side view: max over y",
+        Point::new(10, side.top - 32),
+        0.42,
+    )?;
+    top.fill(&mut img, &top_cells, s)?;
+    side.fill(&mut img, &side_cells, s)?;
+    for b in obstacles {
+        top.outline(
+            &mut img,
+            (b.min_m[0], b.min_m[1]),
+            (b.max_m[0], b.max_m[1]),
+            res,
+            s,
+        )?;
+        side.outline(
+            &mut img,
+            (b.min_m[0], b.min_m[2]),
+            (b.max_m[0], b.max_m[2]),
+            res,
+            s,
+        )?;
+    }
+    let grey = Scalar::new(120.0, 120.0, 120.0, 0.0);
+    let blue = Scalar::new(200.0, 90.0, 20.0, 0.0);
+    let tp: Vec<_> = truth_path.iter().map(|p| (p.x, p.y)).collect();
+    let ts: Vec<_> = truth_path.iter().map(|p| (p.x, p.z)).collect();
+    top.path(&mut img, &tp, res, s, grey, 1)?;
+    side.path(&mut img, &ts, res, s, grey, 1)?;
+    let ep: Vec<_> = path.iter().map(|p| (p.x, p.y)).collect();
+    let es: Vec<_> = path.iter().map(|p| (p.x, p.z)).collect();
+    top.path(&mut img, &ep, res, s, blue, 2)?;
+    side.path(&mut img, &es, res, s, blue, 2)?;
+    if let Some(last) = path.last() {
+        for (panel, (u, v)) in [(&top, (last.x, last.y)), (&side, (last.x, last.z))] {
+            imgproc::circle(
+                &mut img,
+                panel.px(u, v, res, s),
+                5,
+                blue,
+                imgproc::FILLED,
+                imgproc::LINE_AA,
+                0,
+            )?;
+        }
+    }
+    top.axes(&mut img, res, s, ("x (m, east)", "y (m, north)"))?;
+    side.axes(&mut img, res, s, ("x (m, east)", "z (m, up)"))?;
+    // Legend and scale bar.
+    let ly = side.top + nz as i32 * s + 60;
+    let mut lx = left;
+    for (st, name) in [
+        (CellState::Unknown, "unknown"),
+        (CellState::Free, "free"),
+        (CellState::Occupied, "occupied"),
+        (CellState::Inflated, "inflated (0.299 m)"),
+    ] {
+        imgproc::rectangle(
+            &mut img,
+            Rect::new(lx, ly - 11, 14, 14),
+            colour(st),
+            imgproc::FILLED,
+            imgproc::LINE_8,
+            0,
+        )?;
+        imgproc::rectangle(
+            &mut img,
+            Rect::new(lx, ly - 11, 14, 14),
+            black(),
+            1,
+            imgproc::LINE_8,
+            0,
+        )?;
+        text(&mut img, name, Point::new(lx + 20, ly), 0.42)?;
+        lx += 40 + 9 * name.len() as i32;
+    }
+    let ly2 = ly + 26;
+    imgproc::line(
+        &mut img,
+        Point::new(left, ly2 - 4),
+        Point::new(left + 24, ly2 - 4),
+        blue,
+        2,
+        imgproc::LINE_AA,
+        0,
+    )?;
+    text(
+        &mut img,
+        "path (autopilot estimate)",
+        Point::new(left + 30, ly2),
+        0.42,
+    )?;
+    imgproc::line(
+        &mut img,
+        Point::new(left + 250, ly2 - 4),
+        Point::new(left + 274, ly2 - 4),
+        grey,
+        1,
+        imgproc::LINE_AA,
+        0,
+    )?;
+    text(&mut img, "path (truth)", Point::new(left + 280, ly2), 0.42)?;
+    imgproc::rectangle(
+        &mut img,
+        Rect::new(left + 400, ly2 - 11, 14, 14),
+        black(),
+        1,
+        imgproc::LINE_8,
+        0,
+    )?;
+    text(
+        &mut img,
+        "obstacle (truth)",
+        Point::new(left + 420, ly2),
+        0.42,
+    )?;
+    let bar = (1.0 / res * f64::from(s)).round() as i32;
+    let bx = width - bar - 40;
+    imgproc::line(
+        &mut img,
+        Point::new(bx, ly - 4),
+        Point::new(bx + bar, ly - 4),
+        black(),
+        3,
+        imgproc::LINE_8,
+        0,
+    )?;
+    text(
+        &mut img,
+        "1 m",
+        Point::new(bx + bar / 2 - 10, ly - 10),
+        0.42,
+    )?;
+    write_png(&args.png, &img)
+}
+
+fn write_png(path: &Path, img: &Mat) -> Result<()> {
+    let p = path
+        .to_str()
+        .with_context(|| format!("{}: not a UTF-8 path", path.display()))?;
+    let ok = imgcodecs::imwrite(p, img, &Vector::new())
+        .with_context(|| format!("writing {}", path.display()))?;
+    if !ok {
+        bail!("{}: OpenCV could not write the PNG", path.display());
+    }
+    Ok(())
+}
