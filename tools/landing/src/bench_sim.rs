@@ -13,8 +13,6 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::Args;
 use ipc_types::runtime::config::deploy_dir;
-use mavlink::MavHeader;
-use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd, MavMessage};
 use serde_json::json;
 use sim::camera_worker::CameraPipeline;
 use sim::lockstep::Simulator;
@@ -46,38 +44,13 @@ struct Flight {
     depth_ms: Vec<f64>,
 }
 
-fn command(sim: &mut Simulator, command: MavCmd, param1: f32, param7: f32) {
-    let header = MavHeader {
-        system_id: 1,
-        component_id: 191,
-        sequence: 0,
-    };
-    sim.handle_mavlink(
-        &header,
-        &MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-            param1,
-            param2: 0.0,
-            param3: 0.0,
-            param4: f32::NAN,
-            param5: f32::NAN,
-            param6: f32::NAN,
-            param7,
-            command,
-            target_system: 1,
-            target_component: 1,
-            confirmation: 0,
-        }),
-    );
-}
-
 /// Flies `seconds` of `scenario`. Synchronous: every render on this thread, timed.
 /// Pipelined: the camera renders on a [`CameraPipeline`] between capture and publish time,
 /// as the lockstep runner does, while physics and depth run here.
 fn fly(scenario: &str, seconds: f64, deploy: &std::path::Path, pipelined: bool) -> Result<Flight> {
     let scn = sim::scenario::load(scenario, deploy)?;
     let mut sim = Simulator::new(&scn, 1).context("building the simulator")?;
-    command(&mut sim, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0);
-    command(&mut sim, MavCmd::MAV_CMD_NAV_TAKEOFF, 0.0, 2.0);
+    crate::companion::arm_and_take_off(&mut sim, 2.0);
     let mut camera = if pipelined {
         CameraPipeline::from_simulator(&mut sim)?
     } else {

@@ -5,6 +5,7 @@ mod bench_depth;
 mod bench_ipc;
 mod bench_perception;
 mod bench_sim;
+mod companion;
 mod config_cmd;
 mod map_cmd;
 mod pad_detect;

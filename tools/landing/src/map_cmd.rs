@@ -21,10 +21,8 @@ use clap::Args;
 use depth_map::{DepthMapConfig, DepthMapper, DepthPixels, DepthView, OccupancyMap};
 use ipc_types::msg::{CellState, Intrinsics};
 use ipc_types::runtime::config::{self as cfgload, deploy_dir};
-use mavlink::MavHeader;
 use mavlink::dialects::common::{
-    COMMAND_LONG_DATA, MavCmd, MavFrame, MavMessage, PositionTargetTypemask,
-    SET_POSITION_TARGET_LOCAL_NED_DATA,
+    MavCmd, MavFrame, MavMessage, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use opencv::core::{Mat, Point, Rect, Scalar, Vector};
@@ -72,30 +70,7 @@ const TOP_VIEW_FROM_M: f64 = 0.45;
 /// Longest flight, simulated s.
 const MAX_FLIGHT_S: f64 = 90.0;
 
-const COMPANION: MavHeader = MavHeader {
-    system_id: 1,
-    component_id: 191,
-    sequence: 0,
-};
-
-fn command(sim: &mut Simulator, command: MavCmd, p: [f32; 7]) {
-    sim.handle_mavlink(
-        &COMPANION,
-        &MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-            param1: p[0],
-            param2: p[1],
-            param3: p[2],
-            param4: p[3],
-            param5: p[4],
-            param6: p[5],
-            param7: p[6],
-            command,
-            target_system: 1,
-            target_component: 1,
-            confirmation: 0,
-        }),
-    );
-}
+use crate::companion::{COMPANION, command};
 
 /// Position + yaw setpoint, ENU in, NED on the wire.
 fn setpoint(sim: &mut Simulator, p: &Vector3<f64>, yaw_enu: f64) {

@@ -1,0 +1,47 @@
+//! The tools' side of MAVLink to the lockstep simulator, in-process (no socket): what a
+//! companion computer would send, handed straight to the simulated autopilot.
+
+use mavlink::MavHeader;
+use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd, MavMessage};
+use sim::lockstep::Simulator;
+
+/// The header a companion (MAV_COMP_ID_ONBOARD_COMPUTER) sends with.
+pub const COMPANION: MavHeader = MavHeader {
+    system_id: 1,
+    component_id: 191,
+    sequence: 0,
+};
+
+/// Sends COMMAND_LONG `command` with parameters `p` to the simulated autopilot.
+pub fn command(sim: &mut Simulator, command: MavCmd, p: [f32; 7]) {
+    sim.handle_mavlink(
+        &COMPANION,
+        &MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            param1: p[0],
+            param2: p[1],
+            param3: p[2],
+            param4: p[3],
+            param5: p[4],
+            param6: p[5],
+            param7: p[6],
+            command,
+            target_system: 1,
+            target_component: 1,
+            confirmation: 0,
+        }),
+    );
+}
+
+/// Arm, then AUTO.TAKEOFF to `altitude_m`.
+pub fn arm_and_take_off(sim: &mut Simulator, altitude_m: f32) {
+    command(
+        sim,
+        MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+        [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    command(
+        sim,
+        MavCmd::MAV_CMD_NAV_TAKEOFF,
+        [0.0, 0.0, 0.0, f32::NAN, f32::NAN, f32::NAN, altitude_m],
+    );
+}
