@@ -1,0 +1,2 @@
+//! `planner` binary (placeholder until the IPC binding lands).
+fn main() {}
