@@ -137,6 +137,7 @@ impl Planner {
         goal: &Goal,
     ) -> Result<Plan, PlanError> {
         self.stats = PlanStats::default();
+        let map = &Bounded(map);
         if !start.is_finite() || !goal.state.is_finite() {
             return Err(PlanError::NotFinite);
         }
@@ -409,11 +410,19 @@ impl Planner {
             while hi_id < n - 1 && map.is_occupied(&q[hi_id]) {
                 hi_id += 1;
             }
-            if map.is_occupied(&q[hi_id]) {
-                return Err(PlanError::NoPath);
-            }
+            // At the ends, the curve's own end points (the start and the goal) are free.
+            let from = if map.is_occupied(&q[lo_id]) {
+                spline.eval(0.0).p
+            } else {
+                q[lo_id]
+            };
+            let to = if map.is_occupied(&q[hi_id]) {
+                spline.eval(spline.duration()).p
+            } else {
+                q[hi_id]
+            };
             let mut path = std::mem::take(&mut self.path);
-            let ok = self.astar.search(map, &q[lo_id], &q[hi_id], &mut path);
+            let ok = self.astar.search(map, &from, &to, &mut path);
             if ok {
                 for j in a.max(3)..=b.min(n - 4) {
                     if let Some(pair) = pair_for(map, q, j, &path) {
@@ -475,6 +484,26 @@ impl Planner {
             }
         }
         Ok(())
+    }
+}
+
+/// The map as the planner's own checks see it: outside the bounds is blocked, so that the
+/// rebound pulls a control point back in rather than letting it wander into unmapped space.
+struct Bounded<'a, M: ?Sized>(&'a M);
+
+impl<M: OccupancyQuery + ?Sized> OccupancyQuery for Bounded<'_, M> {
+    fn resolution(&self) -> f64 {
+        self.0.resolution()
+    }
+
+    fn is_occupied(&self, p: &Vector3<f64>) -> bool {
+        let (lo, hi) = self.0.bounds();
+        // `!(a <= b)` so that NaN is blocked too.
+        (0..3).any(|i| !(lo[i] <= p[i] && p[i] <= hi[i])) || self.0.is_occupied(p)
+    }
+
+    fn bounds(&self) -> (Vector3<f64>, Vector3<f64>) {
+        self.0.bounds()
     }
 }
 
