@@ -17,6 +17,9 @@ pub struct StackConfig {
     /// The pad estimator.
     #[serde(default)]
     pub aruco_pnp: aruco_pnp::ArucoConfig,
+    /// The planner.
+    #[serde(default)]
+    pub planner: planner::PlannerConfig,
     /// camera-ingest: where frames come from, the calibration, undistortion.
     #[serde(default)]
     pub camera_ingest: Option<CameraIngestConfig>,
@@ -28,6 +31,7 @@ impl Validate for StackConfig {
         self.aruco_pnp
             .validate()
             .map_err(|e| e.under("aruco_pnp"))?;
+        self.planner.validate().map_err(|e| e.under("planner"))?;
         if let Some(c) = &self.camera_ingest {
             c.validate().map_err(|e| e.under("camera_ingest"))?;
         }

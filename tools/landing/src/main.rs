@@ -3,10 +3,12 @@
 mod bench_aruco;
 mod bench_ipc;
 mod bench_perception;
+mod bench_planner;
 mod bench_sim;
 mod config_cmd;
 mod pad_detect;
 mod pad_print;
+mod plan_cmd;
 mod stats;
 
 use std::path::PathBuf;
@@ -37,6 +39,8 @@ enum Command {
     /// The landing pad: print it, find it in an image.
     #[command(subcommand)]
     Pad(PadCommand),
+    /// Plan one trajectory offline on a map of boxes (exit code 3 when there is none).
+    Plan(plan_cmd::PlanArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -80,6 +84,9 @@ enum BenchCommand {
     Aruco(bench_aruco::ArucoArgs),
     /// sim -> camera-ingest -> aruco-pnp as processes: observation rate and latency.
     Perception(bench_perception::PerceptionArgs),
+    /// Planner success rate and planning time on random pillar fields and the paper's
+    /// obstacle scene.
+    Planner(bench_planner::PlannerArgs),
     /// Internal: the publishing side of `bench ipc`, started by it in a second process.
     #[command(hide = true)]
     IpcPeer(bench_ipc::PeerArgs),
@@ -108,6 +115,11 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::IpcPeer(args)) => {
             bench_ipc::run_peer(&args, cli.ipc_prefix.as_deref())
         }
+        Command::Bench(BenchCommand::Planner(args)) => bench_planner::run(&args),
+        Command::Plan(args) => match plan_cmd::run(&args) {
+            Ok(false) => return ExitCode::from(plan_cmd::NO_PLAN),
+            other => other.map(|_| ()),
+        },
         Command::Config(ConfigCommand::Check { file }) => config_cmd::check(&file),
         Command::Pad(PadCommand::Detect(args)) => match pad_detect::run(&args) {
             Ok(false) => return ExitCode::from(pad_detect::NOT_FOUND),
