@@ -29,6 +29,9 @@ pub struct PlannerArgs {
     /// Seed of the map generator.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Print each failed or slow (> 2 ms) run on stderr.
+    #[arg(long)]
+    verbose: bool,
 }
 
 /// Pillar densities, per m^2 of the field.
@@ -174,7 +177,7 @@ struct Group {
 }
 
 impl Group {
-    fn record(&mut self, planner: &mut Planner, map: &GridMap, start: &State, goal: &State) {
+    fn record(&mut self, planner: &mut Planner, map: &GridMap, start: &State, goal: &State, verbose: bool) {
         let t0 = Instant::now();
         let r = planner.plan(
             map,
@@ -189,16 +192,16 @@ impl Group {
         let st = planner.stats();
         self.iterations.push(st.iterations as f64);
         self.rebounds.push(st.rebounds as f64);
-        if let Ok(p) = r {
-            if verify(
-                map,
-                &p.spline,
-                start,
-                &State { p: p.goal, ..*goal },
-                planner.config(),
-            ) {
-                self.ok += 1;
-            }
+        let ms = self.ms.last().copied().unwrap_or(0.0);
+        let ok = match &r {
+            Ok(p) => verify(map, &p.spline, start, &State { p: p.goal, ..*goal }, planner.config()),
+            Err(_) => false,
+        };
+        if ok {
+            self.ok += 1;
+        }
+        if verbose && (!ok || ms > 2.0) {
+            eprintln!("run {}: {ms:.3} ms, {st:?}, verified {ok}, {:?}", self.runs, r.as_ref().err());
         }
     }
 
@@ -229,7 +232,7 @@ pub fn run(args: &PlannerArgs) -> Result<()> {
         let mut g = Group::default();
         for _ in 0..args.maps {
             let s = random_scene(&mut rng, d, &cfg)?;
-            g.record(&mut planner, &s.map, &s.start, &s.goal);
+            g.record(&mut planner, &s.map, &s.start, &s.goal, args.verbose);
         }
         per.insert(format!("{d:.2}"), g.json());
         merge(&mut all, g);
@@ -241,7 +244,7 @@ pub fn run(args: &PlannerArgs) -> Result<()> {
         State::at_rest(Vector3::new(6.0, 0.0, 0.8)),
     );
     for _ in 0..args.maps {
-        g.record(&mut planner, &paper, &s, &e);
+        g.record(&mut planner, &paper, &s, &e, args.verbose);
     }
     let paper_json = g.json();
     merge(&mut all, g);
