@@ -13,11 +13,13 @@ pub mod config;
 pub mod cost;
 pub mod lbfgs;
 pub mod map;
+pub mod node;
 pub mod plan;
 pub mod replan;
 
 pub use bspline::{BSpline, State};
 pub use config::PlannerConfig;
 pub use map::{Aabb, CellView, GridMap, MapError, OccupancyQuery};
+pub use node::{Output, PlannerNode, to_message};
 pub use plan::{Goal, LIMIT_TOLERANCE, Plan, PlanError, PlanStats, Planner, stop_trajectory};
 pub use replan::{Decision, OnFailure, Reason, ReplanPolicy, predicted_collision};
