@@ -177,7 +177,14 @@ struct Group {
 }
 
 impl Group {
-    fn record(&mut self, planner: &mut Planner, map: &GridMap, start: &State, goal: &State, verbose: bool) {
+    fn record(
+        &mut self,
+        planner: &mut Planner,
+        map: &GridMap,
+        start: &State,
+        goal: &State,
+        verbose: bool,
+    ) {
         let t0 = Instant::now();
         let r = planner.plan(
             map,
@@ -194,14 +201,24 @@ impl Group {
         self.rebounds.push(st.rebounds as f64);
         let ms = self.ms.last().copied().unwrap_or(0.0);
         let ok = match &r {
-            Ok(p) => verify(map, &p.spline, start, &State { p: p.goal, ..*goal }, planner.config()),
+            Ok(p) => verify(
+                map,
+                &p.spline,
+                start,
+                &State { p: p.goal, ..*goal },
+                planner.config(),
+            ),
             Err(_) => false,
         };
         if ok {
             self.ok += 1;
         }
         if verbose && (!ok || ms > 2.0) {
-            eprintln!("run {}: {ms:.3} ms, {st:?}, verified {ok}, {:?}", self.runs, r.as_ref().err());
+            eprintln!(
+                "run {}: {ms:.3} ms, {st:?}, verified {ok}, {:?}",
+                self.runs,
+                r.as_ref().err()
+            );
         }
     }
 

@@ -22,17 +22,17 @@ pub struct PlanArgs {
     #[arg(long)]
     map: PathBuf,
     /// Start position x,y,z (m).
-    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
-    start: Vector3<f64>,
+    #[arg(long, allow_hyphen_values = true)]
+    start: String,
     /// Goal position x,y,z (m).
-    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
-    goal: Vector3<f64>,
+    #[arg(long, allow_hyphen_values = true)]
+    goal: String,
     /// Start velocity x,y,z (m/s; default 0,0,0).
-    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
-    start_vel: Option<Vector3<f64>>,
+    #[arg(long, allow_hyphen_values = true)]
+    start_vel: Option<String>,
     /// Goal velocity x,y,z (m/s; default 0,0,0).
-    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
-    goal_vel: Option<Vector3<f64>>,
+    #[arg(long, allow_hyphen_values = true)]
+    goal_vel: Option<String>,
     /// Stack configuration for the [planner] section (default: the paper's parameters).
     #[arg(long)]
     config: Option<PathBuf>,
@@ -117,20 +117,27 @@ pub fn planner_config(path: Option<&Path>) -> Result<PlannerConfig> {
 /// Runs `landing plan`; `Ok(false)` when no trajectory was found.
 pub fn run(args: &PlanArgs) -> Result<bool> {
     let cfg = planner_config(args.config.as_deref())?;
-    let map = load_map(&args.map, &cfg)?;
+    // Vectors are parsed here, not by clap, so that a bad one is one line like the rest.
+    let vec = |flag: &str, v: Option<&String>| -> Result<Vector3<f64>> {
+        match v {
+            Some(s) => parse_vec3(s).map_err(|e| anyhow::anyhow!("--{flag} {e}")),
+            None => Ok(Vector3::zeros()),
+        }
+    };
     let start = State {
-        p: args.start,
-        v: args.start_vel.unwrap_or_default(),
+        p: vec("start", Some(&args.start))?,
+        v: vec("start-vel", args.start_vel.as_ref())?,
         a: Vector3::zeros(),
     };
     let goal = Goal {
         state: State {
-            p: args.goal,
-            v: args.goal_vel.unwrap_or_default(),
+            p: vec("goal", Some(&args.goal))?,
+            v: vec("goal-vel", args.goal_vel.as_ref())?,
             a: Vector3::zeros(),
         },
         moving: false,
     };
+    let map = load_map(&args.map, &cfg)?;
     let mut planner = Planner::new(cfg);
     let t0 = Instant::now();
     let result = planner.plan(&map, &start, &goal);

@@ -25,6 +25,8 @@ fn every_subcommand_has_help() {
         vec!["bench", "sim"],
         vec!["bench", "aruco"],
         vec!["bench", "perception"],
+        vec!["bench", "planner"],
+        vec!["plan"],
         vec!["pad"],
         vec!["pad", "detect"],
         vec!["config"],
