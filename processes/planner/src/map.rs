@@ -248,9 +248,8 @@ impl<'a> CellView<'a> {
     /// has no cells, or promises more cells than the payload holds.
     pub fn new(header: &OccupancyMapHeader, cells: &'a [u8]) -> Option<Self> {
         let origin = Vector3::from(header.origin);
-        if !origin.iter().all(|v| v.is_finite())
-            || !(header.resolution.is_finite() && header.resolution > 1e-3)
-        {
+        let finite = origin.iter().all(|v| v.is_finite()) && header.resolution.is_finite();
+        if !(finite && header.resolution > 1e-3) {
             return None;
         }
         let dims = header.dims.map(|d| d as usize);

@@ -1,4 +1,5 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
+#![allow(clippy::needless_range_loop)] // the basis matrix reads as written
 //! Whole plans checked from outside the optimizer: the curve is re-evaluated here with
 //! its own basis matrix and sampled densely against the raw boxes (distance >= the
 //! inflation), the limits, and the requested end states.

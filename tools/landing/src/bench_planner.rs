@@ -103,6 +103,7 @@ pub fn paper_scene(cfg: &PlannerConfig) -> Result<GridMap> {
 }
 
 /// Position, velocity, acceleration at `t` from the B-spline basis matrix.
+#[allow(clippy::needless_range_loop)] // the basis matrix reads as written
 fn sample(s: &BSpline, t: f64) -> [Vector3<f64>; 3] {
     let segs = s.points.len() - 3;
     let x = (t / s.ts).clamp(0.0, segs as f64);
@@ -137,7 +138,7 @@ pub fn verify(
     goal: &State,
     cfg: &PlannerConfig,
 ) -> bool {
-    if s.points.len() < 4 || !(s.ts > 0.0) {
+    if s.points.len() < 4 || s.ts.is_nan() || s.ts <= 0.0 {
         return false;
     }
     let (lo, hi) = map.bounds();
