@@ -24,6 +24,11 @@ pub struct LbfgsSettings {
     pub c2: f64,
     /// Function evaluations allowed per line search.
     pub max_line_evals: usize,
+    /// Stop when the cost fell by less than `delta` (relative) over the last `past`
+    /// iterations (0 disables): the planner needs a good curve, not the last digit.
+    pub past: usize,
+    /// Relative decrease threshold for `past`.
+    pub delta: f64,
 }
 
 impl Default for LbfgsSettings {
@@ -35,6 +40,8 @@ impl Default for LbfgsSettings {
             c1: 1e-4,
             c2: 0.9,
             max_line_evals: 30,
+            past: 3,
+            delta: 1e-4,
         }
     }
 }
@@ -79,8 +86,7 @@ pub struct Lbfgs {
     g: Vec<f64>,
     x0: Vec<f64>,
     g0: Vec<f64>,
-    xt: Vec<f64>,
-    gt: Vec<f64>,
+    history: [f64; 8],
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -115,8 +121,6 @@ impl Lbfgs {
             &mut self.g,
             &mut self.x0,
             &mut self.g0,
-            &mut self.xt,
-            &mut self.gt,
         ] {
             v.clear();
             v.resize(n, 0.0);
@@ -231,6 +235,16 @@ impl Lbfgs {
                 stored = (stored + 1).min(m);
             }
             iter += 1;
+            let past = set.past.min(self.history.len());
+            if past > 0 {
+                if iter > past {
+                    let old = self.history[iter % past];
+                    if (old - fx) / fx.abs().max(1e-12) < set.delta {
+                        break Stop::Converged;
+                    }
+                }
+                self.history[iter % past] = fx;
+            }
         };
         Report {
             stop,
