@@ -116,12 +116,7 @@ impl Lbfgs {
             v.clear();
             v.resize(m, 0.0);
         }
-        for v in [
-            &mut self.d,
-            &mut self.g,
-            &mut self.x0,
-            &mut self.g0,
-        ] {
+        for v in [&mut self.d, &mut self.g, &mut self.x0, &mut self.g0] {
             v.clear();
             v.resize(n, 0.0);
         }

@@ -184,7 +184,8 @@ impl Planner {
         let mut rounds = 0usize;
         loop {
             self.optimize(&mut spline, w, vlim, alim, reference.as_deref());
-            match self.add_pairs(map, &spline)? {
+            let found = self.add_pairs(map, &spline)?;
+            match found {
                 Found::Clear => {}
                 found => {
                     rounds += 1;
@@ -401,6 +402,26 @@ impl Planner {
                 i += 1;
             }
             let b = i - 1;
+            // Which points get a new pair: the occupied ones (EGO-Planner), unless an
+            // existing pair already says the point is inside that pair's obstacle (then
+            // it is not a new obstacle, the weights must do it). A run that clips a
+            // corner without any occupied control point gives its points pairs instead.
+            let range = a.max(3)..=b.min(n - 4);
+            let occupied: Vec<bool> = (0..n)
+                .map(|j| range.contains(&j) && map.is_occupied(&q[j]))
+                .collect();
+            let any_occupied = occupied.iter().any(|&o| o);
+            let tol = 0.1 * res;
+            let wanted = |j: usize, pairs: &[Vec<Pair>]| {
+                if any_occupied {
+                    occupied[j] && pairs[j].iter().all(|e| (q[j] - e.p).dot(&e.v) >= tol)
+                } else {
+                    true
+                }
+            };
+            if !range.clone().any(|j| wanted(j, &self.pairs)) {
+                continue;
+            }
             // Free control points on either side of the run.
             let mut lo_id = a.saturating_sub(1);
             while lo_id > 0 && map.is_occupied(&q[lo_id]) {
@@ -424,7 +445,10 @@ impl Planner {
             let mut path = std::mem::take(&mut self.path);
             let ok = self.astar.search(map, &from, &to, &mut path);
             if ok {
-                for j in a.max(3)..=b.min(n - 4) {
+                for j in range.clone() {
+                    if !wanted(j, &self.pairs) {
+                        continue;
+                    }
                     if let Some(pair) = pair_for(map, q, j, &path) {
                         let dup = self.pairs[j].iter().any(|e| e.v.dot(&pair.v) > 0.9);
                         if !dup && self.pairs[j].len() < 16 {
