@@ -69,6 +69,8 @@ pub struct PlanStats {
     pub rebounds: u32,
     /// Time re-allocations.
     pub reallocations: u32,
+    /// Restarts from the A* path after the first initialization failed.
+    pub restarts: u32,
 }
 
 /// The planner: settings and every buffer reused from plan to plan.
@@ -84,6 +86,9 @@ pub struct Planner {
     marks: Vec<bool>,
     stats: PlanStats,
 }
+
+/// Time re-allocations per plan before the limits are called infeasible.
+const MAX_REALLOCATIONS: u32 = 5;
 
 /// How far the final check tolerates limits being exceeded (sampling and rounding).
 pub const LIMIT_TOLERANCE: f64 = 1.05;
@@ -164,9 +169,40 @@ impl Planner {
             end.p = gp;
             duration = self.duration(start, &end, vlim, alim);
         }
-        let mut spline = self
+        let first = self
             .initial(start, &end, duration, vlim)
             .ok_or(PlanError::Infeasible("initialization failed"))?;
+        let spline = match self.solve(map, first, start, &end, vlim, alim) {
+            Ok(s) => s,
+            Err(e @ (PlanError::Collides | PlanError::NoPath | PlanError::Infeasible(_))) => {
+                // Fallback: start again from the A* path between start and goal (the
+                // straight initialization may sit in a pocket the rebound cannot leave).
+                let Some(second) = self.initial_from_path(map, start, &end, vlim, alim) else {
+                    return Err(e);
+                };
+                self.stats.restarts += 1;
+                self.solve(map, second, start, &end, vlim, alim)?
+            }
+            Err(e) => return Err(e),
+        };
+        Ok(Plan {
+            spline,
+            goal: end.p,
+            goal_adjusted: adjusted,
+        })
+    }
+
+    /// The back end on one initial curve: rebound rounds, time re-allocation with
+    /// refinement, and the final check.
+    fn solve<M: OccupancyQuery + ?Sized>(
+        &mut self,
+        map: &M,
+        mut spline: BSpline,
+        start: &State,
+        end: &State,
+        vlim: f64,
+        alim: f64,
+    ) -> Result<BSpline, PlanError> {
         let n = spline.points.len();
         self.pairs.iter_mut().for_each(|p| p.clear());
         self.pairs.resize_with(n, Vec::new);
@@ -202,14 +238,14 @@ impl Planner {
             }
             let (v, a) = spline.max_vel_acc();
             let ratio = (v / vlim).max((a / alim).sqrt());
-            if ratio > 1.02 && self.stats.reallocations < 3 {
+            if ratio > 1.02 && self.stats.reallocations < MAX_REALLOCATIONS {
                 self.stats.reallocations += 1;
                 // Same control points, longer knots: the same path, slower; then refit the
                 // fixed ends to the end states and refine near the stretched curve.
                 let r = spline.points.clone();
-                spline.ts *= ratio.min(4.0);
+                spline.ts *= (ratio * 1.02).min(4.0);
                 let s3 = end_points(start, spline.ts);
-                let e3 = end_points(&end, spline.ts);
+                let e3 = end_points(end, spline.ts);
                 spline.points[..3].copy_from_slice(&s3);
                 spline.points[n - 3..].copy_from_slice(&e3);
                 reference = Some(r);
@@ -219,11 +255,51 @@ impl Planner {
             break;
         }
         self.accept(map, &spline, vlim, alim)?;
-        Ok(Plan {
-            spline,
-            goal: end.p,
-            goal_adjusted: adjusted,
-        })
+        Ok(spline)
+    }
+
+    /// An initial curve along the A* path from start to goal, timed with a
+    /// minimum-jerk profile along its length.
+    fn initial_from_path<M: OccupancyQuery + ?Sized>(
+        &mut self,
+        map: &M,
+        start: &State,
+        end: &State,
+        vlim: f64,
+        alim: f64,
+    ) -> Option<BSpline> {
+        let mut path = std::mem::take(&mut self.path);
+        let found = self.astar.search(map, &start.p, &end.p, &mut path);
+        let result = if found && path.len() >= 2 {
+            let mut cum = Vec::with_capacity(path.len());
+            let mut len = 0.0;
+            cum.push(0.0);
+            for w in path.windows(2) {
+                len += (w[1] - w[0]).norm();
+                cum.push(len);
+            }
+            let t = (1.875 * len / vlim).max((5.8 * len / alim).sqrt()).max(0.2) * 1.1;
+            let ts0 = self.cfg.control_point_spacing / vlim * 1.2;
+            let k = ((t / ts0).ceil() as usize + 1).clamp(5, MAX_CONTROL_POINTS - 2);
+            let ts = t / (k - 1) as f64;
+            let mut seg = 0;
+            let samples: Vec<Vector3<f64>> = (0..k)
+                .map(|i| {
+                    let tau = i as f64 / (k - 1) as f64;
+                    let s = len * tau * tau * tau * (10.0 - 15.0 * tau + 6.0 * tau * tau);
+                    while seg + 2 < cum.len() && cum[seg + 1] < s {
+                        seg += 1;
+                    }
+                    let l = (cum[seg + 1] - cum[seg]).max(1e-12);
+                    path[seg] + (path[seg + 1] - path[seg]) * ((s - cum[seg]) / l).clamp(0.0, 1.0)
+                })
+                .collect();
+            fit(&samples, ts, start, end)
+        } else {
+            None
+        };
+        self.path = path;
+        result
     }
 
     /// Duration of the initial quintic: long enough that its speed and acceleration stay
@@ -450,10 +526,20 @@ impl Planner {
                         continue;
                     }
                     if let Some(pair) = pair_for(map, q, j, &path) {
-                        let dup = self.pairs[j].iter().any(|e| e.v.dot(&pair.v) > 0.9);
-                        if !dup && self.pairs[j].len() < 16 {
-                            self.pairs[j].push(pair);
-                            added = true;
+                        let count = self.pairs[j].len();
+                        match self.pairs[j].iter_mut().find(|e| e.v.dot(&pair.v) > 0.9) {
+                            // A corner clip that its pair already pushed out of, and the
+                            // curve still clips: re-anchor it so the point moves further.
+                            Some(e) if !any_occupied && (q[j] - e.p).dot(&e.v) > tol => {
+                                e.p = q[j];
+                                added = true;
+                            }
+                            Some(_) => {}
+                            None if count < 16 => {
+                                self.pairs[j].push(pair);
+                                added = true;
+                            }
+                            None => {}
                         }
                     }
                 }
