@@ -20,6 +20,9 @@ pub struct StackConfig {
     /// The autopilot link.
     #[serde(default)]
     pub px4_link: px4_link::config::Px4LinkConfig,
+    /// The planner.
+    #[serde(default)]
+    pub planner: planner::PlannerConfig,
     /// camera-ingest: where frames come from, the calibration, undistortion.
     #[serde(default)]
     pub camera_ingest: Option<CameraIngestConfig>,
@@ -38,6 +41,7 @@ impl Validate for StackConfig {
         self.depth_map
             .validate()
             .map_err(|e| e.under("depth_map"))?;
+        self.planner.validate().map_err(|e| e.under("planner"))?;
         if let Some(c) = &self.camera_ingest {
             c.validate().map_err(|e| e.under("camera_ingest"))?;
         }

@@ -4,12 +4,14 @@ mod bench_aruco;
 mod bench_depth;
 mod bench_ipc;
 mod bench_perception;
+mod bench_planner;
 mod bench_sim;
 mod companion;
 mod config_cmd;
 mod map_cmd;
 mod pad_detect;
 mod pad_print;
+mod plan_cmd;
 mod stats;
 
 use std::path::PathBuf;
@@ -44,6 +46,8 @@ enum Command {
     /// the autopilot's estimated pose, and draw the map (top and side views) into a PNG;
     /// prints where the obstacles really are against where the map put them.
     Map(map_cmd::MapArgs),
+    /// Plan one trajectory offline on a map of boxes (exit code 3 when there is none).
+    Plan(plan_cmd::PlanArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -89,6 +93,9 @@ enum BenchCommand {
     Perception(bench_perception::PerceptionArgs),
     /// Depth mapping: integration, inflation and wire time of one 640x480 depth frame.
     Depth(bench_depth::DepthArgs),
+    /// Planner success rate and planning time on random pillar fields and the paper's
+    /// obstacle scene.
+    Planner(bench_planner::PlannerArgs),
     /// Internal: the publishing side of `bench ipc`, started by it in a second process.
     #[command(hide = true)]
     IpcPeer(bench_ipc::PeerArgs),
@@ -118,6 +125,11 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::IpcPeer(args)) => {
             bench_ipc::run_peer(&args, cli.ipc_prefix.as_deref())
         }
+        Command::Bench(BenchCommand::Planner(args)) => bench_planner::run(&args),
+        Command::Plan(args) => match plan_cmd::run(&args) {
+            Ok(false) => return ExitCode::from(plan_cmd::NO_PLAN),
+            other => other.map(|_| ()),
+        },
         Command::Config(ConfigCommand::Check { file }) => config_cmd::check(&file),
         Command::Pad(PadCommand::Detect(args)) => match pad_detect::run(&args) {
             Ok(false) => return ExitCode::from(pad_detect::NOT_FOUND),

@@ -27,6 +27,8 @@ fn every_subcommand_has_help() {
         vec!["bench", "perception"],
         vec!["bench", "depth"],
         vec!["map"],
+        vec!["bench", "planner"],
+        vec!["plan"],
         vec!["pad"],
         vec!["pad", "detect"],
         vec!["config"],

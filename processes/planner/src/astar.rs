@@ -1,0 +1,231 @@
+//! A* on the map's lattice: 26-connected, octile (3-D diagonal) heuristic.
+//!
+//! It guides the rebound only: its path decides which side of an obstacle a control
+//! point is pushed to. Buffers are kept between searches and reset by a generation
+//! counter, so a search costs what it expands, not the size of the map.
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+use nalgebra::Vector3;
+
+use crate::map::OccupancyQuery;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Open {
+    f: f32,
+    g: f32,
+    idx: u32,
+}
+
+impl Eq for Open {}
+
+impl Ord for Open {
+    fn cmp(&self, o: &Self) -> Ordering {
+        // Min-heap on f, ties to the larger g (deeper node).
+        o.f.total_cmp(&self.f).then(self.g.total_cmp(&o.g))
+    }
+}
+
+impl PartialOrd for Open {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+
+/// Reusable A* search state.
+#[derive(Debug, Clone, Default)]
+pub struct AStar {
+    stamp: Vec<u32>,
+    g: Vec<f32>,
+    parent: Vec<u32>,
+    closed: Vec<bool>,
+    heap: BinaryHeap<Open>,
+    current: u32,
+    /// Expansion limit per search (bounds the time on a maze).
+    pub max_expansions: usize,
+}
+
+/// Octile distance in 3-D between two cells, in cells.
+fn octile(a: [i32; 3], b: [i32; 3]) -> f32 {
+    let mut d = [
+        (a[0] - b[0]).abs() as f32,
+        (a[1] - b[1]).abs() as f32,
+        (a[2] - b[2]).abs() as f32,
+    ];
+    d.sort_by(f32::total_cmp);
+    (3f32.sqrt() - 2f32.sqrt()) * d[0] + (2f32.sqrt() - 1.0) * d[1] + d[2]
+}
+
+impl AStar {
+    /// A search state with a limit of `max_expansions` expanded cells per search.
+    pub fn new(max_expansions: usize) -> Self {
+        Self {
+            max_expansions,
+            ..Self::default()
+        }
+    }
+
+    /// Shortest 26-connected path of free cells from `from` to `to`, written into `out`
+    /// as points (`from`, cell centres, `to`). The start cell may be occupied (to leave
+    /// the inflation); the goal cell must be free and both must be in the map. Returns
+    /// false when there is no path within the expansion limit.
+    pub fn search<M: OccupancyQuery + ?Sized>(
+        &mut self,
+        map: &M,
+        from: &Vector3<f64>,
+        to: &Vector3<f64>,
+        out: &mut Vec<Vector3<f64>>,
+    ) -> bool {
+        out.clear();
+        let res = map.resolution();
+        let (lo, hi) = map.bounds();
+        let mut dims = [0i32; 3];
+        for i in 0..3 {
+            dims[i] = (((hi[i] - lo[i]) / res).round() as i32).max(1);
+        }
+        let total = dims.iter().map(|&d| d as usize).product::<usize>();
+        if total > u32::MAX as usize / 2 {
+            return false;
+        }
+        let cell = |p: &Vector3<f64>| -> Option<[i32; 3]> {
+            let mut c = [0i32; 3];
+            for i in 0..3 {
+                let f = ((p[i] - lo[i]) / res).floor();
+                if !(f >= 0.0) || f >= dims[i] as f64 {
+                    return None;
+                }
+                c[i] = f as i32;
+            }
+            Some(c)
+        };
+        let (Some(s), Some(t)) = (cell(from), cell(to)) else {
+            return false;
+        };
+        let centre = |c: [i32; 3]| {
+            Vector3::new(
+                lo[0] + (c[0] as f64 + 0.5) * res,
+                lo[1] + (c[1] as f64 + 0.5) * res,
+                lo[2] + (c[2] as f64 + 0.5) * res,
+            )
+        };
+        if map.is_occupied(&centre(t)) {
+            return false;
+        }
+        let lin = |c: [i32; 3]| ((c[2] * dims[1] + c[1]) * dims[0] + c[0]) as u32;
+        let unlin = |i: u32| {
+            let i = i as i32;
+            [
+                i % dims[0],
+                (i / dims[0]) % dims[1],
+                i / (dims[0] * dims[1]),
+            ]
+        };
+        if self.stamp.len() < total {
+            self.stamp.resize(total, 0);
+            self.g.resize(total, 0.0);
+            self.parent.resize(total, 0);
+            self.closed.resize(total, false);
+        }
+        self.current = self.current.wrapping_add(1);
+        if self.current == 0 {
+            self.stamp.iter_mut().for_each(|g| *g = 0);
+            self.current = 1;
+        }
+        let cur = self.current;
+        self.heap.clear();
+        let si = lin(s);
+        let ti = lin(t);
+        self.stamp[si as usize] = cur;
+        self.g[si as usize] = 0.0;
+        self.parent[si as usize] = si;
+        self.closed[si as usize] = false;
+        // A slightly greedy heuristic: ties break toward the goal, far fewer expansions.
+        const TIE: f32 = 1.0 + 1e-3;
+        self.heap.push(Open {
+            f: octile(s, t) * TIE,
+            g: 0.0,
+            idx: si,
+        });
+        let mut expanded = 0usize;
+        let mut found = false;
+        while let Some(o) = self.heap.pop() {
+            let oi = o.idx as usize;
+            if self.closed[oi] || o.g > self.g[oi] {
+                continue;
+            }
+            if o.idx == ti {
+                found = true;
+                break;
+            }
+            self.closed[oi] = true;
+            expanded += 1;
+            if expanded > self.max_expansions {
+                break;
+            }
+            let c = unlin(o.idx);
+            for dz in -1..=1 {
+                for dy in -1..=1 {
+                    for dx in -1..=1 {
+                        if dx == 0 && dy == 0 && dz == 0 {
+                            continue;
+                        }
+                        let nc = [c[0] + dx, c[1] + dy, c[2] + dz];
+                        if (0..3).any(|i| nc[i] < 0 || nc[i] >= dims[i]) {
+                            continue;
+                        }
+                        let ni = lin(nc);
+                        let nu = ni as usize;
+                        let fresh = self.stamp[nu] != cur;
+                        if !fresh && self.closed[nu] {
+                            continue;
+                        }
+                        let step = match dx.abs() + dy.abs() + dz.abs() {
+                            1 => 1.0,
+                            2 => std::f32::consts::SQRT_2,
+                            _ => 1.732_050_8,
+                        };
+                        let ng = o.g + step;
+                        if !fresh && ng >= self.g[nu] {
+                            continue;
+                        }
+                        if fresh {
+                            // Occupancy is asked once per cell per search.
+                            self.stamp[nu] = cur;
+                            self.closed[nu] = false;
+                            if map.is_occupied(&centre(nc)) {
+                                self.closed[nu] = true;
+                                continue;
+                            }
+                        }
+                        self.g[nu] = ng;
+                        self.parent[nu] = o.idx;
+                        self.heap.push(Open {
+                            f: ng + octile(nc, t) * TIE,
+                            g: ng,
+                            idx: ni,
+                        });
+                    }
+                }
+            }
+        }
+        if !found {
+            return false;
+        }
+        let mut i = ti;
+        out.push(*to);
+        loop {
+            let p = self.parent[i as usize];
+            if p == i || out.len() > total {
+                break;
+            }
+            if p != si {
+                out.push(centre(unlin(p)));
+            }
+            i = p;
+        }
+        out.push(*from);
+        out.reverse();
+        true
+    }
+}

@@ -1,0 +1,219 @@
+//! Uniform cubic B-splines: evaluation, end-state control points, and the fit of a
+//! sampled curve to control points (the front end's initialization).
+
+use nalgebra::{DMatrix, DVector, Vector3};
+
+/// Position, velocity and acceleration at one instant.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct State {
+    /// Position, m.
+    pub p: Vector3<f64>,
+    /// Velocity, m/s.
+    pub v: Vector3<f64>,
+    /// Acceleration, m/s^2.
+    pub a: Vector3<f64>,
+}
+
+impl State {
+    /// A state at rest at `p`.
+    pub fn at_rest(p: Vector3<f64>) -> Self {
+        Self {
+            p,
+            ..Self::default()
+        }
+    }
+
+    /// True when every component is finite.
+    pub fn is_finite(&self) -> bool {
+        self.p
+            .iter()
+            .chain(self.v.iter())
+            .chain(self.a.iter())
+            .all(|x| x.is_finite())
+    }
+}
+
+/// A uniform cubic B-spline: control points and a knot interval; the curve runs over
+/// `0..=(n - 3) * ts` and segment `s` is shaped by points `s..s + 4`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BSpline {
+    /// Control points, m.
+    pub points: Vec<Vector3<f64>>,
+    /// Knot interval, s.
+    pub ts: f64,
+}
+
+impl BSpline {
+    /// Duration of the curve, s (0 for fewer than 4 points).
+    pub fn duration(&self) -> f64 {
+        self.points.len().saturating_sub(3) as f64 * self.ts
+    }
+
+    /// Position, velocity and acceleration at `t` (clamped to the curve's span).
+    pub fn eval(&self, t: f64) -> State {
+        let n = self.points.len();
+        if n < 4 || !(self.ts > 0.0) {
+            return State::at_rest(self.points.first().copied().unwrap_or_default());
+        }
+        let segs = n - 3;
+        let x = (t / self.ts).clamp(0.0, segs as f64);
+        let s = (x.floor() as usize).min(segs - 1);
+        let u = x - s as f64;
+        let q = &self.points[s..s + 4];
+        let (u2, u3) = (u * u, u * u * u);
+        let m = 1.0 - u;
+        let bp = [
+            m * m * m / 6.0,
+            (3.0 * u3 - 6.0 * u2 + 4.0) / 6.0,
+            (-3.0 * u3 + 3.0 * u2 + 3.0 * u + 1.0) / 6.0,
+            u3 / 6.0,
+        ];
+        let bv = [
+            -0.5 * m * m,
+            1.5 * u2 - 2.0 * u,
+            -1.5 * u2 + u + 0.5,
+            0.5 * u2,
+        ];
+        let ba = [m, 3.0 * u - 2.0, -3.0 * u + 1.0, u];
+        let mut st = State::default();
+        for i in 0..4 {
+            st.p += q[i] * bp[i];
+            st.v += q[i] * bv[i];
+            st.a += q[i] * ba[i];
+        }
+        st.v /= self.ts;
+        st.a /= self.ts * self.ts;
+        st
+    }
+
+    /// Largest velocity and acceleration norms over the control points' differences:
+    /// bounds on the curve's (the convex-hull property).
+    pub fn max_vel_acc(&self) -> (f64, f64) {
+        let q = &self.points;
+        let mut v: f64 = 0.0;
+        let mut a: f64 = 0.0;
+        for i in 0..q.len().saturating_sub(1) {
+            v = v.max((q[i + 1] - q[i]).norm() / self.ts);
+        }
+        for i in 0..q.len().saturating_sub(2) {
+            a = a.max((q[i + 2] - 2.0 * q[i + 1] + q[i]).norm() / (self.ts * self.ts));
+        }
+        (v, a)
+    }
+}
+
+/// The three control points that give a curve the state `s` at its start (`end` false)
+/// or at its end (`end` true), for knot interval `ts`.
+pub fn end_points(s: &State, ts: f64) -> [Vector3<f64>; 3] {
+    // p = (q0 + 4 q1 + q2) / 6, v = (q2 - q0) / 2ts, a = (q0 - 2 q1 + q2) / ts^2.
+    let q1 = s.p - s.a * (ts * ts / 6.0);
+    let half = s.a * (ts * ts / 2.0);
+    [q1 + half - s.v * ts, q1, q1 + half + s.v * ts]
+}
+
+/// Control points for positions sampled every `ts` (`samples[k]` at `k * ts`), with the
+/// first and last three points set exactly from `start` and `end` and the others fitted
+/// by least squares to the interior samples (rows (1/6)[1 4 1]). Needs >= 5 samples.
+pub fn fit(samples: &[Vector3<f64>], ts: f64, start: &State, end: &State) -> Option<BSpline> {
+    let k = samples.len();
+    if k < 5 || !(ts > 0.0) {
+        return None;
+    }
+    let n = k + 2;
+    let mut q = vec![Vector3::zeros(); n];
+    let s3 = end_points(start, ts);
+    let e3 = end_points(end, ts);
+    q[..3].copy_from_slice(&s3);
+    q[n - 3..].copy_from_slice(&e3);
+    let m = n - 6;
+    if m > 0 {
+        // Equations for samples 1..=k-2: (q_j + 4 q_{j+1} + q_{j+2}) / 6 = s_j.
+        let rows = k - 2;
+        let mut a = DMatrix::<f64>::zeros(rows, m);
+        let mut b = DMatrix::<f64>::zeros(rows, 3);
+        for (r, j) in (1..=k - 2).enumerate() {
+            let mut rhs = samples[j];
+            for (off, w) in [(0usize, 1.0 / 6.0), (1, 4.0 / 6.0), (2, 1.0 / 6.0)] {
+                let idx = j + off;
+                if (3..n - 3).contains(&idx) {
+                    a[(r, idx - 3)] += w;
+                } else {
+                    rhs -= q[idx] * w;
+                }
+            }
+            for c in 0..3 {
+                b[(r, c)] = rhs[c];
+            }
+        }
+        let ata = a.transpose() * &a + DMatrix::<f64>::identity(m, m) * 1e-9;
+        let atb = a.transpose() * b;
+        let chol = ata.cholesky()?;
+        for c in 0..3 {
+            let col: DVector<f64> = atb.column(c).into();
+            let x = chol.solve(&col);
+            for i in 0..m {
+                q[3 + i][c] = x[i];
+            }
+        }
+    }
+    if q.iter().all(|p| p.iter().all(|v| v.is_finite())) {
+        Some(BSpline { points: q, ts })
+    } else {
+        None
+    }
+}
+
+/// A quintic polynomial per axis joining two states in `duration` seconds.
+#[derive(Debug, Clone, Copy)]
+pub struct Quintic {
+    c: [Vector3<f64>; 6],
+}
+
+impl Quintic {
+    /// The quintic from `a` to `b` over `t` s (`t` > 0).
+    pub fn new(a: &State, b: &State, t: f64) -> Self {
+        let (t2, t3) = (t * t, t * t * t);
+        let (t4, t5) = (t3 * t, t3 * t2);
+        // Solve for c3, c4, c5 from the end position, velocity and acceleration.
+        let m = nalgebra::Matrix3::new(
+            t3,
+            t4,
+            t5, //
+            3.0 * t2,
+            4.0 * t3,
+            5.0 * t4, //
+            6.0 * t,
+            12.0 * t2,
+            20.0 * t3,
+        );
+        let inv = m.try_inverse().unwrap_or_else(nalgebra::Matrix3::zeros);
+        let rp = b.p - a.p - a.v * t - a.a * (0.5 * t2);
+        let rv = b.v - a.v - a.a * t;
+        let ra = b.a - a.a;
+        let mut c3 = Vector3::zeros();
+        let mut c4 = Vector3::zeros();
+        let mut c5 = Vector3::zeros();
+        for i in 0..3 {
+            let x = inv * Vector3::new(rp[i], rv[i], ra[i]);
+            c3[i] = x[0];
+            c4[i] = x[1];
+            c5[i] = x[2];
+        }
+        Self {
+            c: [a.p, a.v, a.a * 0.5, c3, c4, c5],
+        }
+    }
+
+    /// Position, velocity, acceleration at `t`.
+    pub fn eval(&self, t: f64) -> State {
+        let c = &self.c;
+        let p = c[0] + (c[1] + (c[2] + (c[3] + (c[4] + c[5] * t) * t) * t) * t) * t;
+        let v = c[1] + (c[2] * 2.0 + (c[3] * 3.0 + (c[4] * 4.0 + c[5] * (5.0 * t)) * t) * t) * t;
+        let a = c[2] * 2.0 + (c[3] * 6.0 + (c[4] * 12.0 + c[5] * (20.0 * t)) * t) * t;
+        State { p, v, a }
+    }
+}
+
+#[cfg(test)]
+#[path = "bspline_test.rs"]
+mod tests;

@@ -1,0 +1,163 @@
+//! `planner`: the local trajectory planner as its own process.
+//!
+//! Reads goals (landing/planner/goal), the vehicle state (landing/vehicle/state) and the
+//! occupancy window (landing/map/occupancy); publishes B-spline trajectories
+//! (landing/planner/trajectory) and planning statistics (landing/planner/stats).
+//! Everything it decides is `planner::PlannerNode`; this file binds it to iceoryx2.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use clap::Parser;
+use ipc_types::msg::{
+    Header, OccupancyMapHeader, PlannerGoal, PlannerStats, Trajectory, VehicleState,
+};
+use ipc_types::runtime::config::{IpcConfig, load_process};
+use ipc_types::runtime::ipc::{Wake, run_wait_loop};
+use ipc_types::runtime::{Ipc, IpcPrefix, logging, monotonic_ns};
+use ipc_types::services;
+use nalgebra::Vector3;
+use planner::{CellView, PlannerConfig, PlannerNode, State};
+
+/// Plans collision-free B-spline trajectories to the goal and publishes them.
+#[derive(Debug, Parser)]
+#[command(name = "planner", version, about)]
+struct Args {
+    /// Stack configuration (reads [ipc] and [planner]; defaults when absent).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// iceoryx2 prefix (default: $LANDING_IPC_PREFIX, else [ipc] prefix).
+    #[arg(long)]
+    ipc_prefix: Option<String>,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    logging::init("info");
+    match run(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// How often the replanning policy is consulted when no message wakes the loop.
+const DECIDE_PERIOD: Duration = Duration::from_millis(20);
+
+fn run(args: &Args) -> Result<()> {
+    let (ipc_cfg, cfg): (IpcConfig, PlannerConfig) = match &args.config {
+        Some(p) => load_process(p, "planner")?,
+        None => (IpcConfig::default(), PlannerConfig::default()),
+    };
+    let prefix = match args.ipc_prefix.as_deref() {
+        Some(p) => IpcPrefix::new(p)?,
+        None if std::env::var_os("LANDING_IPC_PREFIX").is_some() => {
+            IpcPrefix::from_flag_or_env(None)?
+        }
+        None => IpcPrefix::new(&ipc_cfg.prefix)?,
+    };
+    let ipc = Ipc::open("planner", &prefix)?;
+    let goals = ipc
+        .subscriber::<PlannerGoal>(services::PLANNER_GOAL)
+        .context("planner goals")?;
+    let states = ipc
+        .subscriber::<VehicleState>(services::VEHICLE_STATE)
+        .context("vehicle state")?;
+    let maps = ipc
+        .slice_subscriber::<u8, OccupancyMapHeader>(services::MAP_OCCUPANCY)
+        .context("occupancy map")?;
+    let mut trajectories = ipc
+        .publisher::<Trajectory>(services::PLANNER_TRAJECTORY)
+        .context("trajectories")?;
+    let mut stats_out = ipc
+        .publisher::<PlannerStats>(services::PLANNER_STATS)
+        .context("planner stats")?;
+    let mut heartbeat = ipc.heartbeat(Duration::from_millis(ipc_cfg.heartbeat_deadline_ms))?;
+    let tick = DECIDE_PERIOD.min(Duration::from_millis(ipc_cfg.heartbeat_period_ms));
+    let mut node = PlannerNode::new(cfg);
+    let mut vehicle: Option<(State, Header)> = None;
+    let mut goal: Option<PlannerGoal> = None;
+    // The newest map, copied out of shared memory so the publisher's slot is released.
+    let mut map_header: Option<OccupancyMapHeader> = None;
+    let mut cells: Vec<u8> = Vec::new();
+    let mut bad_maps = 0u64;
+    let mut last_beat = monotonic_ns();
+    let beat_ns = ipc_cfg.heartbeat_period_ms * 1_000_000;
+    tracing::info!("planner running");
+    let mut failure = None;
+    let exit = run_wait_loop(
+        &[goals.listener(), states.listener(), maps.listener()],
+        &[],
+        Some(tick),
+        |_wake: Wake| {
+            // Every wake (data, tick) drains the inputs, then consults the policy.
+            {
+                if let Ok(Some(s)) = states.latest() {
+                    let v = s.payload();
+                    let st = State {
+                        p: Vector3::from(v.world_from_body.translation),
+                        v: Vector3::from(v.velocity),
+                        a: Vector3::zeros(),
+                    };
+                    if st.is_finite() {
+                        vehicle = Some((st, v.msg));
+                    }
+                }
+                if let Ok(Some(g)) = goals.latest() {
+                    goal = Some(*g.payload());
+                }
+                if let Ok(Some(m)) = maps.latest() {
+                    let h = *m.user_header();
+                    if CellView::new(&h, m.payload()).is_some() {
+                        cells.clear();
+                        cells.extend_from_slice(m.payload());
+                        map_header = Some(h);
+                    } else {
+                        bad_maps += 1;
+                    }
+                }
+            }
+            let now = monotonic_ns();
+            if now.saturating_sub(last_beat) >= beat_ns {
+                last_beat = now;
+                if let Err(e) = heartbeat.beat() {
+                    failure = Some(anyhow::Error::from(e));
+                    return false;
+                }
+            }
+            let Some((state, input)) = &vehicle else {
+                return true;
+            };
+            let view = map_header.as_ref().and_then(|h| CellView::new(h, &cells));
+            let out = node.step(now, state, goal.as_ref(), view.as_ref(), input);
+            if let Some(t) = out.trajectory {
+                if let Err(e) = trajectories.send(t.msg, &t) {
+                    failure = Some(anyhow::Error::from(e));
+                    return false;
+                }
+                if t.emergency != 0 {
+                    tracing::warn!(id = t.id, "emergency stop published");
+                }
+            }
+            if let Some(s) = out.stats {
+                if s.success == 0 {
+                    tracing::debug!(bad_maps, "plan failed");
+                }
+                if let Err(e) = stats_out.send(s.msg, &s) {
+                    failure = Some(anyhow::Error::from(e));
+                    return false;
+                }
+            }
+            true
+        },
+    )?;
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    tracing::info!(?exit, "planner stopped");
+    Ok(())
+}

@@ -1,0 +1,290 @@
+//! `landing bench planner`: success rate and planning time on seeded random pillar fields
+//! (0.05 to 0.2 pillars per m^2, start and goal 10 m apart) and on the paper's obstacle
+//! scene. A run succeeds when the trajectory passes a check independent of the planner:
+//! the curve re-evaluated from its basis matrix, sampled every ~1 cm, at least the
+//! inflation away from every raw box, inside the map, within the limits (5%), and at the
+//! requested end states.
+
+use std::time::Instant;
+
+use anyhow::Result;
+use clap::Args;
+use nalgebra::Vector3;
+use planner::{
+    Aabb, BSpline, Goal, GridMap, LIMIT_TOLERANCE, OccupancyQuery, Planner, PlannerConfig, State,
+};
+use serde_json::json;
+
+use crate::stats::percentile;
+
+/// Arguments of `landing bench planner`.
+#[derive(Debug, Args)]
+pub struct PlannerArgs {
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+    /// Random maps per density.
+    #[arg(long, default_value_t = 50)]
+    maps: usize,
+    /// Seed of the map generator.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Print each failed or slow (> 2 ms) run on stderr.
+    #[arg(long)]
+    verbose: bool,
+}
+
+/// Pillar densities, per m^2 of the field.
+const DENSITIES: [f64; 4] = [0.05, 0.1, 0.15, 0.2];
+
+/// xorshift64*: a tiny seeded generator, so the maps are the same on every machine.
+struct Rng(u64);
+
+impl Rng {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// One scene: map, boxes, start, goal.
+struct Scene {
+    map: GridMap,
+    start: State,
+    goal: State,
+}
+
+fn random_scene(rng: &mut Rng, density: f64, cfg: &PlannerConfig) -> Result<Scene> {
+    let (start, goal) = (Vector3::new(0.0, 0.0, 1.0), Vector3::new(10.0, 0.0, 1.0));
+    // The field: x 1..9, y -4..4 (64 m^2); pillars 0.3 x 0.3 m, floor to ceiling.
+    let count = (density * 64.0).round() as usize;
+    let mut boxes = Vec::with_capacity(count);
+    while boxes.len() < count {
+        let c = Vector3::new(1.0 + 8.0 * rng.uniform(), -4.0 + 8.0 * rng.uniform(), 0.0);
+        let flat = |p: Vector3<f64>| Vector3::new(p.x, p.y, 0.0);
+        if (c - flat(start)).norm() < 1.0 || (c - flat(goal)).norm() < 1.0 {
+            continue;
+        }
+        let w = 0.15;
+        boxes.push(Aabb {
+            min: Vector3::new(c.x - w, c.y - w, 0.0),
+            max: Vector3::new(c.x + w, c.y + w, 3.0),
+        });
+    }
+    let map = GridMap::from_boxes(
+        Vector3::new(-1.0, -5.0, 0.0),
+        Vector3::new(11.0, 5.0, 3.0),
+        cfg.resolution,
+        cfg.inflation,
+        &boxes,
+    )?;
+    Ok(Scene {
+        map,
+        start: State::at_rest(start),
+        goal: State::at_rest(goal),
+    })
+}
+
+/// The paper's obstacle demo: a 60 x 120 x 120 cm box between start and goal.
+pub fn paper_scene(cfg: &PlannerConfig) -> Result<GridMap> {
+    let b = Aabb {
+        min: Vector3::new(2.7, -0.6, 0.0),
+        max: Vector3::new(3.3, 0.6, 1.2),
+    };
+    Ok(GridMap::from_boxes(
+        Vector3::new(-1.0, -3.0, 0.0),
+        Vector3::new(7.0, 3.0, 3.0),
+        cfg.resolution,
+        cfg.inflation,
+        &[b],
+    )?)
+}
+
+/// Position, velocity, acceleration at `t` from the B-spline basis matrix.
+#[allow(clippy::needless_range_loop)] // the basis matrix reads as written
+fn sample(s: &BSpline, t: f64) -> [Vector3<f64>; 3] {
+    let segs = s.points.len() - 3;
+    let x = (t / s.ts).clamp(0.0, segs as f64);
+    let i = (x as usize).min(segs - 1);
+    let u = x - i as f64;
+    const M: [[f64; 4]; 4] = [
+        [1.0, 4.0, 1.0, 0.0],
+        [-3.0, 0.0, 3.0, 0.0],
+        [3.0, -6.0, 3.0, 0.0],
+        [-1.0, 3.0, -3.0, 1.0],
+    ];
+    let pu = [
+        [1.0, u, u * u, u * u * u],
+        [0.0, 1.0, 2.0 * u, 3.0 * u * u],
+        [0.0, 0.0, 2.0, 6.0 * u],
+    ];
+    let mut out = [Vector3::zeros(); 3];
+    for (d, row) in pu.iter().enumerate() {
+        for k in 0..4 {
+            let w: f64 = (0..4).map(|r| row[r] * M[r][k]).sum();
+            out[d] += s.points[i + k] * (w / 6.0 / s.ts.powi(d as i32));
+        }
+    }
+    out
+}
+
+/// The independent acceptance check.
+pub fn verify(
+    map: &GridMap,
+    s: &BSpline,
+    start: &State,
+    goal: &State,
+    cfg: &PlannerConfig,
+) -> bool {
+    if s.points.len() < 4 || s.ts.is_nan() || s.ts <= 0.0 {
+        return false;
+    }
+    let (lo, hi) = map.bounds();
+    let (vmax, _) = s.max_vel_acc();
+    let n = ((s.duration() * vmax / 0.01).ceil() as usize).clamp(100, 200_000);
+    let vlim = cfg.max_vel.max(start.v.norm()).max(goal.v.norm()) * LIMIT_TOLERANCE;
+    let alim = cfg.max_acc.max(start.a.norm()).max(goal.a.norm()) * LIMIT_TOLERANCE;
+    for k in 0..=n {
+        let [p, v, a] = sample(s, s.duration() * k as f64 / n as f64);
+        if (0..3).any(|i| !(lo[i] <= p[i] && p[i] <= hi[i])) || v.norm() > vlim || a.norm() > alim {
+            return false;
+        }
+        if map
+            .boxes()
+            .iter()
+            .any(|b| b.distance(&p) < map.inflation() - 1e-9)
+        {
+            return false;
+        }
+    }
+    let [p0, v0, _] = sample(s, 0.0);
+    let [p1, v1, _] = sample(s, s.duration());
+    (p0 - start.p).norm() < 1e-6
+        && (v0 - start.v).norm() < 1e-6
+        && (p1 - goal.p).norm() < 1e-6
+        && (v1 - goal.v).norm() < 1e-6
+}
+
+/// Results of one group of runs.
+#[derive(Default)]
+struct Group {
+    ms: Vec<f64>,
+    ok: usize,
+    runs: usize,
+    iterations: Vec<f64>,
+    rebounds: Vec<f64>,
+}
+
+impl Group {
+    fn record(
+        &mut self,
+        planner: &mut Planner,
+        map: &GridMap,
+        start: &State,
+        goal: &State,
+        verbose: bool,
+    ) {
+        let t0 = Instant::now();
+        let r = planner.plan(
+            map,
+            start,
+            &Goal {
+                state: *goal,
+                moving: false,
+            },
+        );
+        self.ms.push(t0.elapsed().as_secs_f64() * 1e3);
+        self.runs += 1;
+        let st = planner.stats();
+        self.iterations.push(st.iterations as f64);
+        self.rebounds.push(st.rebounds as f64);
+        let ms = self.ms.last().copied().unwrap_or(0.0);
+        let ok = match &r {
+            Ok(p) => verify(
+                map,
+                &p.spline,
+                start,
+                &State { p: p.goal, ..*goal },
+                planner.config(),
+            ),
+            Err(_) => false,
+        };
+        if ok {
+            self.ok += 1;
+        }
+        if verbose && (!ok || ms > 2.0) {
+            eprintln!(
+                "run {}: {ms:.3} ms, {st:?}, verified {ok}, {:?}",
+                self.runs,
+                r.as_ref().err()
+            );
+        }
+    }
+
+    fn json(&self) -> serde_json::Value {
+        json!({
+            "success_rate": round3(self.ok as f64 / self.runs.max(1) as f64),
+            "planning_ms_p50": round3(percentile(&self.ms, 50.0)),
+            "planning_ms_p99": round3(percentile(&self.ms, 99.0)),
+            "iterations_p50": percentile(&self.iterations, 50.0),
+            "rebounds_p50": percentile(&self.rebounds, 50.0),
+            "runs": self.runs,
+        })
+    }
+}
+
+fn round3(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}
+
+/// Runs the benchmark.
+pub fn run(args: &PlannerArgs) -> Result<()> {
+    let cfg = PlannerConfig::default();
+    let mut planner = Planner::new(cfg.clone());
+    let mut rng = Rng(args.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut all = Group::default();
+    let mut per = serde_json::Map::new();
+    for d in DENSITIES {
+        let mut g = Group::default();
+        for _ in 0..args.maps {
+            let s = random_scene(&mut rng, d, &cfg)?;
+            g.record(&mut planner, &s.map, &s.start, &s.goal, args.verbose);
+        }
+        per.insert(format!("{d:.2}"), g.json());
+        merge(&mut all, g);
+    }
+    let paper = paper_scene(&cfg)?;
+    let mut g = Group::default();
+    let (s, e) = (
+        State::at_rest(Vector3::new(0.0, 0.0, 0.8)),
+        State::at_rest(Vector3::new(6.0, 0.0, 0.8)),
+    );
+    for _ in 0..args.maps {
+        g.record(&mut planner, &paper, &s, &e, args.verbose);
+    }
+    let paper_json = g.json();
+    merge(&mut all, g);
+    let mut out = all.json();
+    out["per_density"] = serde_json::Value::Object(per);
+    out["paper_obstacle"] = paper_json;
+    if args.json {
+        println!("{out}");
+    } else {
+        println!(
+            "planner: {} runs (max_vel {} m/s, max_acc {} m/s^2)",
+            all.runs, cfg.max_vel, cfg.max_acc
+        );
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    }
+    Ok(())
+}
+
+fn merge(all: &mut Group, g: Group) {
+    all.ms.extend(g.ms);
+    all.iterations.extend(g.iterations);
+    all.rebounds.extend(g.rebounds);
+    all.ok += g.ok;
+    all.runs += g.runs;
+}
