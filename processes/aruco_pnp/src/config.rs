@@ -26,6 +26,10 @@ pub struct ArucoConfig {
     /// A frame newer than the newest vehicle state by more than this gets no
     /// world pose, ms.
     pub max_state_age_ms: u64,
+    /// How far from level the pad may be, 1 sigma, deg: the soft prior the vehicle
+    /// attitude gives the pose (docs/perception.md). 0 turns it off (a pad that pitches
+    /// and rolls a lot on its vehicle).
+    pub level_prior_deg: f64,
 }
 
 impl Default for ArucoConfig {
@@ -39,6 +43,7 @@ impl Default for ArucoConfig {
             region_margin: s.region_margin,
             threshold_window_px: s.detect.threshold_window_px,
             max_state_age_ms: 50,
+            level_prior_deg: s.level_sigma_rad.to_degrees(),
         }
     }
 }
@@ -57,6 +62,7 @@ impl ArucoConfig {
                 ..d.pose
             },
             region_margin: self.region_margin,
+            level_sigma_rad: self.level_prior_deg.to_radians(),
             ..d
         }
     }
@@ -71,6 +77,7 @@ impl Validate for ArucoConfig {
         check_range("region_margin", self.region_margin, 0.0, 5.0)?;
         check_range("threshold_window_px", self.threshold_window_px, 3, 51)?;
         check_range("max_state_age_ms", self.max_state_age_ms, 0, 1000)?;
+        check_range("level_prior_deg", self.level_prior_deg, 0.0, 30.0)?;
         if self.camera.is_empty() || self.pad.is_empty() {
             return Err(Invalid::new("camera", "camera and pad must name files"));
         }

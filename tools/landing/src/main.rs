@@ -112,6 +112,10 @@ enum ConfigCommand {
 }
 
 fn main() -> ExitCode {
+    // `landing ... | head` must end quietly when the pipe closes, as CLI tools do, not
+    // panic in println!.
+    // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
+    unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
     let cli = Cli::parse();
     ipc_types::runtime::logging::init("warn");
     let result = match cli.command {
