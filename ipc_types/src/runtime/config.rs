@@ -211,6 +211,21 @@ where
     Ok((ipc, own))
 }
 
+/// [`load_process`] when a file is given, else the defaults (a process run without
+/// `--config`).
+pub fn load_process_or_default<T>(
+    path: Option<&Path>,
+    section: &str,
+) -> Result<(IpcConfig, T), ConfigError>
+where
+    T: DeserializeOwned + Validate + Default,
+{
+    match path {
+        Some(p) => load_process(p, section),
+        None => Ok((IpcConfig::default(), T::default())),
+    }
+}
+
 fn section_of<T>(table: &toml::Table, name: &str, origin: &Path) -> Result<T, ConfigError>
 where
     T: DeserializeOwned + Validate + Default,

@@ -122,6 +122,16 @@ impl IpcPrefix {
         }
     }
 
+    /// What a process with a stack config uses: the flag if given, else
+    /// `LANDING_IPC_PREFIX`, else the config's `[ipc] prefix`.
+    pub fn resolve(flag: Option<&str>, config_prefix: &str) -> Result<Self, IpcError> {
+        match (flag, std::env::var(PREFIX_ENV)) {
+            (Some(f), _) => Self::new(f),
+            (None, Ok(v)) => Self::new(&v),
+            (None, Err(_)) => Self::new(config_prefix),
+        }
+    }
+
     /// A fresh prefix for one test or benchmark run: unique per process and call.
     pub fn unique(tag: &str) -> Self {
         use std::sync::atomic::{AtomicU32, Ordering};

@@ -14,7 +14,7 @@ use clap::Parser;
 use ipc_types::msg::{
     CameraFrameHeader, Header, PadObservation, PixelEncoding, Stage, VehicleState,
 };
-use ipc_types::runtime::config::{IpcConfig, deploy_dir, load_process};
+use ipc_types::runtime::config::{IpcConfig, deploy_dir, load_process_or_default};
 use ipc_types::runtime::ipc::{Wake, run_wait_loop};
 use ipc_types::runtime::{Ipc, IpcPrefix, logging, monotonic_ns};
 use ipc_types::services;
@@ -61,10 +61,8 @@ const STATE_HISTORY: usize = 100;
 
 fn run(args: &Args) -> Result<()> {
     let deploy = args.deploy_dir.clone().unwrap_or_else(deploy_dir);
-    let (ipc_cfg, cfg): (IpcConfig, ArucoConfig) = match &args.config {
-        Some(p) => load_process(p, "aruco_pnp")?,
-        None => (IpcConfig::default(), ArucoConfig::default()),
-    };
+    let (ipc_cfg, cfg): (IpcConfig, ArucoConfig) =
+        load_process_or_default(args.config.as_deref(), "aruco_pnp")?;
     let in_config = |name: &str| {
         let p = PathBuf::from(name);
         if p.is_absolute() {
@@ -86,13 +84,7 @@ fn run(args: &Args) -> Result<()> {
         down_camera_from_body(cfg.camera_position_in_body_m),
         cfg.settings(),
     )?;
-    let prefix = match args.ipc_prefix.as_deref() {
-        Some(p) => IpcPrefix::new(p)?,
-        None if std::env::var_os("LANDING_IPC_PREFIX").is_some() => {
-            IpcPrefix::from_flag_or_env(None)?
-        }
-        None => IpcPrefix::new(&ipc_cfg.prefix)?,
-    };
+    let prefix = IpcPrefix::resolve(args.ipc_prefix.as_deref(), &ipc_cfg.prefix)?;
     let ipc = Ipc::open("aruco-pnp", &prefix)?;
     let frames = ipc
         .slice_subscriber::<u8, CameraFrameHeader>(services::CAMERA_FRAME)

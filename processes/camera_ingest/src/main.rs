@@ -22,7 +22,6 @@ use camera_ingest::{
 use clap::Parser;
 use ipc_types::msg::{CameraFrameHeader, Stage};
 use ipc_types::runtime::config::{self, deploy_dir};
-use ipc_types::runtime::ipc::PREFIX_ENV;
 use ipc_types::runtime::{
     Heartbeat, Ipc, IpcError, IpcPrefix, PeriodicWait, SlicePublisher, logging, monotonic_ns,
 };
@@ -130,11 +129,7 @@ fn settings(args: &Args) -> Result<Settings> {
         }
         _ => {}
     }
-    let prefix = match (&args.ipc_prefix, std::env::var(PREFIX_ENV)) {
-        (Some(flag), _) => IpcPrefix::new(flag)?,
-        (None, Ok(env)) => IpcPrefix::new(&env)?,
-        (None, Err(_)) => IpcPrefix::new(&file.ipc.prefix)?,
-    };
+    let prefix = IpcPrefix::resolve(args.ipc_prefix.as_deref(), &file.ipc.prefix)?;
     Ok(Settings {
         source,
         camera,

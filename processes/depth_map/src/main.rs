@@ -15,8 +15,8 @@ use clap::Parser;
 use clap::error::ErrorKind;
 use depth_map::{DepthError, DepthMapConfig, DepthMapper, DepthView, Input};
 use ipc_types::msg::{DepthFrameHeader, Header, OccupancyMapHeader, Stage, VehicleState};
-use ipc_types::runtime::config::{IpcConfig, load_process};
-use ipc_types::runtime::ipc::{PREFIX_ENV, Wake, run_wait_loop};
+use ipc_types::runtime::config::{IpcConfig, load_process_or_default};
+use ipc_types::runtime::ipc::{Wake, run_wait_loop};
 use ipc_types::runtime::{
     Ipc, IpcError, IpcPrefix, SlicePublisher, Subscriber, logging, monotonic_ns,
 };
@@ -116,20 +116,14 @@ impl DropLog {
 }
 
 fn run(args: &Args) -> Result<()> {
-    let (ipc_cfg, mut cfg): (IpcConfig, DepthMapConfig) = match &args.config {
-        Some(p) => load_process(p, "depth_map")?,
-        None => (IpcConfig::default(), DepthMapConfig::default()),
-    };
+    let (ipc_cfg, mut cfg): (IpcConfig, DepthMapConfig) =
+        load_process_or_default(args.config.as_deref(), "depth_map")?;
     if let Some(i) = args.input.as_deref() {
         cfg.input = Input::parse(i)
             .ok_or_else(|| anyhow!("--input `{i}` is not allowed (allowed: sim, depth-frame)"))?;
     }
     let mut mapper = DepthMapper::from_config(&cfg)?;
-    let prefix = match args.ipc_prefix.as_deref() {
-        Some(p) => IpcPrefix::new(p)?,
-        None if std::env::var_os(PREFIX_ENV).is_some() => IpcPrefix::from_flag_or_env(None)?,
-        None => IpcPrefix::new(&ipc_cfg.prefix)?,
-    };
+    let prefix = IpcPrefix::resolve(args.ipc_prefix.as_deref(), &ipc_cfg.prefix)?;
     let ipc = Ipc::open(PROCESS, &prefix)?;
     let frames = ipc
         .slice_subscriber::<u16, DepthFrameHeader>(cfg.input.service())

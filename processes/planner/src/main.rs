@@ -14,7 +14,7 @@ use clap::Parser;
 use ipc_types::msg::{
     Header, OccupancyMapHeader, PlannerGoal, PlannerStats, Trajectory, VehicleState,
 };
-use ipc_types::runtime::config::{IpcConfig, load_process};
+use ipc_types::runtime::config::{IpcConfig, load_process_or_default};
 use ipc_types::runtime::ipc::{Wake, run_wait_loop};
 use ipc_types::runtime::{Ipc, IpcPrefix, logging, monotonic_ns};
 use ipc_types::services;
@@ -49,17 +49,9 @@ fn main() -> ExitCode {
 const DECIDE_PERIOD: Duration = Duration::from_millis(20);
 
 fn run(args: &Args) -> Result<()> {
-    let (ipc_cfg, cfg): (IpcConfig, PlannerConfig) = match &args.config {
-        Some(p) => load_process(p, "planner")?,
-        None => (IpcConfig::default(), PlannerConfig::default()),
-    };
-    let prefix = match args.ipc_prefix.as_deref() {
-        Some(p) => IpcPrefix::new(p)?,
-        None if std::env::var_os("LANDING_IPC_PREFIX").is_some() => {
-            IpcPrefix::from_flag_or_env(None)?
-        }
-        None => IpcPrefix::new(&ipc_cfg.prefix)?,
-    };
+    let (ipc_cfg, cfg): (IpcConfig, PlannerConfig) =
+        load_process_or_default(args.config.as_deref(), "planner")?;
+    let prefix = IpcPrefix::resolve(args.ipc_prefix.as_deref(), &ipc_cfg.prefix)?;
     let ipc = Ipc::open("planner", &prefix)?;
     let goals = ipc
         .subscriber::<PlannerGoal>(services::PLANNER_GOAL)

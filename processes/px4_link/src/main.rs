@@ -17,7 +17,7 @@ use ipc_types::msg::{
     Header, LinkOutcome, LinkOutcomeKind, LinkRequest, LinkRequestKind, SafetyAction,
     SafetyCommand, Setpoint, Stage, VehicleState,
 };
-use ipc_types::runtime::config::{IpcConfig, load_process};
+use ipc_types::runtime::config::{IpcConfig, load_process_or_default};
 use ipc_types::runtime::{Ipc, IpcPrefix, Validate, logging, monotonic_ns};
 use ipc_types::services;
 use mavlink::dialects::common::MavResult;
@@ -59,10 +59,8 @@ fn main() -> ExitCode {
 const RECV_TIMEOUT: Duration = Duration::from_millis(2);
 
 fn run(args: &Args) -> Result<()> {
-    let (ipc_cfg, mut cfg): (IpcConfig, Px4LinkConfig) = match &args.config {
-        Some(p) => load_process(p, "px4_link")?,
-        None => (IpcConfig::default(), Px4LinkConfig::default()),
-    };
+    let (ipc_cfg, mut cfg): (IpcConfig, Px4LinkConfig) =
+        load_process_or_default(args.config.as_deref(), "px4_link")?;
     if let Some(l) = &args.link {
         cfg.link = l.clone();
     }
@@ -78,13 +76,7 @@ fn run(args: &Args) -> Result<()> {
     let socket = UdpSocket::bind(listen).with_context(|| format!("binding {listen}"))?;
     socket.set_read_timeout(Some(RECV_TIMEOUT))?;
 
-    let prefix = match args.ipc_prefix.as_deref() {
-        Some(p) => IpcPrefix::new(p)?,
-        None if std::env::var_os("LANDING_IPC_PREFIX").is_some() => {
-            IpcPrefix::from_flag_or_env(None)?
-        }
-        None => IpcPrefix::new(&ipc_cfg.prefix)?,
-    };
+    let prefix = IpcPrefix::resolve(args.ipc_prefix.as_deref(), &ipc_cfg.prefix)?;
     let ipc = Ipc::open("px4-link", &prefix)?;
     let setpoints = ipc.subscriber::<Setpoint>(services::FSM_SETPOINT)?;
     let requests = ipc.subscriber::<LinkRequest>(services::PX4_REQUEST)?;
