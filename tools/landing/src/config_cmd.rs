@@ -29,6 +29,9 @@ pub struct StackConfig {
     /// depth-map: the depth camera's mount, ray casting, the window, the log-odds model.
     #[serde(default)]
     pub depth_map: depth_map::DepthMapConfig,
+    /// The mission state machine and the pad filter.
+    #[serde(default)]
+    pub fsm: fsm::FsmConfig,
 }
 
 impl Validate for StackConfig {
@@ -42,6 +45,7 @@ impl Validate for StackConfig {
             .validate()
             .map_err(|e| e.under("depth_map"))?;
         self.planner.validate().map_err(|e| e.under("planner"))?;
+        self.fsm.validate().map_err(|e| e.under("fsm"))?;
         if let Some(c) = &self.camera_ingest {
             c.validate().map_err(|e| e.under("camera_ingest"))?;
         }

@@ -12,6 +12,9 @@ mod map_cmd;
 mod pad_detect;
 mod pad_print;
 mod plan_cmd;
+mod run_cmd;
+mod run_eval;
+mod run_lockstep;
 mod stats;
 
 use std::path::PathBuf;
@@ -48,6 +51,11 @@ enum Command {
     Map(map_cmd::MapArgs),
     /// Plan one trajectory offline on a map of boxes (exit code 3 when there is none).
     Plan(plan_cmd::PlanArgs),
+    /// Fly one whole autonomous landing mission in the simulator: take off, find the pad
+    /// on its moving vehicle, track it around obstacles, descend and land on it. Prints a
+    /// progress line, every state transition and a summary (exit code 1 when the vehicle
+    /// did not land on the pad).
+    Run(run_cmd::RunArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -141,6 +149,10 @@ fn main() -> ExitCode {
         },
         Command::Pad(PadCommand::Print(args)) => pad_print::run(&args),
         Command::Map(args) => map_cmd::run(&args),
+        Command::Run(args) => match run_cmd::run(&args) {
+            Ok(false) => return ExitCode::from(1),
+            other => other.map(|_| ()),
+        },
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

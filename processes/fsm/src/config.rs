@@ -1,0 +1,252 @@
+//! The `[fsm]` section of the stack configuration: the mission and its gates. Defaults
+//! follow the paper where it gives a number (commit height 0.6 m) and are otherwise set
+//! for a 450 mm quadrotor with a downward camera.
+
+use ipc_types::runtime::config::{Invalid, Validate, check_range};
+use serde::Deserialize;
+
+/// What the fsm reads from `landing.toml`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FsmConfig {
+    /// Start the mission as soon as the link is up (else wait for an operator start).
+    pub autostart: bool,
+    /// Setpoint rate, Hz (the issue asks for 50).
+    pub rate_hz: f64,
+    /// Where to climb to and wait for the pad, world ENU, m (the paper's preset point).
+    pub preset_m: [f64; 3],
+    /// Distance to the preset point that counts as arrived, m.
+    pub preset_tolerance_m: f64,
+    /// Highest take-off altitude asked of AUTO.TAKEOFF; the planner flies the rest, m.
+    pub takeoff_altitude_m: f64,
+    /// Highest tracking height above the pad, m.
+    pub track_height_max_m: f64,
+    /// Closer than this (horizontally) the vehicle flies pad-relative setpoints instead
+    /// of planner trajectories: over the pad vehicle the map shows the vehicle itself.
+    pub direct_range_m: f64,
+    /// Speed used to predict the rendezvous time (distance / this), m/s.
+    pub approach_speed_m_s: f64,
+    /// Horizontal error below which descent may start, m.
+    pub align_m: f64,
+    /// Horizontal speed relative to the pad below which descent may start, m/s.
+    pub align_speed_m_s: f64,
+    /// How long both alignment gates must hold before descent, s.
+    pub align_hold_s: f64,
+    /// Descent rate while tracking, m/s.
+    pub descend_rate_m_s: f64,
+    /// Height above the pad below which the vehicle commits to touchdown, m (paper 0.6).
+    pub commit_height_m: f64,
+    /// Horizontal error allowed at the commit, m.
+    pub land_align_m: f64,
+    /// Horizontal speed relative to the pad allowed at the commit, m/s.
+    pub land_speed_gate_m_s: f64,
+    /// Touchdown descent rate, m/s.
+    pub land_rate_m_s: f64,
+    /// Horizontal error that aborts a descent or a touchdown into a climb back, m.
+    pub go_around_m: f64,
+    /// Go-arounds before the mission lands in place instead.
+    pub max_go_arounds: u32,
+    /// No pad observation for this long while tracking means the pad is lost, s.
+    pub lost_after_s: f64,
+    /// Lost: hold this long before climbing, s.
+    pub lost_hold_s: f64,
+    /// Lost: climb rate, m/s.
+    pub lost_climb_m_s: f64,
+    /// Lost: climb at most this much above where the pad was lost, m.
+    pub lost_climb_max_m: f64,
+    /// Lost: give up and land in place after this long, s.
+    pub lost_timeout_s: f64,
+    /// Vehicle state older than this (or a link reported down) means telemetry is lost, s.
+    pub telemetry_timeout_s: f64,
+    /// Attempts per autopilot request (arm, take-off, OFFBOARD, land, disarm).
+    pub request_attempts: u32,
+    /// Wait between attempts, s.
+    pub request_retry_s: f64,
+    /// Time limit of Takeoff (arming, climbing, entering OFFBOARD), s.
+    pub takeoff_timeout_s: f64,
+    /// Time limit of GoToPreset, s.
+    pub goto_timeout_s: f64,
+    /// Time limit of WaitForPad, s.
+    pub wait_timeout_s: f64,
+    /// Time limit of Track, s.
+    pub track_timeout_s: f64,
+    /// Time limit of Descend, s.
+    pub descend_timeout_s: f64,
+    /// Time limit of Land (commit to disarmed), s.
+    pub land_timeout_s: f64,
+    /// How often the status is published without a transition, s.
+    pub status_period_s: f64,
+    /// How often the planner goal is re-published, s.
+    pub goal_period_s: f64,
+    /// The pad motion filter.
+    pub pad_filter: PadFilterConfig,
+}
+
+impl Default for FsmConfig {
+    fn default() -> Self {
+        Self {
+            autostart: true,
+            rate_hz: 50.0,
+            preset_m: [0.0, 0.0, 2.0],
+            preset_tolerance_m: 0.3,
+            takeoff_altitude_m: 2.0,
+            track_height_max_m: 3.0,
+            direct_range_m: 1.5,
+            approach_speed_m_s: 2.0,
+            align_m: 0.3,
+            align_speed_m_s: 0.4,
+            align_hold_s: 0.5,
+            descend_rate_m_s: 0.4,
+            commit_height_m: 0.6,
+            land_align_m: 0.12,
+            land_speed_gate_m_s: 0.3,
+            land_rate_m_s: 0.5,
+            go_around_m: 0.4,
+            max_go_arounds: 3,
+            lost_after_s: 1.0,
+            lost_hold_s: 1.0,
+            lost_climb_m_s: 0.5,
+            lost_climb_max_m: 2.0,
+            lost_timeout_s: 10.0,
+            telemetry_timeout_s: 0.5,
+            request_attempts: 3,
+            request_retry_s: 1.0,
+            takeoff_timeout_s: 30.0,
+            goto_timeout_s: 90.0,
+            wait_timeout_s: 120.0,
+            track_timeout_s: 120.0,
+            descend_timeout_s: 60.0,
+            land_timeout_s: 20.0,
+            status_period_s: 0.2,
+            goal_period_s: 0.2,
+            pad_filter: PadFilterConfig::default(),
+        }
+    }
+}
+
+/// The pad's constant-velocity Kalman filter.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PadFilterConfig {
+    /// Position noise of an observation at the camera, m.
+    pub sigma_m: f64,
+    /// Added position noise per metre of camera-to-pad distance, m/m.
+    pub sigma_per_m: f64,
+    /// Horizontal acceleration noise of the pad vehicle (white), m/s^2.
+    pub accel_noise_xy: f64,
+    /// Vertical acceleration noise, m/s^2.
+    pub accel_noise_z: f64,
+    /// Heading-rate noise (white angular acceleration), rad/s^2.
+    pub yaw_accel_noise: f64,
+    /// Heading noise of an observation, rad.
+    pub sigma_yaw_rad: f64,
+    /// Initial speed uncertainty, m/s (a 50 km/h vehicle: 14 m/s).
+    pub initial_speed_sigma: f64,
+    /// Innovation gate: normalized innovation squared above this is an outlier
+    /// (16.3 = chi-square 3 dof at 99.9%).
+    pub gate_chi2: f64,
+    /// Consecutive outliers after which the filter restarts at the new observations.
+    pub max_rejects: u32,
+    /// Updates before the estimate counts as valid.
+    pub min_updates: u32,
+    /// Observations older than this at arrival are dropped, s.
+    pub max_age_s: f64,
+}
+
+impl Default for PadFilterConfig {
+    fn default() -> Self {
+        Self {
+            sigma_m: 0.02,
+            sigma_per_m: 0.01,
+            accel_noise_xy: 1.0,
+            accel_noise_z: 0.2,
+            yaw_accel_noise: 0.5,
+            sigma_yaw_rad: 0.03,
+            initial_speed_sigma: 14.0,
+            gate_chi2: 16.3,
+            max_rejects: 5,
+            min_updates: 3,
+            max_age_s: 0.5,
+        }
+    }
+}
+
+impl Validate for PadFilterConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        check_range("pad_filter.sigma_m", self.sigma_m, 1e-4, 1.0)?;
+        check_range("pad_filter.sigma_per_m", self.sigma_per_m, 0.0, 0.5)?;
+        check_range("pad_filter.accel_noise_xy", self.accel_noise_xy, 1e-3, 50.0)?;
+        check_range("pad_filter.accel_noise_z", self.accel_noise_z, 1e-3, 50.0)?;
+        check_range(
+            "pad_filter.yaw_accel_noise",
+            self.yaw_accel_noise,
+            1e-3,
+            50.0,
+        )?;
+        check_range("pad_filter.sigma_yaw_rad", self.sigma_yaw_rad, 1e-4, 1.0)?;
+        check_range(
+            "pad_filter.initial_speed_sigma",
+            self.initial_speed_sigma,
+            0.1,
+            100.0,
+        )?;
+        check_range("pad_filter.gate_chi2", self.gate_chi2, 1.0, 1000.0)?;
+        check_range("pad_filter.max_rejects", self.max_rejects, 1, 1000)?;
+        check_range("pad_filter.min_updates", self.min_updates, 1, 100)?;
+        check_range("pad_filter.max_age_s", self.max_age_s, 0.01, 10.0)?;
+        Ok(())
+    }
+}
+
+impl Validate for FsmConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        check_range("rate_hz", self.rate_hz, 20.0, 500.0)?;
+        for (i, v) in self.preset_m.iter().enumerate() {
+            check_range(&format!("preset_m[{i}]"), *v, -1000.0, 1000.0)?;
+        }
+        check_range("preset_m[2]", self.preset_m[2], 0.3, 100.0)?;
+        let positive = [
+            ("preset_tolerance_m", self.preset_tolerance_m, 0.05, 5.0),
+            ("takeoff_altitude_m", self.takeoff_altitude_m, 0.3, 50.0),
+            ("track_height_max_m", self.track_height_max_m, 0.3, 50.0),
+            ("direct_range_m", self.direct_range_m, 0.2, 20.0),
+            ("approach_speed_m_s", self.approach_speed_m_s, 0.1, 30.0),
+            ("align_m", self.align_m, 0.01, 5.0),
+            ("align_speed_m_s", self.align_speed_m_s, 0.01, 10.0),
+            ("align_hold_s", self.align_hold_s, 0.0, 10.0),
+            ("descend_rate_m_s", self.descend_rate_m_s, 0.05, 3.0),
+            ("commit_height_m", self.commit_height_m, 0.05, 3.0),
+            ("land_align_m", self.land_align_m, 0.01, 1.0),
+            ("land_speed_gate_m_s", self.land_speed_gate_m_s, 0.01, 5.0),
+            ("land_rate_m_s", self.land_rate_m_s, 0.05, 3.0),
+            ("go_around_m", self.go_around_m, 0.05, 5.0),
+            ("lost_after_s", self.lost_after_s, 0.05, 30.0),
+            ("lost_hold_s", self.lost_hold_s, 0.0, 30.0),
+            ("lost_climb_m_s", self.lost_climb_m_s, 0.0, 5.0),
+            ("lost_climb_max_m", self.lost_climb_max_m, 0.0, 50.0),
+            ("lost_timeout_s", self.lost_timeout_s, 0.1, 600.0),
+            ("telemetry_timeout_s", self.telemetry_timeout_s, 0.05, 10.0),
+            ("request_retry_s", self.request_retry_s, 0.0, 60.0),
+            ("takeoff_timeout_s", self.takeoff_timeout_s, 1.0, 3600.0),
+            ("goto_timeout_s", self.goto_timeout_s, 1.0, 3600.0),
+            ("wait_timeout_s", self.wait_timeout_s, 1.0, 3600.0),
+            ("track_timeout_s", self.track_timeout_s, 1.0, 3600.0),
+            ("descend_timeout_s", self.descend_timeout_s, 1.0, 3600.0),
+            ("land_timeout_s", self.land_timeout_s, 1.0, 3600.0),
+            ("status_period_s", self.status_period_s, 0.01, 10.0),
+            ("goal_period_s", self.goal_period_s, 0.01, 10.0),
+        ];
+        for (key, value, lo, hi) in positive {
+            check_range(key, value, lo, hi)?;
+        }
+        check_range("max_go_arounds", self.max_go_arounds, 0, 100)?;
+        check_range("request_attempts", self.request_attempts, 1, 100)?;
+        if self.land_align_m > self.go_around_m {
+            return Err(Invalid::new(
+                "land_align_m",
+                "must not exceed go_around_m (the commit gate must be inside the abort gate)",
+            ));
+        }
+        self.pad_filter.validate()
+    }
+}

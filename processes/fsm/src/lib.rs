@@ -1,0 +1,14 @@
+//! The landing mission: a pad motion filter and the state machine that takes off,
+//! finds the pad, tracks it, descends and lands on it while it moves.
+//!
+//! Pure library: time and messages in, setpoints, goals, requests and status out. The
+//! `fsm` binary binds it to iceoryx2; `landing run` steps it in lockstep with the
+//! simulator.
+
+pub mod config;
+pub mod mission;
+pub mod pad_filter;
+
+pub use config::{FsmConfig, PadFilterConfig};
+pub use mission::{Fsm, Outputs, Transition, state_name};
+pub use pad_filter::{PadEstimate, PadFilter, Update};

@@ -1,0 +1,967 @@
+//! The landing mission as a state machine: inputs (vehicle state, pad observations,
+//! trajectories, autopilot outcomes, safety orders) and time in; setpoints, planner goals,
+//! autopilot requests and status out. No clock, no IPC: the `fsm` binary and
+//! `landing run` call the same code.
+
+use ipc_types::msg::{
+    FlightMode, GoalMode, Header, LandedState, LinkOutcome, LinkOutcomeKind, LinkRequest,
+    LinkRequestKind, MissionState, PadObservation, PlannerGoal, SafetyAction, SafetyCommand,
+    Setpoint, Stage, Text, Trajectory, VehicleState,
+};
+use nalgebra::{UnitQuaternion, Vector3};
+use planner::bspline::BSpline;
+
+use crate::config::FsmConfig;
+use crate::pad_filter::{PadEstimate, PadFilter, Update};
+
+/// A name for each state, for logs and plots.
+pub fn state_name(s: MissionState) -> &'static str {
+    match s {
+        MissionState::Idle => "idle",
+        MissionState::Takeoff => "takeoff",
+        MissionState::GoToPreset => "goto-preset",
+        MissionState::WaitForPad => "wait-for-pad",
+        MissionState::Track => "track",
+        MissionState::Descend => "descend",
+        MissionState::Land => "land",
+        MissionState::Landed => "landed",
+        MissionState::Lost => "lost",
+        MissionState::Abort => "abort",
+        MissionState::SafeLand => "safe-land",
+    }
+}
+
+/// One transition, kept for the log and the tests.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Transition {
+    /// When, ns.
+    pub at_ns: u64,
+    /// From.
+    pub from: MissionState,
+    /// To.
+    pub to: MissionState,
+    /// Why, for people.
+    pub reason: String,
+}
+
+/// What one tick asks the caller to publish.
+#[derive(Debug, Clone, Default)]
+pub struct Outputs {
+    /// The setpoint to stream to the autopilot (None: no stream in this state).
+    pub setpoint: Option<Setpoint>,
+    /// A planner goal (on change and every `goal_period_s`).
+    pub goal: Option<PlannerGoal>,
+    /// Requests to the autopilot, in order.
+    pub requests: Vec<LinkRequest>,
+    /// The status (on a transition and every `status_period_s`).
+    pub status: Option<FsmStatus>,
+}
+
+pub use ipc_types::msg::FsmStatus;
+
+/// Steps inside Takeoff.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum TakeoffStep {
+    Arming,
+    TakingOff,
+    Climbing,
+    EnteringOffboard,
+}
+
+/// One autopilot request in flight, with its retries.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Pending {
+    kind: LinkRequestKind,
+    id: u64,
+    attempts: u32,
+    /// When the current attempt went out (None: waiting to retry).
+    sent_ns: Option<u64>,
+    retry_at_ns: u64,
+    answer: Option<(LinkOutcomeKind, u32)>,
+}
+
+/// Where a request stands.
+#[derive(Debug, Clone, PartialEq)]
+enum Drive {
+    Waiting,
+    Accepted,
+    Failed(String),
+}
+
+/// Where setpoints come from in Track/GoToPreset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Guidance {
+    Planner,
+    Direct,
+}
+
+/// How long px4-link may take to answer a request before the fsm counts it as lost.
+const NO_ANSWER_NS: u64 = 5_000_000_000;
+/// How long the autopilot may show another mode than OFFBOARD before the fsm yields.
+const MODE_LOSS_NS: u64 = 1_000_000_000;
+
+/// The mission state machine.
+#[derive(Debug, Clone)]
+pub struct Fsm {
+    cfg: FsmConfig,
+    state: MissionState,
+    previous: MissionState,
+    since_ns: u64,
+    reason: String,
+    started: bool,
+    filter: PadFilter,
+    vehicle: Option<(u64, VehicleState)>,
+    trajectory: Option<(u64, BSpline, u64)>,
+    takeoff: TakeoffStep,
+    pending: Option<Pending>,
+    next_request_id: u64,
+    streaming: bool,
+    hold: Vector3<f64>,
+    yaw_sp: f64,
+    guidance: Guidance,
+    goal_epoch_ns: u64,
+    last_goal_ns: Option<u64>,
+    goal_seq: u64,
+    align_since: Option<u64>,
+    track_height: f64,
+    h_cmd: f64,
+    z_cmd: f64,
+    go_arounds: u32,
+    lost_z0: f64,
+    lost_since_update: u64,
+    mode_lost_since: Option<u64>,
+    last_tick_ns: Option<u64>,
+    last_status_ns: Option<u64>,
+    transitioned: bool,
+    transitions: Vec<Transition>,
+    safety_ordered: bool,
+    status_seq: u64,
+}
+
+impl Fsm {
+    /// A mission with `cfg` (validated), in Idle.
+    pub fn new(cfg: FsmConfig) -> Self {
+        let filter = PadFilter::new(cfg.pad_filter.clone());
+        let started = cfg.autostart;
+        Self {
+            cfg,
+            state: MissionState::Idle,
+            previous: MissionState::Idle,
+            since_ns: 0,
+            reason: "initial".into(),
+            started,
+            filter,
+            vehicle: None,
+            trajectory: None,
+            takeoff: TakeoffStep::Arming,
+            pending: None,
+            next_request_id: 1,
+            streaming: false,
+            hold: Vector3::zeros(),
+            yaw_sp: 0.0,
+            guidance: Guidance::Planner,
+            goal_epoch_ns: 0,
+            last_goal_ns: None,
+            goal_seq: 0,
+            align_since: None,
+            track_height: 1.0,
+            h_cmd: 1.0,
+            z_cmd: 0.0,
+            go_arounds: 0,
+            lost_z0: 0.0,
+            lost_since_update: 0,
+            mode_lost_since: None,
+            last_tick_ns: None,
+            last_status_ns: None,
+            transitioned: true,
+            transitions: Vec::new(),
+            safety_ordered: false,
+            status_seq: 0,
+        }
+    }
+
+    /// The state now.
+    pub fn state(&self) -> MissionState {
+        self.state
+    }
+
+    /// Why the last transition happened.
+    pub fn reason(&self) -> &str {
+        &self.reason
+    }
+
+    /// Every transition so far.
+    pub fn transitions(&self) -> &[Transition] {
+        &self.transitions
+    }
+
+    /// The pad filter (counters, estimate).
+    pub fn pad_filter(&self) -> &PadFilter {
+        &self.filter
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &FsmConfig {
+        &self.cfg
+    }
+
+    /// An operator's start (when `autostart` is off).
+    pub fn start(&mut self) {
+        self.started = true;
+    }
+
+    /// The newest vehicle state, received at `now_ns`.
+    pub fn on_vehicle_state(&mut self, now_ns: u64, v: &VehicleState) {
+        if v.world_from_body.is_finite() && v.velocity.iter().all(|x| x.is_finite()) {
+            self.vehicle = Some((now_ns, *v));
+        }
+    }
+
+    /// A pad observation, received at `now_ns`.
+    pub fn on_observation(&mut self, now_ns: u64, obs: &PadObservation) -> Update {
+        let u = self.filter.update(now_ns, obs);
+        match u {
+            Update::Restarted => tracing::warn!("pad observations jumped: pad filter restarted"),
+            Update::Rejected => tracing::debug!("pad observation outside the gate"),
+            _ => {}
+        }
+        u
+    }
+
+    /// A trajectory from the planner.
+    pub fn on_trajectory(&mut self, t: &Trajectory) {
+        let count = t.points().len();
+        if count < 4 || !(t.knot_interval_s.is_finite() && t.knot_interval_s > 0.0) {
+            return;
+        }
+        if let Some((id, _, _)) = &self.trajectory {
+            if t.id <= *id {
+                return;
+            }
+        }
+        // Only plans made for the current goal, or an emergency stop.
+        if t.start_ns < self.goal_epoch_ns && t.emergency == 0 {
+            return;
+        }
+        let points = t.points().iter().map(|p| Vector3::from(*p)).collect();
+        let spline = BSpline {
+            points,
+            ts: t.knot_interval_s,
+        };
+        self.trajectory = Some((t.id, spline, t.start_ns));
+    }
+
+    /// An answer from px4-link.
+    pub fn on_outcome(&mut self, o: &LinkOutcome) {
+        if let Some(p) = &mut self.pending {
+            if p.id == o.id && p.sent_ns.is_some() {
+                let kind = match o.outcome {
+                    1 => LinkOutcomeKind::Accepted,
+                    2 => LinkOutcomeKind::Rejected,
+                    3 => LinkOutcomeKind::TimedOut,
+                    4 => LinkOutcomeKind::NoSetpointStream,
+                    _ => LinkOutcomeKind::Invalid,
+                };
+                p.answer = Some((kind, o.result));
+            }
+        }
+    }
+
+    /// An order from the watchdog or an operator: executed at once (px4-link executes
+    /// the autopilot side itself; the fsm stops the mission).
+    pub fn on_safety(&mut self, now_ns: u64, c: &SafetyCommand) {
+        let source = c.source.as_str();
+        let why = c.reason.as_str();
+        match SafetyAction::from_raw(c.action) {
+            SafetyAction::None => {}
+            SafetyAction::Hold | SafetyAction::Abort => {
+                if !matches!(self.state, MissionState::Abort | MissionState::Landed) {
+                    self.safety_ordered = true;
+                    self.go(now_ns, MissionState::Abort, format!("{source}: {why}"));
+                }
+            }
+            SafetyAction::SafeLand => {
+                if !matches!(self.state, MissionState::SafeLand | MissionState::Landed) {
+                    self.safety_ordered = true;
+                    self.go(now_ns, MissionState::SafeLand, format!("{source}: {why}"));
+                }
+            }
+        }
+    }
+
+    /// One step at `now_ns` (call at `rate_hz`).
+    pub fn tick(&mut self, now_ns: u64) -> Outputs {
+        let dt = self
+            .last_tick_ns
+            .map(|t| now_ns.saturating_sub(t) as f64 * 1e-9)
+            .unwrap_or(0.0)
+            .min(0.2);
+        self.last_tick_ns = Some(now_ns);
+        let mut out = Outputs::default();
+        self.check_links(now_ns);
+        match self.state {
+            MissionState::Idle => self.idle(now_ns, &mut out),
+            MissionState::Takeoff => self.takeoff(now_ns, &mut out),
+            MissionState::GoToPreset | MissionState::WaitForPad => self.preset(now_ns, &mut out),
+            MissionState::Track => self.track(now_ns, &mut out),
+            MissionState::Descend => self.descend(now_ns, dt, &mut out),
+            MissionState::Land => self.land(now_ns, dt, &mut out),
+            MissionState::Lost => self.lost(now_ns, &mut out),
+            MissionState::SafeLand => self.safe_land(now_ns, &mut out),
+            MissionState::Landed | MissionState::Abort => {}
+        }
+        if !self.streaming {
+            out.setpoint = None;
+        }
+        if self.transitioned
+            || self
+                .last_status_ns
+                .is_none_or(|t| now_ns.saturating_sub(t) as f64 * 1e-9 >= self.cfg.status_period_s)
+        {
+            self.transitioned = false;
+            self.last_status_ns = Some(now_ns);
+            out.status = Some(self.status(now_ns));
+        }
+        out
+    }
+
+    /// The status message now.
+    pub fn status(&self, now_ns: u64) -> FsmStatus {
+        let mut msg = Header::captured_at(now_ns);
+        msg.seq = self.status_seq;
+        msg.push_stage(Stage::Fsm, now_ns, now_ns);
+        let est = self.filter.estimate(now_ns);
+        FsmStatus {
+            msg,
+            state: self.state as u32,
+            previous: self.previous as u32,
+            since_ns: self.since_ns,
+            reason: Text::new(&self.reason),
+            pad_valid: u32::from(est.is_some()),
+            reserved: 0,
+            pad_position: est.map(|e| e.position.into()).unwrap_or([0.0; 3]),
+            pad_velocity: est.map(|e| e.velocity.into()).unwrap_or([0.0; 3]),
+        }
+    }
+
+    fn go(&mut self, now_ns: u64, to: MissionState, reason: String) {
+        if to == self.state {
+            return;
+        }
+        tracing::info!(
+            from = state_name(self.state),
+            to = state_name(to),
+            reason = reason.as_str(),
+            "transition"
+        );
+        self.transitions.push(Transition {
+            at_ns: now_ns,
+            from: self.state,
+            to,
+            reason: reason.clone(),
+        });
+        self.previous = self.state;
+        self.state = to;
+        self.since_ns = now_ns;
+        self.reason = reason;
+        self.transitioned = true;
+        self.status_seq += 1;
+        self.align_since = None;
+        match to {
+            MissionState::SafeLand | MissionState::Abort | MissionState::Landed => {
+                self.streaming = false;
+                self.pending = None;
+            }
+            MissionState::Takeoff => {
+                self.takeoff = TakeoffStep::Arming;
+                self.pending = None;
+            }
+            _ => {}
+        }
+    }
+
+    fn elapsed_s(&self, now_ns: u64) -> f64 {
+        now_ns.saturating_sub(self.since_ns) as f64 * 1e-9
+    }
+
+    fn vehicle(&self) -> Option<&VehicleState> {
+        self.vehicle.as_ref().map(|(_, v)| v)
+    }
+
+    fn position(&self) -> Option<Vector3<f64>> {
+        self.vehicle()
+            .map(|v| Vector3::from(v.world_from_body.translation))
+    }
+
+    fn velocity(&self) -> Vector3<f64> {
+        self.vehicle()
+            .map(|v| Vector3::from(v.velocity))
+            .unwrap_or_else(Vector3::zeros)
+    }
+
+    /// Telemetry and flight-mode checks shared by every airborne state.
+    fn check_links(&mut self, now_ns: u64) {
+        let airborne = matches!(
+            self.state,
+            MissionState::Takeoff
+                | MissionState::GoToPreset
+                | MissionState::WaitForPad
+                | MissionState::Track
+                | MissionState::Descend
+                | MissionState::Land
+                | MissionState::Lost
+        );
+        if !airborne {
+            return;
+        }
+        let fresh = self.vehicle.as_ref().is_some_and(|(rx, v)| {
+            v.link.connected != 0
+                && now_ns.saturating_sub(*rx) as f64 * 1e-9 <= self.cfg.telemetry_timeout_s
+        });
+        if !fresh {
+            self.go(now_ns, MissionState::SafeLand, "telemetry lost".into());
+            return;
+        }
+        // Once in OFFBOARD, another mode shown for a while means the pilot or a PX4
+        // failsafe took over: the mission yields instead of fighting it.
+        let in_offboard_phase = self.state != MissionState::Takeoff;
+        if in_offboard_phase {
+            let mode = self
+                .vehicle()
+                .map(|v| FlightMode::from_raw(v.flight_mode))
+                .unwrap_or(FlightMode::Unknown);
+            if mode == FlightMode::Offboard {
+                self.mode_lost_since = None;
+            } else {
+                let since = *self.mode_lost_since.get_or_insert(now_ns);
+                if now_ns.saturating_sub(since) >= MODE_LOSS_NS {
+                    self.go(
+                        now_ns,
+                        MissionState::Abort,
+                        format!("autopilot left OFFBOARD ({mode:?})"),
+                    );
+                }
+            }
+        }
+    }
+
+    /// Sends `kind` and follows it through retries; one request at a time.
+    fn drive(
+        &mut self,
+        now_ns: u64,
+        kind: LinkRequestKind,
+        altitude_m: f64,
+        out: &mut Outputs,
+    ) -> Drive {
+        if self.pending.is_none_or(|p| p.kind != kind) {
+            self.pending = Some(Pending {
+                kind,
+                id: 0,
+                attempts: 0,
+                sent_ns: None,
+                retry_at_ns: now_ns,
+                answer: None,
+            });
+        }
+        let Some(mut p) = self.pending else {
+            return Drive::Waiting;
+        };
+        match (p.sent_ns, p.answer) {
+            (None, _) if now_ns >= p.retry_at_ns => {
+                p.id = self.next_request_id;
+                self.next_request_id += 1;
+                p.attempts += 1;
+                p.sent_ns = Some(now_ns);
+                p.answer = None;
+                let mut msg = Header::captured_at(now_ns);
+                msg.push_stage(Stage::Fsm, now_ns, now_ns);
+                out.requests.push(LinkRequest {
+                    msg,
+                    id: p.id,
+                    kind: kind as u32,
+                    reserved: 0,
+                    altitude_m,
+                });
+                tracing::info!(?kind, attempt = p.attempts, "autopilot request");
+            }
+            (Some(_), Some((LinkOutcomeKind::Accepted, _))) => {
+                self.pending = None;
+                return Drive::Accepted;
+            }
+            (Some(sent), answer) => {
+                let failure = match answer {
+                    Some((k, code)) => Some(format!("{k:?} (MAV_RESULT {code})")),
+                    None if now_ns.saturating_sub(sent) >= NO_ANSWER_NS => {
+                        Some("no answer from px4-link".to_string())
+                    }
+                    None => None,
+                };
+                if let Some(f) = failure {
+                    tracing::warn!(
+                        ?kind,
+                        attempt = p.attempts,
+                        failure = f.as_str(),
+                        "request failed"
+                    );
+                    if p.attempts >= self.cfg.request_attempts {
+                        self.pending = None;
+                        return Drive::Failed(format!("{kind:?} failed {} times: {f}", p.attempts));
+                    }
+                    p.sent_ns = None;
+                    p.retry_at_ns = now_ns + (self.cfg.request_retry_s * 1e9) as u64;
+                }
+            }
+            _ => {}
+        }
+        self.pending = Some(p);
+        Drive::Waiting
+    }
+
+    fn idle(&mut self, now_ns: u64, _out: &mut Outputs) {
+        if !self.started {
+            return;
+        }
+        let ready = self.vehicle.as_ref().is_some_and(|(rx, v)| {
+            v.link.connected != 0
+                && now_ns.saturating_sub(*rx) as f64 * 1e-9 <= self.cfg.telemetry_timeout_s
+        });
+        if ready {
+            self.go(now_ns, MissionState::Takeoff, "started, link up".into());
+        }
+    }
+
+    fn takeoff_altitude(&self) -> f64 {
+        self.cfg.preset_m[2].min(self.cfg.takeoff_altitude_m)
+    }
+
+    fn takeoff(&mut self, now_ns: u64, out: &mut Outputs) {
+        if self.elapsed_s(now_ns) > self.cfg.takeoff_timeout_s {
+            self.go(
+                now_ns,
+                MissionState::SafeLand,
+                format!("takeoff timed out ({:?})", self.takeoff),
+            );
+            return;
+        }
+        let alt = self.takeoff_altitude();
+        match self.takeoff {
+            TakeoffStep::Arming => match self.drive(now_ns, LinkRequestKind::Arm, 0.0, out) {
+                Drive::Accepted => self.takeoff = TakeoffStep::TakingOff,
+                Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),
+                Drive::Waiting => {}
+            },
+            TakeoffStep::TakingOff => {
+                match self.drive(now_ns, LinkRequestKind::Takeoff, alt, out) {
+                    Drive::Accepted => self.takeoff = TakeoffStep::Climbing,
+                    Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),
+                    Drive::Waiting => {}
+                }
+            }
+            TakeoffStep::Climbing => {
+                let (Some(p), Some(v)) = (self.position(), self.vehicle().copied()) else {
+                    return;
+                };
+                let up = LandedState::from_raw(v.landed_state) == LandedState::InAir;
+                if p.z >= alt - 0.15 && up {
+                    self.hold = Vector3::new(p.x, p.y, alt);
+                    self.yaw_sp = yaw_of(&v.world_from_body.rotation_xyzw);
+                    self.streaming = true;
+                    self.takeoff = TakeoffStep::EnteringOffboard;
+                }
+            }
+            TakeoffStep::EnteringOffboard => {
+                out.setpoint = Some(self.hold_setpoint(now_ns, self.hold));
+                match self.drive(now_ns, LinkRequestKind::Offboard, 0.0, out) {
+                    Drive::Accepted => {
+                        self.mode_lost_since = None;
+                        self.enter_preset(now_ns, "OFFBOARD entered".into());
+                    }
+                    Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),
+                    Drive::Waiting => {}
+                }
+            }
+        }
+    }
+
+    fn enter_preset(&mut self, now_ns: u64, reason: String) {
+        self.go(now_ns, MissionState::GoToPreset, reason);
+        self.new_goal_epoch(now_ns);
+        self.guidance = Guidance::Planner;
+    }
+
+    fn new_goal_epoch(&mut self, now_ns: u64) {
+        self.goal_epoch_ns = now_ns;
+        self.last_goal_ns = None;
+        self.trajectory = None;
+        if let Some(p) = self.position() {
+            self.hold = p;
+        }
+    }
+
+    fn pad(&self, now_ns: u64) -> Option<PadEstimate> {
+        let est = self.filter.estimate(now_ns)?;
+        (est.age_s <= self.cfg.lost_after_s).then_some(est)
+    }
+
+    fn preset(&mut self, now_ns: u64, out: &mut Outputs) {
+        let preset = Vector3::from(self.cfg.preset_m);
+        let limit = if self.state == MissionState::GoToPreset {
+            self.cfg.goto_timeout_s
+        } else {
+            self.cfg.wait_timeout_s
+        };
+        if self.elapsed_s(now_ns) > limit {
+            let why = if self.state == MissionState::GoToPreset {
+                "preset point not reached in time"
+            } else {
+                "pad not seen in time"
+            };
+            self.go(now_ns, MissionState::SafeLand, why.into());
+            return;
+        }
+        if self.pad(now_ns).is_some() {
+            self.enter_track(now_ns, "pad seen".into());
+            self.track(now_ns, out);
+            return;
+        }
+        self.publish_goal(now_ns, GoalMode::Point, preset, Vector3::zeros(), out);
+        out.setpoint = Some(self.trajectory_setpoint(now_ns));
+        if self.state == MissionState::GoToPreset
+            && self
+                .position()
+                .is_some_and(|p| (p - preset).norm() <= self.cfg.preset_tolerance_m)
+        {
+            self.go(
+                now_ns,
+                MissionState::WaitForPad,
+                "at the preset point".into(),
+            );
+        }
+    }
+
+    fn enter_track(&mut self, now_ns: u64, reason: String) {
+        let from = self.state;
+        self.go(now_ns, MissionState::Track, reason);
+        self.new_goal_epoch(now_ns);
+        self.guidance = Guidance::Planner;
+        if let (Some(p), Some(est)) = (self.position(), self.filter.estimate(now_ns)) {
+            let h = p.z - est.position.z;
+            let lo = self.cfg.commit_height_m + 0.3;
+            let hi = self.cfg.track_height_max_m.max(lo);
+            // Coming back up from a descent keeps at least the height it had.
+            self.track_height = if matches!(from, MissionState::Descend | MissionState::Land) {
+                (h + 0.3).clamp(lo, hi)
+            } else {
+                h.clamp(lo, hi)
+            };
+        }
+    }
+
+    fn track(&mut self, now_ns: u64, out: &mut Outputs) {
+        if self.elapsed_s(now_ns) > self.cfg.track_timeout_s {
+            self.go(now_ns, MissionState::SafeLand, "tracking timed out".into());
+            return;
+        }
+        let Some(est) = self.pad(now_ns) else {
+            self.enter_lost(now_ns);
+            return;
+        };
+        let Some(p) = self.position() else { return };
+        let e = (est.position - p).xy();
+        let dist = e.norm();
+        match self.guidance {
+            Guidance::Planner if dist <= self.cfg.direct_range_m => {
+                self.guidance = Guidance::Direct
+            }
+            Guidance::Direct if dist > 1.5 * self.cfg.direct_range_m => {
+                self.guidance = Guidance::Planner;
+                self.new_goal_epoch(now_ns);
+            }
+            _ => {}
+        }
+        let above = Vector3::new(0.0, 0.0, self.track_height);
+        if self.guidance == Guidance::Planner {
+            let t_go = (dist / self.cfg.approach_speed_m_s).clamp(0.5, 5.0);
+            let v_pad = Vector3::new(est.velocity.x, est.velocity.y, 0.0);
+            let meet = est.position + v_pad * t_go + above;
+            self.publish_goal(now_ns, GoalMode::Rendezvous, meet, v_pad, out);
+            out.setpoint = Some(self.trajectory_setpoint(now_ns));
+            return;
+        }
+        out.setpoint =
+            Some(self.pad_setpoint(now_ns, &est, est.position.z + self.track_height, 0.0));
+        let rel_v = (self.velocity() - est.velocity).xy().norm();
+        if dist < self.cfg.align_m && rel_v < self.cfg.align_speed_m_s {
+            let since = *self.align_since.get_or_insert(now_ns);
+            if now_ns.saturating_sub(since) as f64 * 1e-9 >= self.cfg.align_hold_s {
+                self.h_cmd = p.z - est.position.z;
+                self.go(now_ns, MissionState::Descend, "aligned over the pad".into());
+            }
+        } else {
+            self.align_since = None;
+        }
+    }
+
+    fn go_around(&mut self, now_ns: u64, why: String) {
+        self.go_arounds += 1;
+        if self.go_arounds > self.cfg.max_go_arounds {
+            self.go(
+                now_ns,
+                MissionState::SafeLand,
+                format!(
+                    "{why}; {} go-arounds, landing in place",
+                    self.go_arounds - 1
+                ),
+            );
+        } else {
+            self.enter_track(now_ns, format!("go-around {}: {why}", self.go_arounds));
+            self.guidance = Guidance::Direct;
+        }
+    }
+
+    fn descend(&mut self, now_ns: u64, dt: f64, out: &mut Outputs) {
+        if self.elapsed_s(now_ns) > self.cfg.descend_timeout_s {
+            self.go(now_ns, MissionState::SafeLand, "descent timed out".into());
+            return;
+        }
+        let Some(est) = self.pad(now_ns) else {
+            self.enter_lost(now_ns);
+            return;
+        };
+        let Some(p) = self.position() else { return };
+        let e = (est.position - p).xy().norm();
+        if e > self.cfg.go_around_m {
+            self.go_around(now_ns, format!("{e:.2} m off the pad while descending"));
+            return;
+        }
+        let height = p.z - est.position.z;
+        let rel_v = (self.velocity() - est.velocity).xy().norm();
+        // Descend only while aligned; hold the height otherwise (and at the commit
+        // height until the commit gates hold).
+        let aligned = e < self.cfg.align_m;
+        let floor = self.cfg.commit_height_m - 0.1;
+        let rate = if aligned && self.h_cmd > floor {
+            self.cfg.descend_rate_m_s
+        } else {
+            0.0
+        };
+        self.h_cmd = (self.h_cmd - rate * dt).max(floor);
+        out.setpoint = Some(self.pad_setpoint(now_ns, &est, est.position.z + self.h_cmd, -rate));
+        if height < self.cfg.commit_height_m
+            && e < self.cfg.land_align_m
+            && rel_v < self.cfg.land_speed_gate_m_s
+        {
+            self.z_cmd = p.z;
+            self.go(
+                now_ns,
+                MissionState::Land,
+                format!("committed at {height:.2} m, {e:.2} m off, {rel_v:.2} m/s"),
+            );
+        }
+    }
+
+    fn land(&mut self, now_ns: u64, dt: f64, out: &mut Outputs) {
+        let Some(v) = self.vehicle().copied() else {
+            return;
+        };
+        let on_ground = LandedState::from_raw(v.landed_state) == LandedState::OnGround;
+        if v.armed == 0 && on_ground {
+            self.go(
+                now_ns,
+                MissionState::Landed,
+                "touched down, disarmed".into(),
+            );
+            return;
+        }
+        if self.elapsed_s(now_ns) > self.cfg.land_timeout_s {
+            self.go(now_ns, MissionState::SafeLand, "touchdown timed out".into());
+            return;
+        }
+        // Close to the pad the camera may see too little: the filter carries the pad.
+        let Some(est) = self.filter.estimate(now_ns) else {
+            self.go(
+                now_ns,
+                MissionState::SafeLand,
+                "pad estimate gone during touchdown".into(),
+            );
+            return;
+        };
+        let p = Vector3::from(v.world_from_body.translation);
+        let e = (est.position - p).xy().norm();
+        let height = p.z - est.position.z;
+        if !on_ground && e > self.cfg.go_around_m && height > 0.15 {
+            self.go_around(now_ns, format!("{e:.2} m off the pad at {height:.2} m"));
+            return;
+        }
+        if on_ground {
+            // Stay pressed onto the pad, moving with it, until the motors are off.
+            out.setpoint = Some(self.pad_setpoint(
+                now_ns,
+                &est,
+                est.position.z - 0.3,
+                -self.cfg.land_rate_m_s,
+            ));
+            match self.drive(now_ns, LinkRequestKind::Disarm, 0.0, out) {
+                Drive::Accepted => self.go(
+                    now_ns,
+                    MissionState::Landed,
+                    "touched down, disarmed".into(),
+                ),
+                Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),
+                Drive::Waiting => {}
+            }
+            return;
+        }
+        self.z_cmd = (self.z_cmd - self.cfg.land_rate_m_s * dt).max(est.position.z - 0.3);
+        out.setpoint = Some(self.pad_setpoint(now_ns, &est, self.z_cmd, -self.cfg.land_rate_m_s));
+    }
+
+    fn enter_lost(&mut self, now_ns: u64) {
+        let z0 = self.position().map(|p| p.z).unwrap_or(self.hold.z);
+        let age = self
+            .filter
+            .estimate(now_ns)
+            .map(|e| e.age_s)
+            .unwrap_or(f64::INFINITY);
+        self.go(now_ns, MissionState::Lost, format!("no pad for {age:.1} s"));
+        self.lost_z0 = z0;
+        self.lost_since_update = self.filter.last_update_ns().unwrap_or(0);
+        if let Some(p) = self.position() {
+            self.hold = p;
+        }
+    }
+
+    fn lost(&mut self, now_ns: u64, out: &mut Outputs) {
+        let t = self.elapsed_s(now_ns);
+        if t > self.cfg.lost_timeout_s {
+            self.go(
+                now_ns,
+                MissionState::SafeLand,
+                format!("pad lost for {:.0} s", self.cfg.lost_timeout_s),
+            );
+            return;
+        }
+        let regained = self
+            .filter
+            .last_update_ns()
+            .is_some_and(|t| t > self.lost_since_update);
+        if regained && self.pad(now_ns).is_some() {
+            self.enter_track(now_ns, "pad regained".into());
+            return;
+        }
+        let climb = ((t - self.cfg.lost_hold_s).max(0.0) * self.cfg.lost_climb_m_s)
+            .min(self.cfg.lost_climb_max_m);
+        let climbing = t > self.cfg.lost_hold_s && climb < self.cfg.lost_climb_max_m;
+        let target = Vector3::new(self.hold.x, self.hold.y, self.lost_z0 + climb);
+        let mut sp = self.hold_setpoint(now_ns, target);
+        if climbing {
+            sp.velocity[2] = self.cfg.lost_climb_m_s;
+        }
+        out.setpoint = Some(sp);
+    }
+
+    fn safe_land(&mut self, now_ns: u64, out: &mut Outputs) {
+        let Some(v) = self.vehicle().copied() else {
+            return;
+        };
+        let down = v.armed == 0 && LandedState::from_raw(v.landed_state) == LandedState::OnGround;
+        if down || self.safety_ordered {
+            // On the ground already, or px4-link executed the order itself.
+            return;
+        }
+        let mode = FlightMode::from_raw(v.flight_mode);
+        if mode == FlightMode::Land {
+            return;
+        }
+        if let Drive::Failed(why) = self.drive(now_ns, LinkRequestKind::Land, 0.0, out) {
+            // A vehicle that must land keeps asking; each failure is logged.
+            tracing::error!(why = why.as_str(), "land request failed, asking again");
+        }
+    }
+
+    /// A planner goal when it changed or is due again.
+    fn publish_goal(
+        &mut self,
+        now_ns: u64,
+        mode: GoalMode,
+        position: Vector3<f64>,
+        velocity: Vector3<f64>,
+        out: &mut Outputs,
+    ) {
+        let due = self
+            .last_goal_ns
+            .is_none_or(|t| now_ns.saturating_sub(t) as f64 * 1e-9 >= self.cfg.goal_period_s);
+        if !due
+            || !position
+                .iter()
+                .chain(velocity.iter())
+                .all(|x| x.is_finite())
+        {
+            return;
+        }
+        self.last_goal_ns = Some(now_ns);
+        self.goal_seq += 1;
+        let mut msg = Header::captured_at(now_ns);
+        msg.seq = self.goal_seq;
+        msg.push_stage(Stage::Fsm, now_ns, now_ns);
+        out.goal = Some(PlannerGoal {
+            msg,
+            position: position.into(),
+            velocity: velocity.into(),
+            acceleration: [0.0; 3],
+            yaw: self.yaw_sp,
+            mode: mode as u32,
+            reserved: 0,
+        });
+    }
+
+    fn setpoint(&self, now_ns: u64, p: Vector3<f64>, v: Vector3<f64>, a: Vector3<f64>) -> Setpoint {
+        let mut msg = Header::captured_at(now_ns);
+        msg.push_stage(Stage::Fsm, now_ns, now_ns);
+        Setpoint {
+            msg,
+            position: p.into(),
+            velocity: v.into(),
+            acceleration: a.into(),
+            yaw: self.yaw_sp,
+            valid: Setpoint::POSITION | Setpoint::VELOCITY | Setpoint::ACCELERATION | Setpoint::YAW,
+            reserved: 0,
+        }
+    }
+
+    fn hold_setpoint(&self, now_ns: u64, p: Vector3<f64>) -> Setpoint {
+        self.setpoint(now_ns, p, Vector3::zeros(), Vector3::zeros())
+    }
+
+    /// The current trajectory sampled now; the hold point before the first one.
+    fn trajectory_setpoint(&self, now_ns: u64) -> Setpoint {
+        if let Some((_, s, t0)) = &self.trajectory {
+            let t = now_ns.saturating_sub(*t0) as f64 * 1e-9;
+            let d = s.duration();
+            let st = s.eval(t.min(d));
+            if st.is_finite() {
+                if t >= d {
+                    return self.hold_setpoint(now_ns, st.p);
+                }
+                return self.setpoint(now_ns, st.p, st.v, st.a);
+            }
+        }
+        self.hold_setpoint(now_ns, self.hold)
+    }
+
+    /// Over the pad at height `z`, moving with it (velocity feed-forward), `vz` down.
+    fn pad_setpoint(&self, now_ns: u64, est: &PadEstimate, z: f64, vz: f64) -> Setpoint {
+        let p = Vector3::new(est.position.x, est.position.y, z);
+        let v = Vector3::new(est.velocity.x, est.velocity.y, est.velocity.z + vz);
+        self.setpoint(now_ns, p, v, Vector3::zeros())
+    }
+}
+
+/// Heading of the body x axis from a quaternion (x, y, z, w), rad; 0 when degenerate.
+fn yaw_of(q: &[f64; 4]) -> f64 {
+    let [x, y, z, w] = *q;
+    let uq = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+    let ax = uq * Vector3::x();
+    let yaw = ax.y.atan2(ax.x);
+    if yaw.is_finite() { yaw } else { 0.0 }
+}

@@ -1,0 +1,115 @@
+//! The evaluator of `landing run`: the only part that reads the simulator's ground
+//! truth (where the vehicle and the pad really are, touchdowns, collisions, crashes).
+
+use ipc_types::msg::{MissionState, TruthEvent, TruthKind};
+use sim::lockstep::Simulator;
+
+/// The world at one instant, for the flight log and the plots.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample {
+    /// Simulated time, s.
+    pub t_s: f64,
+    /// True vehicle position, world ENU, m.
+    pub uav: [f64; 3],
+    /// True vehicle velocity, m/s.
+    pub uav_velocity: [f64; 3],
+    /// True pad centre, m (None without a ground vehicle).
+    pub pad: Option<[f64; 3]>,
+    /// True pad velocity, m/s.
+    pub pad_velocity: Option<[f64; 3]>,
+    /// The fsm's state.
+    pub phase: MissionState,
+}
+
+impl Sample {
+    /// The truth now.
+    pub fn of(sim: &Simulator, phase: MissionState) -> Self {
+        let truth = sim.world().truth();
+        let pad = sim.world().pad();
+        Self {
+            t_s: sim.time_ns() as f64 * 1e-9,
+            uav: truth.position.into(),
+            uav_velocity: truth.velocity.into(),
+            pad: pad
+                .as_ref()
+                .map(|p| p.world_from_pad.translation.vector.into()),
+            pad_velocity: pad.as_ref().map(|p| p.linear_velocity.into()),
+            phase,
+        }
+    }
+}
+
+/// A touchdown as the simulator saw it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Touchdown {
+    /// When, s.
+    pub t_s: f64,
+    /// On the pad (not the ground).
+    pub on_pad: bool,
+    /// Horizontal distance from the pad centre, m.
+    pub error_m: f64,
+    /// Speed relative to the surface, m/s.
+    pub rel_speed_mps: f64,
+    /// The fsm's state at that moment.
+    pub phase: MissionState,
+}
+
+/// Collects the truth during a run.
+#[derive(Debug, Clone, Default)]
+pub struct Evaluator {
+    /// Samples at 20 Hz.
+    pub samples: Vec<Sample>,
+    /// Every touchdown.
+    pub touchdowns: Vec<Touchdown>,
+    /// Obstacle collisions.
+    pub collisions: u32,
+    /// Crash reasons.
+    pub crashes: Vec<String>,
+}
+
+impl Evaluator {
+    /// Takes in one truth event, with the fsm's state at that moment.
+    pub fn on_truth(&mut self, t: &TruthEvent, phase: MissionState) {
+        match TruthKind::from_raw(t.kind) {
+            Some(TruthKind::Touchdown) => {
+                let [x, y] = t.rel_position_pad;
+                let v = t.rel_velocity;
+                self.touchdowns.push(Touchdown {
+                    t_s: t.msg.capture_ns as f64 * 1e-9,
+                    on_pad: t.on_pad != 0,
+                    error_m: x.hypot(y),
+                    rel_speed_mps: (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(),
+                    phase,
+                });
+            }
+            Some(TruthKind::Collision) => self.collisions += 1,
+            Some(TruthKind::Crash) => self.crashes.push(t.reason.as_str().to_string()),
+            _ => {}
+        }
+    }
+
+    /// Keeps one sample.
+    pub fn sample(&mut self, s: Sample) {
+        self.samples.push(s);
+    }
+
+    /// Horizontal distance from the vehicle to the pad now, m.
+    pub fn distance_to_pad(&self, sim: &Simulator) -> Option<f64> {
+        let p = sim.world().pad()?;
+        let u = sim.world().truth().position;
+        let c = p.world_from_pad.translation.vector;
+        Some((u - c).xy().norm())
+    }
+
+    /// The touchdown that ended the mission: the last one on the pad, else the last one
+    /// after take-off.
+    pub fn final_touchdown(&self) -> Option<&Touchdown> {
+        let flown = |t: &&Touchdown| t.phase != MissionState::Idle;
+        self.touchdowns
+            .iter()
+            .filter(flown)
+            .filter(|t| t.on_pad)
+            .next_back()
+            .or_else(|| self.touchdowns.iter().filter(flown).next_back())
+    }
+}

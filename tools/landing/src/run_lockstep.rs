@@ -1,0 +1,403 @@
+//! `landing run` in one process: the simulator and every pipeline library (px4-link,
+//! aruco-pnp, depth-map, planner, fsm) stepped together on simulated time.
+//!
+//! Each library gets its input when the process would: camera and depth frames at their
+//! publish time (capture + sensor latency), telemetry when the autopilot sends it, the
+//! planner's trajectory after the time the plan really took on this machine. MAVLink
+//! goes through its wire encoding both ways, as on a socket. The pipeline sees only
+//! telemetry and sensor data; the ground truth goes to the evaluator only.
+
+use std::collections::VecDeque;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use aruco_pnp::{Frame, PadEstimator};
+use depth_map::{DepthMapper, DepthPixels, DepthView};
+use fsm::Fsm;
+use ipc_types::msg::{
+    Header, Intrinsics, LinkOutcome, LinkOutcomeKind, LinkRequest, LinkRequestKind, MissionState,
+    OccupancyMapHeader, PadObservation, PixelEncoding, PlannerGoal, Stage, Trajectory, TruthEvent,
+    VehicleState,
+};
+use mavlink::MavHeader;
+use mavlink::dialects::common::{MavMessage, MavResult};
+use planner::PlannerNode;
+use planner::bspline::State;
+use planner::map::CellView;
+use px4_link::codec::{decode_datagram, encode};
+use px4_link::{LinkSettings, Outcome, Px4Link, Request};
+use sim::lockstep::Simulator;
+use state_history::StateHistory;
+
+use crate::run_eval::{Evaluator, Sample};
+
+/// The fsm's tick, ns (50 Hz).
+const FSM_PERIOD_NS: u64 = 20_000_000;
+/// The planner's tick, ns (it wakes on goals, states and maps; 50 Hz bounds it).
+const PLANNER_PERIOD_NS: u64 = 20_000_000;
+/// Flight-log sample period, ns.
+const SAMPLE_PERIOD_NS: u64 = 50_000_000;
+
+/// Everything the run needs besides the simulator.
+pub struct Pipeline {
+    /// The pad estimator (aruco-pnp).
+    pub estimator: PadEstimator,
+    /// The occupancy mapper (depth-map).
+    pub mapper: DepthMapper,
+    /// The planner.
+    pub planner: PlannerNode,
+    /// The mission.
+    pub fsm: Fsm,
+    /// px4-link's protocol.
+    pub link: Px4Link,
+}
+
+/// px4-link's request bookkeeping: requests go out in order, answers come back in order.
+struct LinkIds {
+    ids: VecDeque<(u64, u32)>,
+}
+
+fn request_of(r: &LinkRequest) -> Option<Request> {
+    Some(match LinkRequestKind::from_raw(r.kind)? {
+        LinkRequestKind::Arm => Request::Arm,
+        LinkRequestKind::Disarm => Request::Disarm,
+        LinkRequestKind::Takeoff => Request::Takeoff {
+            altitude_m: r.altitude_m as f32,
+        },
+        LinkRequestKind::Offboard => Request::Offboard,
+        LinkRequestKind::Land => Request::Land,
+        LinkRequestKind::Hold => Request::Hold,
+    })
+}
+
+fn outcome_msg(now_ns: u64, id: u64, kind: u32, o: Outcome) -> LinkOutcome {
+    let (code, result) = match o {
+        Outcome::Accepted => (
+            LinkOutcomeKind::Accepted,
+            MavResult::MAV_RESULT_ACCEPTED as u32,
+        ),
+        Outcome::Rejected(r) => (LinkOutcomeKind::Rejected, r as u32),
+        Outcome::TimedOut => (LinkOutcomeKind::TimedOut, 0),
+        Outcome::NoSetpointStream => (LinkOutcomeKind::NoSetpointStream, 0),
+    };
+    let mut msg = Header::captured_at(now_ns);
+    msg.push_stage(Stage::Px4Link, now_ns, now_ns);
+    LinkOutcome {
+        msg,
+        id,
+        kind,
+        outcome: code as u32,
+        result,
+        reserved: 0,
+    }
+}
+
+/// How the run ended, as the simulator saw it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum End {
+    /// The fsm reached Landed.
+    Landed,
+    /// The fsm stopped in SafeLand or Abort and the vehicle is down and disarmed.
+    SafeLanded,
+    /// The simulator reported a crash.
+    Crashed,
+    /// The scenario's time ran out.
+    Timeout,
+}
+
+/// What the run measured besides the flight log.
+#[derive(Debug, Clone, Default)]
+pub struct RunStats {
+    /// Wall time of every planning call, ms.
+    pub planning_ms: Vec<f64>,
+    /// Plans published (first plan included).
+    pub plans: u64,
+    /// Pad observations delivered to the fsm.
+    pub observations: u64,
+    /// Camera frames processed.
+    pub frames: u64,
+}
+
+/// Runs the mission to its end. `progress` is called about once per simulated second.
+pub fn run(
+    sim: &mut Simulator,
+    pipe: &mut Pipeline,
+    duration_s: f64,
+    eval: &mut Evaluator,
+    mut progress: impl FnMut(f64, MissionState, Option<f64>),
+) -> Result<(End, RunStats)> {
+    let mut stats = RunStats::default();
+    let cam = sim
+        .down_camera()
+        .context("the scenario has no downward camera")?;
+    let (cw, chh) = (cam.calibration().width, cam.calibration().height);
+    let cam_len = cam.frame_len();
+    let encoding = match cam.params().format {
+        sim::camera::PixelFormat::Mono8 => PixelEncoding::Mono8,
+        sim::camera::PixelFormat::Bgr8 => PixelEncoding::Bgr8,
+    };
+    let depth_cam = sim
+        .depth_camera()
+        .context("the scenario has no depth camera")?;
+    let dp = depth_cam.params().clone();
+    let (fx, fy) = dp.focal_px();
+    let (cx, cy) = dp.principal_point_px();
+    let intrinsics = Intrinsics { fx, fy, cx, cy };
+    let depth_len = depth_cam.frame_len();
+
+    let mut cam_pool: Vec<Vec<u8>> = (0..3).map(|_| vec![0u8; cam_len]).collect();
+    let mut cam_pending: VecDeque<(Vec<u8>, u64, u64)> = VecDeque::new();
+    let mut depth_pool: Vec<Vec<u16>> = (0..3).map(|_| vec![0u16; depth_len]).collect();
+    let mut depth_pending: VecDeque<(Vec<u16>, u64, u64)> = VecDeque::new();
+    let mut map_cells = vec![0u8; pipe.mapper.map().cell_count()];
+    let mut map_header: Option<OccupancyMapHeader> = None;
+    let mut history = StateHistory::new(100, 200_000_000);
+    let mut ids = LinkIds {
+        ids: VecDeque::new(),
+    };
+    let mut wire = Vec::with_capacity(280);
+    let mut seq_out = 0u8;
+    let mut decoded: Vec<(MavHeader, MavMessage)> = Vec::with_capacity(8);
+    let mut last_state_ns = 0u64;
+    let mut vehicle: Option<VehicleState> = None;
+    let mut goal: Option<PlannerGoal> = None;
+    let mut traj_pending: VecDeque<(u64, Trajectory)> = VecDeque::new();
+    let mut next_fsm = 0u64;
+    let mut next_planner = 0u64;
+    let mut next_sample = 0u64;
+    let mut next_progress = 0u64;
+    let end_ns = (duration_s * 1e9) as u64;
+    let mut ended: Option<(End, u64)> = None;
+
+    loop {
+        let now = sim.time_ns();
+        if let Some((end, at)) = ended {
+            // A second more after the end, so the touchdown settles in the log.
+            if now >= at + 1_000_000_000 {
+                return Ok((end, stats));
+            }
+        } else if now >= end_ns {
+            return Ok((End::Timeout, stats));
+        }
+
+        // Companion -> autopilot, through the wire format.
+        let header = pipe.link.header(0);
+        let out: Vec<MavMessage> = pipe.link.poll(now).to_vec();
+        for m in &out {
+            wire.clear();
+            encode(
+                &mut wire,
+                MavHeader {
+                    sequence: seq_out,
+                    ..header
+                },
+                m,
+            )?;
+            seq_out = seq_out.wrapping_add(1);
+            decoded.clear();
+            decode_datagram(&wire, &mut decoded);
+            for (h, msg) in &decoded {
+                sim.handle_mavlink(h, msg);
+            }
+        }
+
+        let report = sim.step()?;
+        let now = sim.time_ns();
+        for (k, m) in sim.take_mavlink().iter().enumerate() {
+            wire.clear();
+            let h = MavHeader {
+                system_id: 1,
+                component_id: 1,
+                sequence: (now / 2_000_000).wrapping_add(k as u64) as u8,
+            };
+            encode(&mut wire, h, m)?;
+            decoded.clear();
+            if decode_datagram(&wire, &mut decoded) > 0 {
+                pipe.link.parse_error();
+            }
+            for (h, msg) in &decoded {
+                pipe.link.on_message(now, h, msg);
+            }
+        }
+        for (_, o) in pipe.link.take_outcomes() {
+            let (id, kind) = ids.ids.pop_front().unwrap_or((0, 0));
+            pipe.fsm.on_outcome(&outcome_msg(now, id, kind, o));
+        }
+        if let Some(state) = pipe.link.vehicle_state(now)
+            && state.msg.capture_ns != last_state_ns
+        {
+            last_state_ns = state.msg.capture_ns;
+            pipe.fsm.on_vehicle_state(now, &state);
+            pipe.mapper.push_state_msg(&state);
+            if let Some(tp) = depth_map::timed_pose_of(&state) {
+                history.push(tp);
+            }
+            vehicle = Some(state);
+        }
+        for t in &report.truth {
+            eval.on_truth(t, pipe.fsm.state());
+            if ended.is_none() && is_crash(t) {
+                ended = Some((End::Crashed, now));
+            }
+        }
+
+        // Sensors: rendered at capture, handed over at publish time.
+        if report.camera_due {
+            let mut buf = cam_pool.pop().unwrap_or_else(|| vec![0u8; cam_len]);
+            match sim.render_camera_into(&mut buf)? {
+                Some(shot) => cam_pending.push_back((buf, shot.capture_ns, shot.publish_ns)),
+                None => cam_pool.push(buf),
+            }
+        }
+        while cam_pending.front().is_some_and(|f| f.2 <= now) {
+            let Some((buf, capture_ns, _)) = cam_pending.pop_front() else {
+                break;
+            };
+            let frame = Frame {
+                width: cw,
+                height: chh,
+                stride: cw * encoding.bytes_per_pixel() as u32,
+                encoding,
+                data: &buf,
+                undistorted: false,
+            };
+            let body = history.at(capture_ns).ok();
+            stats.frames += 1;
+            if let Ok(Some(est)) = pipe.estimator.process(&frame, capture_ns, body.as_ref()) {
+                let mut msg = Header::captured_at(capture_ns);
+                msg.push_stage(Stage::ArucoPnp, now, now);
+                if let Some(obs) = est.observation(msg) {
+                    deliver_observation(pipe, now, &obs, &mut stats);
+                }
+            }
+            cam_pool.push(buf);
+        }
+        if report.depth_due {
+            let mut buf = depth_pool.pop().unwrap_or_else(|| vec![0u16; depth_len]);
+            match sim.render_depth_into(&mut buf) {
+                Some(shot) => depth_pending.push_back((buf, shot.capture_ns, shot.publish_ns)),
+                None => depth_pool.push(buf),
+            }
+        }
+        while depth_pending.front().is_some_and(|f| f.2 <= now) {
+            let Some((buf, capture_ns, _)) = depth_pending.pop_front() else {
+                break;
+            };
+            let view = DepthView::new(
+                dp.width,
+                dp.height,
+                intrinsics,
+                DepthPixels::U16 {
+                    data: &buf,
+                    scale_m: 0.001,
+                },
+            )?;
+            if pipe.mapper.process(&view, capture_ns).is_ok() {
+                if let Ok(h) = pipe.mapper.map().write_wire(&mut map_cells) {
+                    map_header = Some(h);
+                }
+            }
+            depth_pool.push(buf);
+        }
+
+        // The fsm at 50 Hz.
+        if now >= next_fsm {
+            next_fsm = now + FSM_PERIOD_NS;
+            let o = pipe.fsm.tick(now);
+            if let Some(sp) = o.setpoint {
+                pipe.link.set_setpoint(now, &sp);
+            }
+            for r in &o.requests {
+                match request_of(r) {
+                    Some(req) => {
+                        ids.ids.push_back((r.id, r.kind));
+                        pipe.link.request(req);
+                    }
+                    None => pipe.fsm.on_outcome(&LinkOutcome {
+                        id: r.id,
+                        kind: r.kind,
+                        outcome: LinkOutcomeKind::Invalid as u32,
+                        ..LinkOutcome::default()
+                    }),
+                }
+            }
+            if let Some(g) = o.goal {
+                goal = Some(g);
+            }
+            if let Some(st) = o.status {
+                let s = MissionState::from_raw(st.state).unwrap_or(MissionState::Idle);
+                if ended.is_none() {
+                    match s {
+                        MissionState::Landed => ended = Some((End::Landed, now)),
+                        MissionState::SafeLand | MissionState::Abort => {
+                            if sim.world().contact() != sim::quadrotor::ContactState::Airborne
+                                && !sim.world().armed()
+                            {
+                                ended = Some((End::SafeLanded, now));
+                            }
+                        }
+                        _ => {}
+                    }
+                }
+            }
+        }
+
+        // The planner, its output delayed by the time planning really took.
+        if now >= next_planner {
+            next_planner = now + PLANNER_PERIOD_NS;
+            if let Some(v) = &vehicle {
+                let p = v.world_from_body.translation;
+                let state = State {
+                    p: p.into(),
+                    v: v.velocity.into(),
+                    a: nalgebra::Vector3::zeros(),
+                };
+                let view = map_header
+                    .as_ref()
+                    .and_then(|h| CellView::new(h, &map_cells));
+                let t0 = Instant::now();
+                let o = pipe
+                    .planner
+                    .step(now, &state, goal.as_ref(), view.as_ref(), &v.msg);
+                let ms = t0.elapsed().as_secs_f64() * 1e3;
+                if o.stats.is_some() {
+                    stats.planning_ms.push(ms);
+                }
+                if let Some(t) = o.trajectory {
+                    stats.plans += 1;
+                    let ready = now + (ms * 1e6) as u64;
+                    traj_pending.push_back((ready, t));
+                }
+            }
+        }
+        while traj_pending.front().is_some_and(|t| t.0 <= now) {
+            if let Some((_, t)) = traj_pending.pop_front() {
+                pipe.fsm.on_trajectory(&t);
+            }
+        }
+
+        if now >= next_sample {
+            next_sample = now + SAMPLE_PERIOD_NS;
+            eval.sample(Sample::of(sim, pipe.fsm.state()));
+        }
+        if now >= next_progress {
+            next_progress = now + 1_000_000_000;
+            let d = eval.distance_to_pad(sim);
+            progress(now as f64 * 1e-9, pipe.fsm.state(), d);
+        }
+    }
+}
+
+fn deliver_observation(pipe: &mut Pipeline, now: u64, obs: &PadObservation, stats: &mut RunStats) {
+    stats.observations += 1;
+    pipe.fsm.on_observation(now, obs);
+}
+
+fn is_crash(t: &TruthEvent) -> bool {
+    t.kind == ipc_types::msg::TruthKind::Crash as u32
+}
+
+/// The default px4-link settings (the process's defaults).
+pub fn link() -> Px4Link {
+    Px4Link::new(LinkSettings::default())
+}
