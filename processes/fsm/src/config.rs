@@ -17,6 +17,10 @@ pub struct FsmConfig {
     pub preset_m: [f64; 3],
     /// Distance to the preset point that counts as arrived, m.
     pub preset_tolerance_m: f64,
+    /// WaitForPad: after this long without the pad, climb to widen the camera's view, s.
+    pub search_after_s: f64,
+    /// WaitForPad: climb at most this much above the preset point, m.
+    pub search_climb_m: f64,
     /// Highest take-off altitude asked of AUTO.TAKEOFF; the planner flies the rest, m.
     pub takeoff_altitude_m: f64,
     /// Highest tracking height above the pad, m.
@@ -89,6 +93,8 @@ impl Default for FsmConfig {
             rate_hz: 50.0,
             preset_m: [0.0, 0.0, 2.0],
             preset_tolerance_m: 0.3,
+            search_after_s: 2.0,
+            search_climb_m: 1.5,
             takeoff_altitude_m: 2.0,
             track_height_max_m: 3.0,
             direct_range_m: 1.5,
@@ -207,6 +213,8 @@ impl Validate for FsmConfig {
         check_range("preset_m[2]", self.preset_m[2], 0.3, 100.0)?;
         let positive = [
             ("preset_tolerance_m", self.preset_tolerance_m, 0.05, 5.0),
+            ("search_after_s", self.search_after_s, 0.0, 600.0),
+            ("search_climb_m", self.search_climb_m, 0.0, 50.0),
             ("takeoff_altitude_m", self.takeoff_altitude_m, 0.3, 50.0),
             ("track_height_max_m", self.track_height_max_m, 0.3, 50.0),
             ("direct_range_m", self.direct_range_m, 0.2, 20.0),

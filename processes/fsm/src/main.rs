@@ -1,1 +1,183 @@
-fn main() {}
+//! `fsm`: the landing mission as its own process.
+//!
+//! Reads vehicle/state, pad/observation, planner/trajectory, px4/outcome and
+//! safety/command; publishes fsm/setpoint (50 Hz), planner/goal, px4/request and
+//! fsm/status. Everything it decides is `fsm::Fsm`; this file binds it to iceoryx2 and
+//! the clock.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use clap::Parser;
+use fsm::{Fsm, FsmConfig, state_name};
+use ipc_types::msg::{
+    FsmStatus, LinkOutcome, LinkRequest, MissionState, PadObservation, PlannerGoal, SafetyCommand,
+    Setpoint, Trajectory, VehicleState,
+};
+use ipc_types::runtime::config::{IpcConfig, Validate, load_process_or_default};
+use ipc_types::runtime::ipc::{Wake, run_wait_loop};
+use ipc_types::runtime::{Ipc, IpcPrefix, logging, monotonic_ns};
+use ipc_types::services;
+
+/// Flies the landing mission: take off, find the pad, track it, descend, land on it.
+#[derive(Debug, Parser)]
+#[command(name = "fsm", version, about)]
+struct Args {
+    /// Stack configuration (reads [ipc] and [fsm]; defaults when absent).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Preset point (where to wait for the pad), x,y,z in metres, world ENU; overrides
+    /// [fsm] preset_m.
+    #[arg(long, value_name = "X,Y,Z")]
+    preset: Option<String>,
+    /// Height above the pad below which the vehicle commits to touchdown, m; overrides
+    /// [fsm] commit_height_m.
+    #[arg(long)]
+    commit_height: Option<f64>,
+    /// iceoryx2 prefix (default: $LANDING_IPC_PREFIX, else [ipc] prefix).
+    #[arg(long)]
+    ipc_prefix: Option<String>,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    logging::init("info");
+    match run(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn parse_xyz(s: &str) -> Option<[f64; 3]> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse().ok())
+        .collect::<Option<_>>()?;
+    match v.as_slice() {
+        [x, y, z] => Some([*x, *y, *z]),
+        _ => None,
+    }
+}
+
+fn run(args: &Args) -> Result<()> {
+    let (ipc_cfg, mut cfg): (IpcConfig, FsmConfig) =
+        load_process_or_default(args.config.as_deref(), "fsm")?;
+    if let Some(p) = &args.preset {
+        cfg.preset_m = parse_xyz(p).ok_or_else(|| {
+            anyhow::anyhow!("--preset `{p}` is not allowed (allowed: three numbers x,y,z in m)")
+        })?;
+    }
+    if let Some(h) = args.commit_height {
+        cfg.commit_height_m = h;
+    }
+    cfg.validate()
+        .map_err(|e| anyhow::anyhow!("--preset/--commit-height: fsm.{}: {}", e.key, e.message))?;
+    let prefix = IpcPrefix::resolve(args.ipc_prefix.as_deref(), &ipc_cfg.prefix)?;
+    let ipc = Ipc::open("fsm", &prefix)?;
+    let states = ipc
+        .subscriber::<VehicleState>(services::VEHICLE_STATE)
+        .context("vehicle state")?;
+    let observations = ipc
+        .subscriber::<PadObservation>(services::PAD_OBSERVATION)
+        .context("pad observations")?;
+    let trajectories = ipc
+        .subscriber::<Trajectory>(services::PLANNER_TRAJECTORY)
+        .context("trajectories")?;
+    let outcomes = ipc
+        .subscriber::<LinkOutcome>(services::PX4_OUTCOME)
+        .context("px4 outcomes")?;
+    let safety = ipc
+        .subscriber::<SafetyCommand>(services::SAFETY_COMMAND)
+        .context("safety commands")?;
+    let mut setpoints = ipc.publisher::<Setpoint>(services::FSM_SETPOINT)?;
+    let mut goals = ipc.publisher::<PlannerGoal>(services::PLANNER_GOAL)?;
+    let mut requests = ipc.publisher::<LinkRequest>(services::PX4_REQUEST)?;
+    let mut statuses = ipc.publisher::<FsmStatus>(services::FSM_STATUS)?;
+    let mut heartbeat = ipc.heartbeat(Duration::from_millis(ipc_cfg.heartbeat_deadline_ms))?;
+    let period = Duration::from_secs_f64(1.0 / cfg.rate_hz);
+    let beat_ns = ipc_cfg.heartbeat_period_ms * 1_000_000;
+    tracing::info!(preset = ?cfg.preset_m, commit_height_m = cfg.commit_height_m, "fsm running");
+    let mut fsm = Fsm::new(cfg);
+    let mut last_beat = 0u64;
+    let mut last_state = MissionState::Idle;
+    let mut failure: Option<anyhow::Error> = None;
+    let exit = run_wait_loop(
+        &[
+            states.listener(),
+            observations.listener(),
+            trajectories.listener(),
+            outcomes.listener(),
+            safety.listener(),
+        ],
+        &[],
+        Some(period),
+        |wake| {
+            let now = monotonic_ns();
+            let result = (|| -> Result<()> {
+                while let Some(s) = states.receive()? {
+                    fsm.on_vehicle_state(now, s.payload());
+                }
+                while let Some(o) = observations.receive()? {
+                    fsm.on_observation(now, o.payload());
+                }
+                while let Some(t) = trajectories.receive()? {
+                    fsm.on_trajectory(t.payload());
+                }
+                while let Some(o) = outcomes.receive()? {
+                    fsm.on_outcome(o.payload());
+                }
+                let mut ordered = false;
+                while let Some(c) = safety.receive()? {
+                    fsm.on_safety(now, c.payload());
+                    ordered = true;
+                }
+                // The mission steps on its own clock; a safety order acts at once.
+                if matches!(wake, Wake::Tick) || ordered {
+                    let out = fsm.tick(now);
+                    for r in &out.requests {
+                        requests.send(r.msg, r)?;
+                    }
+                    if let Some(g) = &out.goal {
+                        goals.send(g.msg, g)?;
+                    }
+                    if let Some(sp) = &out.setpoint {
+                        setpoints.send(sp.msg, sp)?;
+                    }
+                    if let Some(st) = &out.status {
+                        statuses.send(st.msg, st)?;
+                    }
+                    if fsm.state() != last_state {
+                        last_state = fsm.state();
+                        tracing::info!(
+                            state = state_name(last_state),
+                            reason = fsm.reason(),
+                            "mission"
+                        );
+                    }
+                }
+                if now.saturating_sub(last_beat) >= beat_ns {
+                    last_beat = now;
+                    heartbeat.beat()?;
+                }
+                Ok(())
+            })();
+            match result {
+                Ok(()) => true,
+                Err(e) => {
+                    failure = Some(e);
+                    false
+                }
+            }
+        },
+    )?;
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    tracing::info!(?exit, state = state_name(fsm.state()), "fsm stopped");
+    Ok(())
+}

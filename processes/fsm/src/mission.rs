@@ -624,6 +624,20 @@ impl Fsm {
             self.track(now_ns, out);
             return;
         }
+        let waited = self.elapsed_s(now_ns) - self.cfg.search_after_s;
+        if self.state == MissionState::WaitForPad && waited > 0.0 {
+            // Not in view from the preset point: climb over it to see more ground.
+            let climb = (waited * self.cfg.lost_climb_m_s).min(self.cfg.search_climb_m);
+            let vz = if climb < self.cfg.search_climb_m {
+                self.cfg.lost_climb_m_s
+            } else {
+                0.0
+            };
+            let mut sp = self.hold_setpoint(now_ns, preset + Vector3::new(0.0, 0.0, climb));
+            sp.velocity[2] = vz;
+            out.setpoint = Some(sp);
+            return;
+        }
         self.publish_goal(now_ns, GoalMode::Point, preset, Vector3::zeros(), out);
         out.setpoint = Some(self.trajectory_setpoint(now_ns));
         if self.state == MissionState::GoToPreset
@@ -818,12 +832,11 @@ impl Fsm {
 
     fn enter_lost(&mut self, now_ns: u64) {
         let z0 = self.position().map(|p| p.z).unwrap_or(self.hold.z);
-        let age = self
-            .filter
-            .estimate(now_ns)
-            .map(|e| e.age_s)
-            .unwrap_or(f64::INFINITY);
-        self.go(now_ns, MissionState::Lost, format!("no pad for {age:.1} s"));
+        let why = match self.filter.estimate(now_ns) {
+            Some(e) => format!("no pad for {:.1} s", e.age_s),
+            None => "pad estimate restarted (observations jumped)".to_string(),
+        };
+        self.go(now_ns, MissionState::Lost, why);
         self.lost_z0 = z0;
         self.lost_since_update = self.filter.last_update_ns().unwrap_or(0);
         if let Some(p) = self.position() {

@@ -198,6 +198,19 @@ pub fn run(args: &RunArgs) -> Result<bool> {
             t.reason
         );
     }
+    for t in &eval.touchdowns {
+        eprintln!(
+            "  {:7.2} s  touchdown on the {} {:.3} m from the pad centre at {:.2} m/s ({})",
+            t.t_s,
+            if t.on_pad { "pad" } else { "ground" },
+            t.error_m,
+            t.rel_speed_mps,
+            state_name(t.phase)
+        );
+    }
+    for c in &eval.crashes {
+        eprintln!("  crash: {c}");
+    }
     let summary = summarize(&scn.scenario.name, seed, end, &eval, &stats);
     if args.json {
         println!("{}", serde_json::to_string(&summary)?);

@@ -1,0 +1,781 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! Every transition of the mission state machine, driven by a small kinematic world:
+//! a vehicle that follows the fsm's setpoints, an autopilot that answers requests as
+//! each test tells it, a pad the camera sees inside its cone, and the real planner on an
+//! empty map. The full closed loop (the simulator's physics, camera and PX4-like
+//! autopilot) is `landing run`, tested in tools/landing/tests/run.rs.
+
+use fsm::{Fsm, FsmConfig};
+use ipc_types::msg::{
+    FlightMode, GoalMode, Header, LandedState, LinkOutcome, LinkOutcomeKind, LinkRequest,
+    LinkRequestKind, MissionState, PadObservation, PlannerGoal, Pose, SafetyAction, SafetyCommand,
+    Text, VehicleState,
+};
+use nalgebra::Vector3;
+use planner::{GridMap, PlannerConfig, PlannerNode, State};
+
+const DT: u64 = 20_000_000;
+const PAD_HEIGHT: f64 = 0.4;
+
+/// How the autopilot answers one kind of request.
+#[derive(Clone, Copy, PartialEq)]
+enum Answer {
+    Reject,
+    /// Reject this many times, then accept.
+    RejectTimes(u32),
+    /// Never answers (px4-link dead).
+    Silent,
+}
+
+struct World {
+    fsm: Fsm,
+    planner: PlannerNode,
+    map: GridMap,
+    goal: Option<PlannerGoal>,
+    t: u64,
+    pos: Vector3<f64>,
+    vel: Vector3<f64>,
+    armed: bool,
+    mode: FlightMode,
+    takeoff_alt: f64,
+    pad: Option<Vector3<f64>>,
+    pad_vel: Vector3<f64>,
+    pad_visible: bool,
+    telemetry: bool,
+    frozen: bool,
+    answers: Vec<(LinkRequestKind, Answer)>,
+    requests: Vec<LinkRequestKind>,
+    setpoints: u64,
+    nan_setpoints: u64,
+    next_obs: u64,
+}
+
+impl World {
+    fn new(cfg: FsmConfig) -> Self {
+        let map = GridMap::new(
+            Vector3::new(-20.0, -20.0, 0.0),
+            Vector3::new(20.0, 20.0, 8.0),
+            0.15,
+            0.299,
+        )
+        .unwrap();
+        Self {
+            fsm: Fsm::new(cfg),
+            planner: PlannerNode::new(PlannerConfig::default()),
+            map,
+            goal: None,
+            t: 0,
+            pos: Vector3::zeros(),
+            vel: Vector3::zeros(),
+            armed: false,
+            mode: FlightMode::Hold,
+            takeoff_alt: 0.0,
+            pad: Some(Vector3::new(0.5, 0.0, PAD_HEIGHT)),
+            pad_vel: Vector3::zeros(),
+            pad_visible: true,
+            telemetry: true,
+            frozen: false,
+            answers: Vec::new(),
+            requests: Vec::new(),
+            setpoints: 0,
+            nan_setpoints: 0,
+            next_obs: 0,
+        }
+    }
+
+    fn answer(&mut self, kind: LinkRequestKind, a: Answer) -> &mut Self {
+        self.answers.push((kind, a));
+        self
+    }
+
+    fn state(&self) -> MissionState {
+        self.fsm.state()
+    }
+
+    fn ground(&self) -> f64 {
+        match self.pad {
+            Some(p) if (p - self.pos).xy().norm() < 0.5 => p.z,
+            _ => 0.0,
+        }
+    }
+
+    fn on_ground(&self) -> bool {
+        self.pos.z <= self.ground() + 0.01
+    }
+
+    fn vehicle_state(&self) -> VehicleState {
+        let landed = if !self.armed || self.on_ground() {
+            LandedState::OnGround
+        } else {
+            LandedState::InAir
+        };
+        let mut v = VehicleState {
+            msg: Header::captured_at(self.t),
+            world_from_body: Pose {
+                translation: self.pos.into(),
+                rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
+            },
+            velocity: self.vel.into(),
+            armed: u32::from(self.armed),
+            flight_mode: self.mode as u32,
+            landed_state: landed as u32,
+            ..VehicleState::default()
+        };
+        v.link.connected = 1;
+        v
+    }
+
+    fn handle(&mut self, r: &LinkRequest) -> Option<LinkOutcome> {
+        let kind = LinkRequestKind::from_raw(r.kind).unwrap();
+        self.requests.push(kind);
+        let answer = self
+            .answers
+            .iter_mut()
+            .find(|(k, _)| *k == kind)
+            .map(|(_, a)| a);
+        let accept = match answer {
+            None => true,
+            Some(Answer::Reject) => false,
+            Some(Answer::Silent) => return None,
+            Some(Answer::RejectTimes(n)) => {
+                if *n == 0 {
+                    true
+                } else {
+                    *n -= 1;
+                    false
+                }
+            }
+        };
+        if accept {
+            match kind {
+                LinkRequestKind::Arm => self.armed = true,
+                LinkRequestKind::Disarm => self.armed = !self.on_ground(),
+                LinkRequestKind::Takeoff => {
+                    self.mode = FlightMode::Takeoff;
+                    self.takeoff_alt = r.altitude_m;
+                }
+                LinkRequestKind::Offboard => self.mode = FlightMode::Offboard,
+                LinkRequestKind::Land => self.mode = FlightMode::Land,
+                LinkRequestKind::Hold => self.mode = FlightMode::Hold,
+            }
+        }
+        let outcome = if accept {
+            LinkOutcomeKind::Accepted
+        } else {
+            LinkOutcomeKind::Rejected
+        };
+        Some(LinkOutcome {
+            id: r.id,
+            kind: r.kind,
+            outcome: outcome as u32,
+            result: if accept { 0 } else { 2 },
+            ..LinkOutcome::default()
+        })
+    }
+
+    fn step(&mut self) {
+        let dt = DT as f64 * 1e-9;
+        let out = self.fsm.tick(self.t);
+        let mut answers = Vec::new();
+        for r in &out.requests {
+            if let Some(o) = self.handle(r) {
+                answers.push(o);
+            }
+        }
+        for o in &answers {
+            self.fsm.on_outcome(o);
+        }
+        if let Some(g) = out.goal {
+            self.goal = Some(g);
+        }
+        let mut target_v = Vector3::zeros();
+        if let Some(sp) = out.setpoint {
+            self.setpoints += 1;
+            let finite = sp
+                .position
+                .iter()
+                .chain(&sp.velocity)
+                .chain(&sp.acceleration)
+                .all(|x| x.is_finite());
+            if !finite {
+                self.nan_setpoints += 1;
+            } else if self.mode == FlightMode::Offboard {
+                let p = Vector3::from(sp.position);
+                target_v = Vector3::from(sp.velocity) + (p - self.pos) * 2.0;
+            }
+        }
+        match self.mode {
+            FlightMode::Takeoff if self.armed => {
+                target_v = Vector3::new(
+                    0.0,
+                    0.0,
+                    (self.takeoff_alt - self.pos.z).clamp(-1.0, 1.0) * 2.0,
+                );
+            }
+            FlightMode::Land if self.armed => target_v = Vector3::new(0.0, 0.0, -0.7),
+            FlightMode::Offboard if self.armed => {}
+            _ => target_v = Vector3::zeros(),
+        }
+        if !self.armed || self.frozen {
+            target_v = Vector3::zeros();
+        }
+        let speed = target_v.norm();
+        if speed > 5.0 {
+            target_v *= 5.0 / speed;
+        }
+        self.vel = target_v;
+        self.pos += self.vel * dt;
+        let g = self.ground();
+        if self.pos.z < g {
+            self.pos.z = g;
+            self.vel.z = 0.0;
+        }
+        if self.on_ground() && self.mode == FlightMode::Land {
+            self.armed = false;
+        }
+        if let Some(p) = &mut self.pad {
+            *p += self.pad_vel * dt;
+        }
+        self.t += DT;
+        if self.telemetry {
+            let v = self.vehicle_state();
+            self.fsm.on_vehicle_state(self.t, &v);
+        }
+        if self.t >= self.next_obs {
+            self.next_obs = self.t + 33_000_000;
+            if let Some(obs) = self.observation() {
+                self.fsm.on_observation(self.t, &obs);
+            }
+        }
+        let state = State {
+            p: self.pos,
+            v: self.vel,
+            a: Vector3::zeros(),
+        };
+        let o = self.planner.step(
+            self.t,
+            &state,
+            self.goal.as_ref(),
+            Some(&self.map),
+            &Header::default(),
+        );
+        if let Some(tr) = o.trajectory {
+            self.fsm.on_trajectory(&tr);
+        }
+    }
+
+    /// What the camera reports: the pad inside a 45-degree cone under the vehicle,
+    /// captured 30 ms ago.
+    fn observation(&self) -> Option<PadObservation> {
+        let pad = self.pad?;
+        let rel = pad - self.pos;
+        let h = -rel.z;
+        if !self.pad_visible || h < 0.1 || rel.xy().norm() > h + 0.3 {
+            return None;
+        }
+        Some(self.observation_at(pad - self.pad_vel * 0.03, h))
+    }
+
+    fn observation_at(&self, pad: Vector3<f64>, range: f64) -> PadObservation {
+        PadObservation {
+            msg: Header::captured_at(self.t.saturating_sub(30_000_000)),
+            camera_from_pad: Pose {
+                translation: [0.0, 0.0, range],
+                rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
+            },
+            world_from_pad: Pose {
+                translation: pad.into(),
+                rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
+            },
+            world_valid: 1,
+            marker_count: 4,
+            ..PadObservation::default()
+        }
+    }
+
+    /// Steps until `state` or `seconds` pass; true when reached.
+    fn run_until(&mut self, state: MissionState, seconds: f64) -> bool {
+        let end = self.t + (seconds * 1e9) as u64;
+        while self.t < end {
+            self.step();
+            if self.state() == state {
+                return true;
+            }
+        }
+        false
+    }
+
+    fn run_for(&mut self, seconds: f64) {
+        let end = self.t + (seconds * 1e9) as u64;
+        while self.t < end {
+            self.step();
+        }
+    }
+
+    fn reasons(&self) -> Vec<String> {
+        self.fsm
+            .transitions()
+            .iter()
+            .map(|t| format!("{:?}->{:?}: {}", t.from, t.to, t.reason))
+            .collect()
+    }
+
+    fn count(&self, kind: LinkRequestKind) -> usize {
+        self.requests.iter().filter(|k| **k == kind).count()
+    }
+}
+
+fn config() -> FsmConfig {
+    FsmConfig {
+        preset_m: [0.0, 0.0, 2.0],
+        commit_height_m: 0.6,
+        ..FsmConfig::default()
+    }
+}
+
+#[test]
+fn a_whole_mission_passes_every_nominal_state_in_order() {
+    let mut w = World::new(config());
+    w.pad_visible = false;
+    assert!(
+        w.run_until(MissionState::WaitForPad, 30.0),
+        "{:?}",
+        w.reasons()
+    );
+    w.pad_visible = true;
+    assert!(w.run_until(MissionState::Landed, 60.0), "{:?}", w.reasons());
+    let path: Vec<_> = w.fsm.transitions().iter().map(|t| t.to).collect();
+    assert_eq!(
+        path,
+        vec![
+            MissionState::Takeoff,
+            MissionState::GoToPreset,
+            MissionState::WaitForPad,
+            MissionState::Track,
+            MissionState::Descend,
+            MissionState::Land,
+            MissionState::Landed,
+        ],
+        "{:?}",
+        w.reasons()
+    );
+    assert!(!w.armed);
+    assert!((w.pos - w.pad.unwrap()).xy().norm() < 0.12);
+    assert_eq!(w.nan_setpoints, 0);
+    // The status carries every transition with its reason.
+    let st = w.fsm.status(w.t);
+    assert_eq!(st.state, MissionState::Landed as u32);
+    assert_eq!(st.reason.as_str(), "touched down, disarmed");
+}
+
+#[test]
+fn a_pad_seen_on_the_way_to_the_preset_point_is_tracked_at_once() {
+    let mut cfg = config();
+    cfg.preset_m = [6.0, 0.0, 2.0];
+    let mut w = World::new(cfg);
+    w.pad = Some(Vector3::new(2.0, 0.0, PAD_HEIGHT));
+    assert!(w.run_until(MissionState::Track, 30.0), "{:?}", w.reasons());
+    assert_eq!(
+        w.fsm.transitions().last().unwrap().from,
+        MissionState::GoToPreset
+    );
+    assert!(w.run_until(MissionState::Landed, 60.0), "{:?}", w.reasons());
+}
+
+#[test]
+fn the_mission_lands_on_a_pad_moving_at_one_metre_per_second() {
+    let mut w = World::new(config());
+    w.pad = Some(Vector3::new(-1.0, -0.5, PAD_HEIGHT));
+    w.pad_vel = Vector3::new(1.0, 0.2, 0.0);
+    assert!(w.run_until(MissionState::Landed, 60.0), "{:?}", w.reasons());
+    assert!(
+        (w.pos - w.pad.unwrap()).xy().norm() < 0.12,
+        "{:?} {:?}",
+        w.pos,
+        w.pad
+    );
+    let est = w.fsm.status(w.t).pad_velocity;
+    assert!(
+        (est[0] - 1.0).abs() < 0.1 && (est[1] - 0.2).abs() < 0.1,
+        "{est:?}"
+    );
+}
+
+#[test]
+fn arming_rejected_is_retried_within_the_limit_then_the_mission_lands_in_place() {
+    let mut w = World::new(config());
+    w.answer(LinkRequestKind::Arm, Answer::Reject);
+    assert!(
+        w.run_until(MissionState::SafeLand, 20.0),
+        "{:?}",
+        w.reasons()
+    );
+    assert_eq!(w.count(LinkRequestKind::Arm), 3);
+    assert!(
+        w.fsm.reason().contains("Arm failed 3 times"),
+        "{}",
+        w.fsm.reason()
+    );
+    w.run_for(5.0);
+    assert_eq!(w.count(LinkRequestKind::Arm), 3, "no retry after giving up");
+    assert!(!w.armed);
+}
+
+#[test]
+fn arming_rejected_once_is_retried_and_the_mission_goes_on() {
+    let mut w = World::new(config());
+    w.answer(LinkRequestKind::Arm, Answer::RejectTimes(1));
+    assert!(
+        w.run_until(MissionState::GoToPreset, 20.0),
+        "{:?}",
+        w.reasons()
+    );
+    assert_eq!(w.count(LinkRequestKind::Arm), 2);
+}
+
+#[test]
+fn offboard_rejected_lands_in_place() {
+    let mut w = World::new(config());
+    w.answer(LinkRequestKind::Offboard, Answer::Reject);
+    assert!(
+        w.run_until(MissionState::SafeLand, 30.0),
+        "{:?}",
+        w.reasons()
+    );
+    assert_eq!(w.count(LinkRequestKind::Offboard), 3);
+    w.run_for(10.0);
+    assert_eq!(w.count(LinkRequestKind::Land), 1, "{:?}", w.requests);
+    assert!(!w.armed && w.on_ground(), "landed in place: {:?}", w.pos);
+}
+
+#[test]
+fn a_silent_px4_link_counts_as_failed_attempts() {
+    let mut w = World::new(config());
+    w.answer(LinkRequestKind::Arm, Answer::Silent);
+    assert!(
+        w.run_until(MissionState::SafeLand, 30.0),
+        "{:?}",
+        w.reasons()
+    );
+    assert!(w.fsm.reason().contains("no answer"), "{}", w.fsm.reason());
+}
+
+#[test]
+fn takeoff_that_never_climbs_times_out() {
+    let mut w = World::new(config());
+    w.frozen = true;
+    assert!(
+        w.run_until(MissionState::SafeLand, 40.0),
+        "{:?}",
+        w.reasons()
+    );
+    assert!(
+        w.fsm.reason().starts_with("takeoff timed out"),
+        "{}",
+        w.fsm.reason()
+    );
+}
+
+#[test]
+fn a_preset_point_never_reached_times_out() {
+    let mut cfg = config();
+    cfg.goto_timeout_s = 5.0;
+    cfg.preset_m = [10.0, 0.0, 2.0];
+    let mut w = World::new(cfg);
+    w.pad_visible = false;
+    assert!(w.run_until(MissionState::GoToPreset, 20.0));
+    w.frozen = true;
+    assert!(
+        w.run_until(MissionState::SafeLand, 10.0),
+        "{:?}",
+        w.reasons()
+    );
+    assert_eq!(w.fsm.reason(), "preset point not reached in time");
+}
+
+#[test]
+fn waiting_for_a_pad_that_never_shows_climbs_to_search_then_times_out() {
+    let mut cfg = config();
+    cfg.wait_timeout_s = 10.0;
+    let mut w = World::new(cfg);
+    w.pad_visible = false;
+    assert!(w.run_until(MissionState::WaitForPad, 20.0));
+    w.run_for(6.0);
+    assert!(w.pos.z > 3.0, "searching climbs: {:?}", w.pos);
+    assert!(
+        w.run_until(MissionState::SafeLand, 10.0),
+        "{:?}",
+        w.reasons()
+    );
+    assert_eq!(w.fsm.reason(), "pad not seen in time");
+}
+
+#[test]
+fn a_pad_lost_while_tracking_holds_climbs_and_is_regained() {
+    let mut w = World::new(config());
+    w.pad = Some(Vector3::new(3.0, 0.0, PAD_HEIGHT));
+    assert!(w.run_until(MissionState::Track, 20.0), "{:?}", w.reasons());
+    w.pad_visible = false;
+    assert!(w.run_until(MissionState::Lost, 3.0), "{:?}", w.reasons());
+    let z0 = w.pos.z;
+    w.run_for(3.0);
+    assert!(
+        w.pos.z > z0 + 0.5,
+        "climbs to regain the view: {} -> {}",
+        z0,
+        w.pos.z
+    );
+    w.pad_visible = true;
+    assert!(w.run_until(MissionState::Track, 2.0), "{:?}", w.reasons());
+    assert_eq!(w.fsm.reason(), "pad regained");
+    assert!(w.run_until(MissionState::Landed, 60.0), "{:?}", w.reasons());
+}
+
+#[test]
+fn a_pad_lost_for_good_ends_in_a_landing_in_place() {
+    let mut w = World::new(config());
+    assert!(w.run_until(MissionState::Track, 20.0));
+    w.pad_visible = false;
+    assert!(w.run_until(MissionState::Lost, 3.0));
+    assert!(
+        w.run_until(MissionState::SafeLand, 12.0),
+        "{:?}",
+        w.reasons()
+    );
+    assert_eq!(w.fsm.reason(), "pad lost for 10 s");
+    w.run_for(10.0);
+    assert!(w.count(LinkRequestKind::Land) >= 1);
+}
+
+#[test]
+fn tracking_that_never_aligns_times_out() {
+    let mut cfg = config();
+    cfg.track_timeout_s = 5.0;
+    let mut w = World::new(cfg);
+    assert!(w.run_until(MissionState::Track, 20.0));
+    w.frozen = true;
+    assert!(
+        w.run_until(MissionState::SafeLand, 10.0),
+        "{:?}",
+        w.reasons()
+    );
+    assert_eq!(w.fsm.reason(), "tracking timed out");
+}
+
+#[test]
+fn a_descent_that_stalls_times_out() {
+    let mut cfg = config();
+    cfg.descend_timeout_s = 3.0;
+    let mut w = World::new(cfg);
+    assert!(
+        w.run_until(MissionState::Descend, 30.0),
+        "{:?}",
+        w.reasons()
+    );
+    w.frozen = true;
+    assert!(
+        w.run_until(MissionState::SafeLand, 5.0),
+        "{:?}",
+        w.reasons()
+    );
+    assert_eq!(w.fsm.reason(), "descent timed out");
+}
+
+#[test]
+fn a_touchdown_that_never_disarms_times_out() {
+    let mut cfg = config();
+    cfg.land_timeout_s = 4.0;
+    let mut w = World::new(cfg);
+    w.answer(LinkRequestKind::Disarm, Answer::Silent);
+    assert!(w.run_until(MissionState::Land, 40.0), "{:?}", w.reasons());
+    assert!(
+        w.run_until(MissionState::SafeLand, 6.0),
+        "{:?}",
+        w.reasons()
+    );
+    assert_eq!(w.fsm.reason(), "touchdown timed out");
+}
+
+#[test]
+fn a_pad_that_drives_off_during_the_descent_causes_a_go_around() {
+    let mut w = World::new(config());
+    assert!(
+        w.run_until(MissionState::Descend, 30.0),
+        "{:?}",
+        w.reasons()
+    );
+    // The vehicle cannot follow (a gust holds it) while the pad drives off: the descent
+    // stops and the vehicle climbs back into tracking.
+    w.frozen = true;
+    w.pad_vel = Vector3::new(0.5, 0.0, 0.0);
+    assert!(w.run_until(MissionState::Track, 3.0), "{:?}", w.reasons());
+    assert!(
+        w.fsm.reason().starts_with("go-around 1"),
+        "{}",
+        w.fsm.reason()
+    );
+    w.frozen = false;
+    w.pad_vel = Vector3::zeros();
+    assert!(w.run_until(MissionState::Landed, 60.0), "{:?}", w.reasons());
+}
+
+#[test]
+fn too_many_go_arounds_land_in_place() {
+    let mut cfg = config();
+    cfg.max_go_arounds = 0;
+    let mut w = World::new(cfg);
+    assert!(
+        w.run_until(MissionState::Descend, 30.0),
+        "{:?}",
+        w.reasons()
+    );
+    w.frozen = true;
+    w.pad_vel = Vector3::new(0.5, 0.0, 0.0);
+    assert!(
+        w.run_until(MissionState::SafeLand, 3.0),
+        "{:?}",
+        w.reasons()
+    );
+    assert!(
+        w.fsm.reason().contains("0 go-arounds"),
+        "{}",
+        w.fsm.reason()
+    );
+}
+
+#[test]
+fn telemetry_that_stops_in_flight_lands_in_place() {
+    let mut w = World::new(config());
+    w.pad_visible = false;
+    assert!(w.run_until(MissionState::WaitForPad, 30.0));
+    w.telemetry = false;
+    assert!(
+        w.run_until(MissionState::SafeLand, 1.0),
+        "{:?}",
+        w.reasons()
+    );
+    assert_eq!(w.fsm.reason(), "telemetry lost");
+    let before = w.setpoints;
+    w.run_for(1.0);
+    assert_eq!(w.setpoints, before, "no setpoints without telemetry");
+}
+
+#[test]
+fn an_operator_abort_stops_the_mission_at_once() {
+    let mut w = World::new(config());
+    assert!(w.run_until(MissionState::Track, 30.0));
+    let cmd = SafetyCommand {
+        action: SafetyAction::Abort as u32,
+        source: Text::new("operator"),
+        reason: Text::new("abort button"),
+        ..SafetyCommand::default()
+    };
+    w.fsm.on_safety(w.t, &cmd);
+    assert_eq!(w.state(), MissionState::Abort);
+    assert_eq!(w.fsm.reason(), "operator: abort button");
+    let out = w.fsm.tick(w.t);
+    assert!(out.setpoint.is_none() && out.goal.is_none());
+    assert_eq!(out.status.unwrap().state, MissionState::Abort as u32);
+}
+
+#[test]
+fn a_watchdog_safe_land_order_ends_the_mission_in_safe_land() {
+    let mut w = World::new(config());
+    assert!(w.run_until(MissionState::GoToPreset, 30.0));
+    let cmd = SafetyCommand {
+        action: SafetyAction::SafeLand as u32,
+        source: Text::new("watchdog"),
+        reason: Text::new("aruco-pnp silent"),
+        ..SafetyCommand::default()
+    };
+    w.fsm.on_safety(w.t, &cmd);
+    assert_eq!(w.state(), MissionState::SafeLand);
+    // px4-link executes the order itself: the fsm does not ask again.
+    w.run_for(2.0);
+    assert_eq!(w.count(LinkRequestKind::Land), 0);
+}
+
+#[test]
+fn a_pilot_taking_over_from_offboard_ends_the_mission() {
+    let mut w = World::new(config());
+    assert!(w.run_until(MissionState::Track, 30.0));
+    w.mode = FlightMode::Manual;
+    assert!(w.run_until(MissionState::Abort, 2.0), "{:?}", w.reasons());
+    assert!(
+        w.fsm.reason().contains("left OFFBOARD"),
+        "{}",
+        w.fsm.reason()
+    );
+}
+
+#[test]
+fn without_autostart_the_mission_waits_for_the_operator() {
+    let mut cfg = config();
+    cfg.autostart = false;
+    let mut w = World::new(cfg);
+    w.run_for(3.0);
+    assert_eq!(w.state(), MissionState::Idle);
+    assert!(w.requests.is_empty());
+    w.fsm.start();
+    assert!(w.run_until(MissionState::Takeoff, 1.0));
+}
+
+#[test]
+fn a_single_jumped_observation_is_gated_out_and_a_persistent_jump_restarts_the_filter() {
+    let mut w = World::new(config());
+    assert!(w.run_until(MissionState::Track, 30.0));
+    let before = w.fsm.status(w.t).pad_position;
+    let far = w.pad.unwrap() + Vector3::new(5.0, 0.0, 0.0);
+    let obs = w.observation_at(far, 1.5);
+    assert_eq!(w.fsm.on_observation(w.t, &obs), fsm::Update::Rejected);
+    let after = w.fsm.status(w.t).pad_position;
+    assert!(
+        (after[0] - before[0]).abs() < 0.05,
+        "{before:?} -> {after:?}"
+    );
+    let mut last = fsm::Update::Rejected;
+    // max_rejects (5) in a row, the first one included.
+    for k in 1..=4u64 {
+        let mut o = w.observation_at(far, 1.5);
+        o.msg.capture_ns = w.t + k * 1_000_000;
+        last = w.fsm.on_observation(w.t + k * 1_000_000, &o);
+    }
+    assert_eq!(last, fsm::Update::Restarted);
+    assert_eq!(w.fsm.pad_filter().counters().restarts, 1);
+}
+
+#[test]
+fn non_finite_and_worldless_observations_are_dropped_and_never_reach_a_setpoint() {
+    let mut w = World::new(config());
+    assert!(w.run_until(MissionState::Track, 30.0));
+    let mut nan = w.observation_at(w.pad.unwrap(), 1.5);
+    nan.world_from_pad.translation[0] = f64::NAN;
+    assert_eq!(w.fsm.on_observation(w.t, &nan), fsm::Update::Dropped);
+    let mut no_world = w.observation_at(w.pad.unwrap(), 1.5);
+    no_world.world_valid = 0;
+    assert_eq!(w.fsm.on_observation(w.t, &no_world), fsm::Update::Dropped);
+    let mut stale = w.observation_at(w.pad.unwrap(), 1.5);
+    stale.msg.capture_ns = w.t.saturating_sub(2_000_000_000);
+    assert_eq!(w.fsm.on_observation(w.t, &stale), fsm::Update::Dropped);
+    assert!(w.run_until(MissionState::Landed, 60.0), "{:?}", w.reasons());
+    assert_eq!(w.nan_setpoints, 0);
+}
+
+#[test]
+fn goals_sent_while_tracking_a_distant_pad_are_rendezvous_points_ahead_of_it() {
+    let mut cfg = config();
+    cfg.preset_m = [0.0, 0.0, 3.0];
+    let mut w = World::new(cfg);
+    w.pad = Some(Vector3::new(4.0, 0.0, PAD_HEIGHT));
+    w.pad_vel = Vector3::new(-0.3, 0.0, 0.0);
+    assert!(w.run_until(MissionState::Track, 30.0), "{:?}", w.reasons());
+    w.run_for(0.3);
+    let g = w.goal.expect("goal");
+    assert_eq!(GoalMode::from_raw(g.mode), GoalMode::Rendezvous);
+    assert!(
+        g.position[0] < w.pad.unwrap().x,
+        "ahead of the pad: {:?}",
+        g.position
+    );
+    assert!((g.velocity[0] + 0.3).abs() < 0.15, "{:?}", g.velocity);
+}
