@@ -934,6 +934,31 @@ impl TruthKind {
     }
 }
 
+/// Where the vehicle and the pad really are, from the simulator, on the evaluator-only
+/// topic [`crate::services::SIM_TRUTH_STATE`] (plots and speeds of `landing run
+/// --processes`). No pipeline process may read it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::TruthState/v1")]
+pub struct TruthState {
+    /// Sequence, publish time (monotonic ns), stage stamps.
+    pub msg: Header,
+    /// Simulated time, ns.
+    pub sim_time_ns: u64,
+    /// Vehicle position, world ENU, m.
+    pub vehicle_position: [f64; 3],
+    /// Vehicle velocity, m/s.
+    pub vehicle_velocity: [f64; 3],
+    /// 1 when there is a ground vehicle (the pad fields are meaningful).
+    pub pad_valid: u32,
+    /// 1 once the vehicle is armed (the autopilot's truth, for the flight time).
+    pub armed: u32,
+    /// Pad centre, world ENU, m.
+    pub pad_position: [f64; 3],
+    /// Pad velocity, m/s.
+    pub pad_velocity: [f64; 3],
+}
+
 /// A ground-truth event from the simulator, on the evaluator-only topic
 /// ([`crate::services::SIM_TRUTH`]). No pipeline process may read it.
 #[repr(C)]

@@ -11,6 +11,9 @@ pub const SIM_DEPTH: &str = "landing/sim/depth";
 /// Ground-truth events (touchdown, collision, crash). Evaluator only: no pipeline process
 /// may open it.
 pub const SIM_TRUTH: &str = "landing/sim/truth";
+/// Where the vehicle and the pad really are, 20 Hz. Evaluator only: no pipeline process
+/// may open it.
+pub const SIM_TRUTH_STATE: &str = "landing/sim/truth_state";
 /// Camera frames as the pipeline sees them (camera-ingest).
 pub const CAMERA_FRAME: &str = "landing/camera/frame";
 /// Depth frames as the pipeline sees them.

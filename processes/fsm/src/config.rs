@@ -104,7 +104,7 @@ impl Default for FsmConfig {
             align_hold_s: 0.5,
             descend_rate_m_s: 0.4,
             commit_height_m: 0.6,
-            land_align_m: 0.12,
+            land_align_m: 0.08,
             land_speed_gate_m_s: 0.3,
             land_rate_m_s: 0.5,
             go_around_m: 0.4,
@@ -162,9 +162,9 @@ pub struct PadFilterConfig {
 impl Default for PadFilterConfig {
     fn default() -> Self {
         Self {
-            sigma_m: 0.02,
+            sigma_m: 0.03,
             sigma_per_m: 0.01,
-            accel_noise_xy: 1.0,
+            accel_noise_xy: 0.5,
             accel_noise_z: 0.2,
             yaw_accel_noise: 0.5,
             sigma_yaw_rad: 0.03,

@@ -826,8 +826,16 @@ impl Fsm {
             }
             return;
         }
-        self.z_cmd = (self.z_cmd - self.cfg.land_rate_m_s * dt).max(est.position.z - 0.3);
-        out.setpoint = Some(self.pad_setpoint(now_ns, &est, self.z_cmd, -self.cfg.land_rate_m_s));
+        // Full rate while within the commit gate, slowing to a hover at twice it: the
+        // last half metre is where a lagging vehicle would miss the pad.
+        let gate = self.cfg.land_align_m;
+        let rate = if height < 0.1 {
+            self.cfg.land_rate_m_s
+        } else {
+            self.cfg.land_rate_m_s * ((2.0 * gate - e) / gate).clamp(0.0, 1.0)
+        };
+        self.z_cmd = (self.z_cmd - rate * dt).max(est.position.z - 0.3);
+        out.setpoint = Some(self.pad_setpoint(now_ns, &est, self.z_cmd, -rate));
     }
 
     fn enter_lost(&mut self, now_ns: u64) {

@@ -6,7 +6,7 @@
 //! the caller renders into a buffer of its choosing (a loaned shared-memory sample in the
 //! `sim` binary, a reused vector in lockstep), so rendering never copies.
 
-use ipc_types::msg::{Header, Text, TruthEvent, TruthKind};
+use ipc_types::msg::{Header, Text, TruthEvent, TruthKind, TruthState};
 
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
@@ -336,3 +336,22 @@ pub fn truth_event(e: &TimedEvent) -> TruthEvent {
 #[cfg(test)]
 #[path = "lockstep_test.rs"]
 mod tests;
+
+/// Where the vehicle and the pad really are now, stamped `now_ns` (the publisher's clock),
+/// for the evaluator-only truth-state topic.
+pub fn truth_state(sim: &Simulator, now_ns: u64) -> TruthState {
+    let truth = sim.world().truth();
+    let pad = sim.world().pad();
+    TruthState {
+        msg: Header::captured_at(now_ns),
+        sim_time_ns: sim.time_ns(),
+        vehicle_position: truth.position.into(),
+        vehicle_velocity: truth.velocity.into(),
+        pad_valid: u32::from(pad.is_some()),
+        armed: u32::from(sim.world().armed()),
+        pad_position: pad
+            .as_ref()
+            .map_or([0.0; 3], |p| p.world_from_pad.translation.vector.into()),
+        pad_velocity: pad.as_ref().map_or([0.0; 3], |p| p.linear_velocity.into()),
+    }
+}

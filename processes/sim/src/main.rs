@@ -89,6 +89,8 @@ fn run(args: &Args) -> Result<()> {
     let prefix = IpcPrefix::from_flag_or_env(args.ipc_prefix.as_deref())?;
     let ipc = Ipc::open("sim", &prefix)?;
     let mut truth = ipc.publisher::<ipc_types::msg::TruthEvent>(services::SIM_TRUTH)?;
+    let mut truth_state =
+        ipc.publisher::<ipc_types::msg::TruthState>(services::SIM_TRUTH_STATE)?;
     let mut heartbeat = ipc.heartbeat(Duration::from_millis(500))?;
     let sim_ref = vehicle.simulator();
     let (cam_len, cam_geometry) = match sim_ref.down_camera() {
@@ -204,6 +206,14 @@ fn run(args: &Args) -> Result<()> {
                 }
             }
             steps += 1;
+            // 20 Hz at the 500 Hz physics step: for the evaluator's plots and speeds.
+            if steps.is_multiple_of(25) {
+                let s = sim::lockstep::truth_state(sim, now);
+                if let Err(e) = truth_state.send(s.msg, &s) {
+                    failure = Some(e);
+                    return false;
+                }
+            }
             if steps.is_multiple_of(50) {
                 if let Err(e) = heartbeat.beat() {
                     failure = Some(e);

@@ -8,8 +8,7 @@
 //! frame's publication by camera-ingest to the observation's arrival at a consumer (this
 //! one).
 
-use std::net::UdpSocket;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -21,6 +20,7 @@ use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
 use serde_json::json;
 
+use crate::procs::{Children, binary, free_udp_port};
 use crate::stats::percentile;
 
 /// Arguments of `landing bench perception`.
@@ -36,45 +36,6 @@ pub struct PerceptionArgs {
     /// view from 2 m there).
     #[arg(long, default_value = "indoor-static")]
     scenario: String,
-}
-
-/// Child processes, killed when dropped (also on error paths).
-struct Children(Vec<Child>);
-
-impl Drop for Children {
-    fn drop(&mut self) {
-        for c in &mut self.0 {
-            // SIGTERM first: the processes shut down cleanly and release shared memory.
-            // SAFETY: signalling our own child.
-            unsafe { libc::kill(c.id() as i32, libc::SIGTERM) };
-        }
-        let end = Instant::now() + Duration::from_secs(3);
-        for c in &mut self.0 {
-            while Instant::now() < end {
-                if let Ok(Some(_)) = c.try_wait() {
-                    break;
-                }
-                std::thread::sleep(Duration::from_millis(20));
-            }
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
-
-fn binary(name: &str) -> Result<PathBuf> {
-    let dir = std::env::current_exe()?
-        .parent()
-        .map(Path::to_path_buf)
-        .unwrap_or_default();
-    let p = dir.join(name);
-    if !p.is_file() {
-        anyhow::bail!(
-            "{} not found next to landing (build the workspace: cargo build --release)",
-            p.display()
-        );
-    }
-    Ok(p)
 }
 
 /// Runs the benchmark and prints the figures.
@@ -95,8 +56,7 @@ pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
         binary("aruco-pnp")?,
         binary("px4-link")?,
     );
-    let port = || -> Result<u16> { Ok(UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port()) };
-    let (sim_port, link_port) = (port()?, port()?);
+    let (sim_port, link_port) = (free_udp_port()?, free_udp_port()?);
     let ipc = Ipc::open("bench-perception", &prefix)?;
     let observations = ipc.subscriber::<PadObservation>(services::PAD_OBSERVATION)?;
     let mut requests = ipc.publisher::<LinkRequest>(services::PX4_REQUEST)?;
@@ -113,8 +73,8 @@ pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
         "bench perception: starting sim ({}), camera-ingest, aruco-pnp, px4-link...",
         args.scenario
     );
-    let mut children = Children(Vec::new());
-    children.0.push(spawn(
+    let mut children = Children::default();
+    children.push("sim", spawn(
         &sim,
         &[
             "--scenario",
@@ -127,9 +87,9 @@ pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
             &format!("127.0.0.1:{link_port}"),
         ],
     )?);
-    children.0.push(spawn(&ingest, &["--source", "sim"])?);
-    children.0.push(spawn(&aruco, &[])?);
-    children.0.push(spawn(
+    children.push("camera-ingest", spawn(&ingest, &["--source", "sim"])?);
+    children.push("aruco-pnp", spawn(&aruco, &[])?);
+    children.push("px4-link", spawn(
         &link,
         &[
             "--link",

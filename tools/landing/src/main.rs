@@ -12,9 +12,11 @@ mod map_cmd;
 mod pad_detect;
 mod pad_print;
 mod plan_cmd;
+mod procs;
 mod run_cmd;
 mod run_eval;
 mod run_lockstep;
+mod run_processes;
 mod stats;
 
 use std::path::PathBuf;

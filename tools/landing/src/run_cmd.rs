@@ -20,6 +20,7 @@ use sim::lockstep::Simulator;
 use crate::config_cmd::StackConfig;
 use crate::run_eval::Evaluator;
 use crate::run_lockstep::{self, End, Pipeline, RunStats};
+use crate::run_processes;
 use crate::stats::percentile;
 
 /// Arguments of `landing run`.
@@ -40,6 +41,15 @@ pub struct RunArgs {
     /// Print the summary as one JSON object on stdout.
     #[arg(long)]
     json: bool,
+    /// Start every stage as its own OS process (sim, camera-ingest, aruco-pnp,
+    /// depth-map, planner, fsm, px4-link) over iceoryx2 and MAVLink/UDP on the wall
+    /// clock, as systemd does on the vehicle, instead of the one-process lockstep.
+    #[arg(long)]
+    processes: bool,
+    /// --processes: where each process's log goes (default: a new directory under the
+    /// system's temporary directory).
+    #[arg(long, value_name = "DIR")]
+    log_dir: Option<PathBuf>,
 }
 
 /// The end-of-run summary (the JSON fields).
@@ -148,48 +158,66 @@ pub fn run(args: &RunArgs) -> Result<bool> {
             e.message
         );
     }
-    let mut sim = Simulator::new(&scn, seed).context("building the simulator")?;
-    let calibration = CameraCalibration::load(&scn.calibration_path())?;
-    let pad = PadModel::load(&scn.pad_path())?;
-    let estimator = PadEstimator::new(
-        calibration,
-        pad,
-        down_camera_from_body(cfg.aruco_pnp.camera_position_in_body_m),
-        cfg.aruco_pnp.settings(),
-    )?;
-    let mut pipe = Pipeline {
-        estimator,
-        mapper: DepthMapper::from_config(&cfg.depth_map)?,
-        planner: PlannerNode::new(cfg.planner.clone()),
-        fsm: Fsm::new(fsm_cfg),
-        link: run_lockstep::link(),
-    };
     let mut eval = Evaluator::default();
     let tty = std::io::stderr().is_terminal();
     eprintln!(
-        "run: {} (seed {seed}): {}",
-        scn.scenario.name, scn.scenario.description
+        "run: {} (seed {seed}, {}): {}",
+        scn.scenario.name,
+        if args.processes { "processes" } else { "lockstep" },
+        scn.scenario.description
     );
-    let (end, stats) = run_lockstep::run(
-        &mut sim,
-        &mut pipe,
-        scn.scenario.duration_s,
-        &mut eval,
-        |t, state, d| {
-            let d = d.map_or("-".to_string(), |d| format!("{d:.2} m"));
-            let line = format!("[{t:6.1} s] {:<13} to pad {d}", state_name(state));
-            if tty {
-                eprint!("\r{line}   ");
-                let _ = std::io::stderr().flush();
-            } else if (t as u64) % 10 == 0 {
-                eprintln!("{line}");
-            }
-        },
-    )?;
-    if tty {
-        eprintln!();
-    }
-    for t in pipe.fsm.transitions() {
+    let progress = |t: f64, state: MissionState, d: Option<f64>| {
+        let d = d.map_or("-".to_string(), |d| format!("{d:.2} m"));
+        let line = format!("[{t:6.1} s] {:<13} to pad {d}", state_name(state));
+        if tty {
+            eprint!("\r{line}   ");
+            let _ = std::io::stderr().flush();
+        } else if (t as u64) % 10 == 0 {
+            eprintln!("{line}");
+        }
+    };
+    let (end, stats, transitions) = if args.processes {
+        let log_dir = args.log_dir.clone().unwrap_or_else(|| {
+            std::env::temp_dir().join(format!("landing-run-{}", std::process::id()))
+        });
+        let launch = run_processes::Launch {
+            scenario: &scn,
+            seed,
+            config: &cfg_path,
+            deploy: &deploy,
+            log_dir: &log_dir,
+        };
+        let r = run_processes::run(&launch, &mut eval, progress)?;
+        if tty {
+            eprintln!();
+        }
+        eprintln!("  process logs: {}", log_dir.display());
+        r
+    } else {
+        let mut sim = Simulator::new(&scn, seed).context("building the simulator")?;
+        let calibration = CameraCalibration::load(&scn.calibration_path())?;
+        let pad = PadModel::load(&scn.pad_path())?;
+        let estimator = PadEstimator::new(
+            calibration,
+            pad,
+            down_camera_from_body(cfg.aruco_pnp.camera_position_in_body_m),
+            cfg.aruco_pnp.settings(),
+        )?;
+        let mut pipe = Pipeline {
+            estimator,
+            mapper: DepthMapper::from_config(&cfg.depth_map)?,
+            planner: PlannerNode::new(cfg.planner.clone()),
+            fsm: Fsm::new(fsm_cfg),
+            link: run_lockstep::link(),
+        };
+        let (end, stats) =
+            run_lockstep::run(&mut sim, &mut pipe, scn.scenario.duration_s, &mut eval, progress)?;
+        if tty {
+            eprintln!();
+        }
+        (end, stats, pipe.fsm.transitions().to_vec())
+    };
+    for t in &transitions {
         eprintln!(
             "  {:7.2} s  {:>13} -> {:<13} {}",
             t.at_ns as f64 * 1e-9,
@@ -200,12 +228,13 @@ pub fn run(args: &RunArgs) -> Result<bool> {
     }
     for t in &eval.touchdowns {
         eprintln!(
-            "  {:7.2} s  touchdown on the {} {:.3} m from the pad centre at {:.2} m/s ({})",
+            "  {:7.2} s  touchdown on the {} {:.3} m from the pad centre at {:.2} m/s ({}; pad estimate {} off)",
             t.t_s,
             if t.on_pad { "pad" } else { "ground" },
             t.error_m,
             t.rel_speed_mps,
-            state_name(t.phase)
+            state_name(t.phase),
+            t.estimate_error_m.map_or("-".into(), |e| format!("{e:.3} m"))
         );
     }
     for c in &eval.crashes {

@@ -19,11 +19,13 @@ pub struct Sample {
     pub pad_velocity: Option<[f64; 3]>,
     /// The fsm's state.
     pub phase: MissionState,
+    /// The fsm's pad estimate (its status), m: what the pipeline believed.
+    pub pad_estimate: Option<[f64; 3]>,
 }
 
 impl Sample {
     /// The truth now.
-    pub fn of(sim: &Simulator, phase: MissionState) -> Self {
+    pub fn of(sim: &Simulator, phase: MissionState, pad_estimate: Option<[f64; 3]>) -> Self {
         let truth = sim.world().truth();
         let pad = sim.world().pad();
         Self {
@@ -35,6 +37,7 @@ impl Sample {
                 .map(|p| p.world_from_pad.translation.vector.into()),
             pad_velocity: pad.as_ref().map(|p| p.linear_velocity.into()),
             phase,
+            pad_estimate,
         }
     }
 }
@@ -52,6 +55,9 @@ pub struct Touchdown {
     pub rel_speed_mps: f64,
     /// The fsm's state at that moment.
     pub phase: MissionState,
+    /// The pipeline's pad estimate off the true pad centre at the last sample before,
+    /// horizontally, m (None without an estimate).
+    pub estimate_error_m: Option<f64>,
 }
 
 /// Collects the truth during a run.
@@ -80,6 +86,10 @@ impl Evaluator {
                     error_m: x.hypot(y),
                     rel_speed_mps: (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(),
                     phase,
+                    estimate_error_m: self.samples.last().and_then(|s| {
+                        let (e, p) = (s.pad_estimate?, s.pad?);
+                        Some((e[0] - p[0]).hypot(e[1] - p[1]))
+                    }),
                 });
             }
             Some(TruthKind::Collision) => self.collisions += 1,

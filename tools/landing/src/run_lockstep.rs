@@ -378,7 +378,9 @@ pub fn run(
 
         if now >= next_sample {
             next_sample = now + SAMPLE_PERIOD_NS;
-            eval.sample(Sample::of(sim, pipe.fsm.state()));
+            let st = pipe.fsm.status(now);
+            let est = (st.pad_valid != 0).then_some(st.pad_position);
+            eval.sample(Sample::of(sim, pipe.fsm.state(), est));
         }
         if now >= next_progress {
             next_progress = now + 1_000_000_000;
@@ -390,7 +392,21 @@ pub fn run(
 
 fn deliver_observation(pipe: &mut Pipeline, now: u64, obs: &PadObservation, stats: &mut RunStats) {
     stats.observations += 1;
-    pipe.fsm.on_observation(now, obs);
+    let u = pipe.fsm.on_observation(now, obs);
+    if std::env::var_os("LANDING_DEBUG_OBS").is_some() {
+        let st = pipe.fsm.status(now);
+        eprintln!(
+            "obs t={:.3} {:?} {:?} cam_z={:.2} n={} state={} est={:?} vel={:?}",
+            now as f64 * 1e-9,
+            u,
+            obs.world_from_pad.translation,
+            obs.camera_from_pad.translation[2],
+            obs.marker_count,
+            st.state,
+            st.pad_position,
+            st.pad_velocity
+        );
+    }
 }
 
 fn is_crash(t: &TruthEvent) -> bool {

@@ -1,0 +1,71 @@
+//! Starting the stack's binaries as child processes (benchmarks, `landing run
+//! --processes`): where they are, and stopping them as systemd would.
+
+use std::net::UdpSocket;
+use std::path::{Path, PathBuf};
+use std::process::Child;
+use std::time::{Duration, Instant};
+
+use anyhow::Result;
+
+/// Child processes, stopped when dropped (also on error paths): SIGTERM, then SIGKILL
+/// after 3 s, as systemd does.
+#[derive(Default)]
+pub struct Children(pub Vec<(String, Child)>);
+
+impl Children {
+    /// Adds a started child under `name`.
+    pub fn push(&mut self, name: &str, child: Child) {
+        self.0.push((name.to_string(), child));
+    }
+
+    /// The first child that has exited, with its status.
+    pub fn exited(&mut self) -> Option<(String, std::process::ExitStatus)> {
+        self.0.iter_mut().find_map(|(n, c)| match c.try_wait() {
+            Ok(Some(s)) => Some((n.clone(), s)),
+            _ => None,
+        })
+    }
+}
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        for (_, c) in &mut self.0 {
+            // SIGTERM first: the processes shut down cleanly and release shared memory.
+            // SAFETY: signalling our own child.
+            unsafe { libc::kill(c.id() as i32, libc::SIGTERM) };
+        }
+        let end = Instant::now() + Duration::from_secs(3);
+        for (_, c) in &mut self.0 {
+            while Instant::now() < end {
+                if let Ok(Some(_)) = c.try_wait() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// The stack binary `name`, next to this executable.
+pub fn binary(name: &str) -> Result<PathBuf> {
+    let dir = std::env::current_exe()?
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_default();
+    let p = dir.join(name);
+    if !p.is_file() {
+        anyhow::bail!(
+            "{} not found next to landing (build the workspace: cargo build --release)",
+            p.display()
+        );
+    }
+    Ok(p)
+}
+
+/// A free local UDP port (bound and released).
+pub fn free_udp_port() -> Result<u16> {
+    Ok(UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port())
+}

@@ -1,0 +1,228 @@
+//! `landing run --processes`: every stage as its own OS process, as systemd starts them
+//! on the vehicle (sim, camera-ingest, aruco-pnp, depth-map, planner, fsm, px4-link),
+//! over iceoryx2 and MAVLink/UDP on the wall clock. This process only watches: the fsm's
+//! status and the planner's statistics (pipeline topics) and the simulator's
+//! evaluator-only truth topics.
+
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use fsm::Transition;
+use ipc_types::msg::{FsmStatus, MissionState, PlannerStats, TruthEvent, TruthKind, TruthState};
+use ipc_types::runtime::ipc::{Wake, run_wait_loop};
+use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
+use ipc_types::services;
+use sim::scenario::LoadedScenario;
+
+use crate::procs::{Children, binary, free_udp_port};
+use crate::run_eval::{Evaluator, Sample};
+use crate::run_lockstep::{End, RunStats};
+
+/// What `--processes` needs to start the stack.
+pub struct Launch<'a> {
+    /// The scenario.
+    pub scenario: &'a LoadedScenario,
+    /// Seed of the simulator.
+    pub seed: u64,
+    /// The stack configuration every process reads.
+    pub config: &'a Path,
+    /// The deploy directory.
+    pub deploy: &'a Path,
+    /// Where each process's log goes.
+    pub log_dir: &'a Path,
+}
+
+/// Runs the mission with every stage as a process; returns how it ended, the statistics
+/// and the fsm's transitions (from its status topic).
+pub fn run(
+    launch: &Launch<'_>,
+    eval: &mut Evaluator,
+    mut progress: impl FnMut(f64, MissionState, Option<f64>),
+) -> Result<(End, RunStats, Vec<Transition>)> {
+    let prefix = IpcPrefix::unique("run");
+    let ipc = Ipc::open("landing-run", &prefix)?;
+    // Subscribers before the publishers start: no event may be missed.
+    let truth = ipc.subscriber::<TruthEvent>(services::SIM_TRUTH)?;
+    let truth_state = ipc.subscriber::<TruthState>(services::SIM_TRUTH_STATE)?;
+    let status = ipc.subscriber::<FsmStatus>(services::FSM_STATUS)?;
+    let planner_stats = ipc.subscriber::<PlannerStats>(services::PLANNER_STATS)?;
+
+    let scn = launch.scenario;
+    let (sim_port, link_port) = (free_udp_port()?, free_udp_port()?);
+    let calibration = scn.calibration_path();
+    let pad = scn.pad_path();
+    let config = launch.config.display().to_string();
+    let deploy = launch.deploy.display().to_string();
+    let preset = scn.scenario.mission.preset_m;
+    // `--x=v` form: a preset may start with a minus sign.
+    let preset = format!("--preset={},{},{}", preset[0], preset[1], preset[2]);
+    let commit = format!("--commit-height={}", scn.scenario.mission.commit_height_m);
+    let sim_addr = format!("127.0.0.1:{sim_port}");
+    let link_addr = format!("127.0.0.1:{link_port}");
+    let duration = scn.scenario.duration_s.to_string();
+    let seed = launch.seed.to_string();
+    let scenario_arg = scn.path.display().to_string();
+    let calibration = calibration.display().to_string();
+    let pad = pad.display().to_string();
+    let link_arg = format!("udp:{link_addr}");
+    let stages: Vec<(&str, Vec<&str>)> = vec![
+        (
+            "px4-link",
+            vec!["--config", &config, "--link", &link_arg, "--remote", &sim_addr],
+        ),
+        (
+            "camera-ingest",
+            vec!["--config", &config, "--deploy-dir", &deploy, "--source", "sim", "--camera", &calibration],
+        ),
+        (
+            "aruco-pnp",
+            vec!["--config", &config, "--deploy-dir", &deploy, "--camera", &calibration, "--pad", &pad],
+        ),
+        ("depth-map", vec!["--config", &config, "--input", "sim"]),
+        ("planner", vec!["--config", &config]),
+        (
+            "fsm",
+            vec!["--config", &config, &preset, &commit],
+        ),
+        (
+            "sim",
+            vec![
+                "--scenario", &scenario_arg, "--seed", &seed, "--duration-s", &duration,
+                "--deploy-dir", &deploy, "--mavlink-listen", &sim_addr, "--mavlink-remote",
+                &link_addr,
+            ],
+        ),
+    ];
+    std::fs::create_dir_all(launch.log_dir)
+        .with_context(|| format!("creating {}", launch.log_dir.display()))?;
+    let mut children = Children::default();
+    for (name, args) in &stages {
+        let path = binary(name)?;
+        let log: PathBuf = launch.log_dir.join(format!("{name}.log"));
+        let file = File::create(&log).with_context(|| format!("creating {}", log.display()))?;
+        let child = Command::new(&path)
+            .args(args)
+            .args(["--ipc-prefix", prefix.as_str()])
+            .env("LANDING_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(file)
+            .spawn()
+            .with_context(|| format!("starting {}", path.display()))?;
+        children.push(name, child);
+        if *name != "sim" {
+            // Let each stage open its ports before the simulator's clock starts.
+            std::thread::sleep(Duration::from_millis(150));
+        }
+    }
+
+    let mut stats = RunStats::default();
+    let mut transitions: Vec<Transition> = Vec::new();
+    let mut phase = MissionState::Idle;
+    let mut pad_estimate: Option<[f64; 3]> = None;
+    let mut last_state: Option<TruthState> = None;
+    let mut ended: Option<(End, Instant)> = None;
+    let mut result: Option<End> = None;
+    let mut failure: Option<anyhow::Error> = None;
+    let mut next_progress = 0.0f64;
+    let wall_limit = Instant::now() + Duration::from_secs_f64(scn.scenario.duration_s + 15.0);
+    let start_ns = monotonic_ns();
+    run_wait_loop(
+        &[truth_state.listener(), status.listener(), truth.listener()],
+        &[],
+        Some(Duration::from_millis(100)),
+        |_wake: Wake| {
+            let step = (|| -> Result<()> {
+                while let Some(s) = status.receive()? {
+                    let st = *s.payload();
+                    let state = MissionState::from_raw(st.state).unwrap_or(MissionState::Idle);
+                    pad_estimate = (st.pad_valid != 0).then_some(st.pad_position);
+                    if state != phase {
+                        transitions.push(Transition {
+                            at_ns: st.since_ns.saturating_sub(start_ns),
+                            from: MissionState::from_raw(st.previous).unwrap_or(phase),
+                            to: state,
+                            reason: st.reason.as_str().to_string(),
+                        });
+                        phase = state;
+                    }
+                }
+                while let Some(p) = planner_stats.receive()? {
+                    stats.planning_ms.push(p.planning_ms);
+                    if p.success != 0 {
+                        stats.plans += 1;
+                    }
+                }
+                while let Some(t) = truth.receive()? {
+                    let t = *t.payload();
+                    eval.on_truth(&t, phase);
+                    if t.kind == TruthKind::Crash as u32 && ended.is_none() {
+                        ended = Some((End::Crashed, Instant::now()));
+                    }
+                }
+                while let Some(s) = truth_state.receive()? {
+                    let s = *s.payload();
+                    eval.sample(Sample {
+                        t_s: s.sim_time_ns as f64 * 1e-9,
+                        uav: s.vehicle_position,
+                        uav_velocity: s.vehicle_velocity,
+                        pad: (s.pad_valid != 0).then_some(s.pad_position),
+                        pad_velocity: (s.pad_valid != 0).then_some(s.pad_velocity),
+                        phase,
+                        pad_estimate,
+                    });
+                    last_state = Some(s);
+                }
+                Ok(())
+            })();
+            if let Err(e) = step {
+                failure = Some(e);
+                return false;
+            }
+            let t_s = last_state.map_or(0.0, |s| s.sim_time_ns as f64 * 1e-9);
+            if t_s >= next_progress {
+                next_progress = t_s.floor() + 1.0;
+                let d = last_state.filter(|s| s.pad_valid != 0).map(|s| {
+                    let (u, p) = (s.vehicle_position, s.pad_position);
+                    (u[0] - p[0]).hypot(u[1] - p[1])
+                });
+                progress(t_s, phase, d);
+            }
+            if ended.is_none() {
+                let down = last_state.is_some_and(|s| s.armed == 0);
+                match phase {
+                    MissionState::Landed => ended = Some((End::Landed, Instant::now())),
+                    MissionState::SafeLand | MissionState::Abort if down => {
+                        ended = Some((End::SafeLanded, Instant::now()));
+                    }
+                    _ => {}
+                }
+            }
+            if let Some((end, at)) = ended {
+                if at.elapsed() >= Duration::from_secs(1) {
+                    result = Some(end);
+                    return false;
+                }
+            }
+            if t_s >= scn.scenario.duration_s || Instant::now() >= wall_limit {
+                result = Some(End::Timeout);
+                return false;
+            }
+            if let Some((name, status)) = children.exited() {
+                failure = Some(anyhow::anyhow!(
+                    "{name} exited ({status}) during the mission; its log: {}",
+                    launch.log_dir.join(format!("{name}.log")).display()
+                ));
+                return false;
+            }
+            true
+        },
+    )?;
+    drop(children);
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    Ok((result.unwrap_or(End::Timeout), stats, transitions))
+}
