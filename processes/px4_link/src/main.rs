@@ -24,7 +24,7 @@ use px4_link::LinkNode;
 use px4_link::codec::{StreamDecoder, decode_datagram, encode};
 use px4_link::config::{LinkAddress, Px4LinkConfig};
 
-use serial_port::SerialPort;
+use serial_port::{Readiness, SerialPort};
 
 /// The MAVLink link between the stack and PX4 (or the simulator).
 #[derive(Debug, Parser)]
@@ -157,10 +157,11 @@ impl Transport {
                     return Ok(());
                 };
                 let failure = match p.wait_readable(RECV_TIMEOUT) {
-                    Ok(false) => return Ok(()),
-                    Ok(true) => loop {
+                    Ok(Readiness::Nothing) => return Ok(()),
+                    Ok(Readiness::HungUp) => Some("hung up".to_string()),
+                    Ok(Readiness::Readable) => loop {
                         match p.read(buf) {
-                            Ok(0) => break Some("hung up".to_string()),
+                            Ok(0) => break None,
                             Ok(n) => {
                                 msgs.clear();
                                 let errors = decoder.push(buf.get(..n).unwrap_or(&[]), &mut msgs);

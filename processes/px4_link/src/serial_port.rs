@@ -15,6 +15,17 @@ use std::os::unix::fs::OpenOptionsExt;
 use std::path::Path;
 use std::time::Duration;
 
+/// What waiting on the port found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Readiness {
+    /// Nothing within the time-out.
+    Nothing,
+    /// Bytes to read.
+    Readable,
+    /// The device is gone (unplugged, or the other end of a pseudo-terminal closed).
+    HungUp,
+}
+
 /// An open, configured serial port.
 #[derive(Debug)]
 pub struct SerialPort {
@@ -83,13 +94,20 @@ impl SerialPort {
         Ok(Self { file })
     }
 
-    /// Waits until bytes can be read, at most `timeout`; true when they can (or the port
-    /// hung up: the next read says so).
-    pub fn wait_readable(&self, timeout: Duration) -> io::Result<bool> {
-        self.wait(libc::POLLIN, timeout)
+    /// Waits until bytes can be read, at most `timeout`.
+    pub fn wait_readable(&self, timeout: Duration) -> io::Result<Readiness> {
+        let revents = self.wait(libc::POLLIN, timeout)?;
+        Ok(if revents & libc::POLLIN != 0 {
+            Readiness::Readable
+        } else if revents & (libc::POLLHUP | libc::POLLERR | libc::POLLNVAL) != 0 {
+            Readiness::HungUp
+        } else {
+            Readiness::Nothing
+        })
     }
 
-    fn wait(&self, events: libc::c_short, timeout: Duration) -> io::Result<bool> {
+    /// poll(2) on the port for `events`; the events that occurred (0 on time-out).
+    fn wait(&self, events: libc::c_short, timeout: Duration) -> io::Result<libc::c_short> {
         let mut p = libc::pollfd {
             fd: self.file.as_raw_fd(),
             events,
@@ -98,22 +116,19 @@ impl SerialPort {
         let ms = libc::c_int::try_from(timeout.as_millis()).unwrap_or(libc::c_int::MAX);
         // SAFETY: one valid pollfd for the duration of the call.
         let n = unsafe { libc::poll(&mut p, 1, ms) };
-        match n {
-            n if n > 0 => Ok(true),
-            0 => Ok(false),
-            _ => {
-                let e = io::Error::last_os_error();
-                if e.kind() == ErrorKind::Interrupted {
-                    Ok(false)
-                } else {
-                    Err(e)
-                }
-            }
+        if n >= 0 {
+            return Ok(if n > 0 { p.revents } else { 0 });
+        }
+        let e = io::Error::last_os_error();
+        if e.kind() == ErrorKind::Interrupted {
+            Ok(0)
+        } else {
+            Err(e)
         }
     }
 
-    /// Reads what is there without blocking (`WouldBlock` when nothing is; `Ok(0)`
-    /// when the port hung up).
+    /// Reads what is there without blocking: `Ok(0)` (raw mode, VMIN = VTIME = 0) or
+    /// `WouldBlock` when nothing is.
     pub fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
         self.file.read(buf)
     }
@@ -125,7 +140,7 @@ impl SerialPort {
                 Ok(0) => return Err(ErrorKind::WriteZero.into()),
                 Ok(n) => data = data.get(n..).unwrap_or(&[]),
                 Err(e) if e.kind() == ErrorKind::WouldBlock => {
-                    if !self.wait(libc::POLLOUT, stall)? {
+                    if self.wait(libc::POLLOUT, stall)? & libc::POLLOUT == 0 {
                         return Err(io::Error::new(ErrorKind::TimedOut, "output stalled"));
                     }
                 }
