@@ -1,6 +1,7 @@
 //! The `[px4_link]` section of the stack configuration.
 
 use std::net::SocketAddr;
+use std::path::PathBuf;
 
 use ipc_types::runtime::config::{Invalid, Validate, check_range};
 use serde::Deserialize;
@@ -12,16 +13,32 @@ use crate::LinkSettings;
 pub enum LinkAddress {
     /// UDP: listen here; answer whoever the autopilot's datagrams come from.
     Udp(SocketAddr),
+    /// A serial port (a Pixhawk TELEM port on a companion UART), raw 8N1 at this baud
+    /// rate, no flow control.
+    Serial {
+        /// The device, e.g. `/dev/ttyTHS1`.
+        path: PathBuf,
+        /// Bits per second, one of [`SERIAL_BAUDS`].
+        baud: u32,
+    },
 }
+
+/// Baud rates a serial link may use: the standard termios rates PX4's `SER_TELx_BAUD`
+/// also offers, plus the higher ones companion UARTs run at.
+pub const SERIAL_BAUDS: &[u32] = &[
+    9_600, 19_200, 38_400, 57_600, 115_200, 230_400, 460_800, 500_000, 921_600, 1_000_000,
+    1_500_000, 2_000_000, 3_000_000,
+];
 
 /// What px4-link reads from `landing.toml`.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Px4LinkConfig {
-    /// `udp:HOST:PORT` to listen on (PX4 SITL and the simulator send to 14540).
+    /// `udp:HOST:PORT` to listen on (PX4 SITL and the simulator send to 14540), or
+    /// `serial:DEVICE:BAUD` (a Pixhawk on a companion UART, e.g. `serial:/dev/ttyTHS1:921600`).
     pub link: String,
     /// Where to send before the autopilot has been heard (the simulator and PX4 SITL
-    /// listen on 14580).
+    /// listen on 14580); unused on a serial link.
     pub remote: String,
     /// Setpoint stream rate, Hz (PX4 needs more than 2 Hz).
     pub setpoint_rate_hz: f64,
@@ -47,7 +64,7 @@ impl Default for Px4LinkConfig {
 }
 
 /// Links this build can open.
-pub const ALLOWED_LINKS: &str = "udp:HOST:PORT (serial:/dev/ttyX:BAUD is not built yet)";
+pub const ALLOWED_LINKS: &str = "udp:HOST:PORT or serial:DEVICE:BAUD";
 
 impl Px4LinkConfig {
     /// The link address, or what is wrong with it.
@@ -59,6 +76,39 @@ impl Px4LinkConfig {
                     format!("`{}`: not HOST:PORT (allowed: {ALLOWED_LINKS})", self.link),
                 )
             }),
+            Some(("serial", rest)) => {
+                let bauds = || {
+                    SERIAL_BAUDS
+                        .iter()
+                        .map(u32::to_string)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                };
+                let Some((path, baud)) = rest.rsplit_once(':').filter(|(p, _)| p.starts_with('/'))
+                else {
+                    return Err(Invalid::new(
+                        "link",
+                        format!(
+                            "`{}`: not serial:DEVICE:BAUD with an absolute device path (allowed: {ALLOWED_LINKS})",
+                            self.link
+                        ),
+                    ));
+                };
+                match baud.parse::<u32>() {
+                    Ok(b) if SERIAL_BAUDS.contains(&b) => Ok(LinkAddress::Serial {
+                        path: PathBuf::from(path),
+                        baud: b,
+                    }),
+                    _ => Err(Invalid::new(
+                        "link",
+                        format!(
+                            "`{}`: baud rate `{baud}` is not allowed (allowed: {})",
+                            self.link,
+                            bauds()
+                        ),
+                    )),
+                }
+            }
             _ => Err(Invalid::new(
                 "link",
                 format!("`{}` is not allowed (allowed: {ALLOWED_LINKS})", self.link),
@@ -100,3 +150,7 @@ impl Validate for Px4LinkConfig {
         )
     }
 }
+
+#[cfg(test)]
+#[path = "config_test.rs"]
+mod tests;

@@ -41,7 +41,8 @@ pub enum Request {
 pub enum Outcome {
     /// COMMAND_ACK accepted.
     Accepted,
-    /// COMMAND_ACK with another result: PX4 refused.
+    /// COMMAND_ACK with another result: PX4 refused. TEMPORARILY_REJECTED counts only
+    /// once every send was refused so.
     Rejected(MavResult),
     /// No answer after every retry.
     TimedOut,
@@ -70,7 +71,8 @@ pub struct LinkSettings {
     pub offboard_stream_ns: u64,
     /// Wait for a COMMAND_ACK this long before resending, ns.
     pub command_timeout_ns: u64,
-    /// Sends of one command before it counts as timed out.
+    /// Sends of one command before it counts as timed out (or, answered
+    /// TEMPORARILY_REJECTED each time, as rejected).
     pub command_attempts: u32,
     /// The autopilot counts as disconnected without a heartbeat this long, ns.
     pub heartbeat_timeout_ns: u64,
@@ -277,6 +279,14 @@ impl Px4Link {
     fn on_ack(&mut self, command: MavCmd, result: MavResult) {
         let Some(p) = self.pending else { return };
         if p.command != command || result == MavResult::MAV_RESULT_IN_PROGRESS {
+            return;
+        }
+        // "Not now" (PX4: preflight checks not yet passing, OFFBOARD not yet available):
+        // asked again after the command timeout while sends remain. Every other refusal
+        // (DENIED, UNSUPPORTED, FAILED) is final at once: resending cannot change it.
+        if result == MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+            && p.attempts < self.settings.command_attempts
+        {
             return;
         }
         let outcome = if result == MavResult::MAV_RESULT_ACCEPTED {

@@ -1,29 +1,30 @@
 //! `px4-link`: the MAVLink link to PX4 as its own process.
 //!
 //! Reads fsm/setpoint, px4/request and safety/command; publishes vehicle/state and
-//! px4/outcome. The protocol is `px4_link::Px4Link`; this file owns the UDP socket, the
-//! clock and the iceoryx2 ports.
+//! px4/outcome. Everything the process decides is `px4_link::LinkNode`; this file owns
+//! the UDP socket or serial port, the clock and the iceoryx2 ports.
 
-use std::collections::VecDeque;
+mod serial_port;
+
 use std::io::ErrorKind;
 use std::net::{SocketAddr, UdpSocket};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use ipc_types::msg::{
-    Header, LinkOutcome, LinkOutcomeKind, LinkRequest, LinkRequestKind, SafetyAction,
-    SafetyCommand, Setpoint, Stage, VehicleState,
-};
+use ipc_types::msg::{LinkOutcome, LinkRequest, SafetyCommand, Setpoint, VehicleState};
 use ipc_types::runtime::config::{IpcConfig, load_process_or_default};
 use ipc_types::runtime::{Ipc, IpcPrefix, Validate, logging, monotonic_ns};
 use ipc_types::services;
-use mavlink::dialects::common::MavResult;
-use px4_link::codec::{decode_datagram, encode};
+use mavlink::MavHeader;
+use mavlink::dialects::common::MavMessage;
+use px4_link::LinkNode;
+use px4_link::codec::{StreamDecoder, decode_datagram, encode};
 use px4_link::config::{LinkAddress, Px4LinkConfig};
-use px4_link::{Outcome, Px4Link, Request};
+
+use serial_port::{Readiness, SerialPort};
 
 /// The MAVLink link between the stack and PX4 (or the simulator).
 #[derive(Debug, Parser)]
@@ -32,10 +33,11 @@ struct Args {
     /// Stack configuration (reads [ipc] and [px4_link]; defaults when absent).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Link to open, overriding the config: udp:HOST:PORT to listen on.
+    /// Link to open, overriding the config: udp:HOST:PORT to listen on, or
+    /// serial:DEVICE:BAUD (e.g. serial:/dev/ttyTHS1:921600).
     #[arg(long)]
     link: Option<String>,
-    /// Where to send before the autopilot is heard, HOST:PORT.
+    /// Where to send before the autopilot is heard, HOST:PORT (UDP only).
     #[arg(long)]
     remote: Option<String>,
     /// iceoryx2 prefix (default: $LANDING_IPC_PREFIX, else [ipc] prefix).
@@ -57,6 +59,160 @@ fn main() -> ExitCode {
 
 /// How long one receive may block: the loop's period when the autopilot is quiet.
 const RECV_TIMEOUT: Duration = Duration::from_millis(2);
+/// How long a write may wait for room in a full serial output buffer.
+const WRITE_STALL: Duration = Duration::from_millis(5);
+/// How often a serial port that failed is reopened (a USB adapter unplugged and back).
+const REOPEN_PERIOD_NS: u64 = 1_000_000_000;
+
+/// Where MAVLink frames go and come from.
+enum Transport {
+    /// Datagrams; replies go to whoever spoke last.
+    Udp { socket: UdpSocket, peer: SocketAddr },
+    /// A byte stream; `port` is `None` while it is being reopened after a failure.
+    Serial {
+        path: PathBuf,
+        baud: u32,
+        port: Option<SerialPort>,
+        decoder: StreamDecoder,
+        failed_at_ns: u64,
+    },
+}
+
+impl Transport {
+    fn open(address: &LinkAddress, remote: SocketAddr) -> Result<Self> {
+        Ok(match address {
+            LinkAddress::Udp(listen) => {
+                let socket =
+                    UdpSocket::bind(listen).with_context(|| format!("binding {listen}"))?;
+                socket.set_read_timeout(Some(RECV_TIMEOUT))?;
+                Self::Udp {
+                    socket,
+                    peer: remote,
+                }
+            }
+            LinkAddress::Serial { path, baud } => {
+                let port = open_serial(path, *baud)?;
+                Self::Serial {
+                    path: path.clone(),
+                    baud: *baud,
+                    port: Some(port),
+                    decoder: StreamDecoder::new(),
+                    failed_at_ns: 0,
+                }
+            }
+        })
+    }
+
+    /// Hands everything that arrived to `node`; the first wait may block briefly.
+    fn receive(&mut self, node: &mut LinkNode, buf: &mut [u8]) -> Result<()> {
+        let mut msgs: Vec<(MavHeader, MavMessage)> = Vec::new();
+        match self {
+            Self::Udp { socket, peer } => {
+                loop {
+                    match socket.recv_from(buf) {
+                        Ok((n, from)) => {
+                            *peer = from;
+                            msgs.clear();
+                            let errors = decode_datagram(buf.get(..n).unwrap_or(&[]), &mut msgs);
+                            node.on_parse_errors(errors);
+                            let now = monotonic_ns();
+                            for (h, m) in &msgs {
+                                node.on_message(now, h, m);
+                            }
+                            socket.set_read_timeout(Some(Duration::from_micros(1)))?;
+                        }
+                        Err(e)
+                            if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) =>
+                        {
+                            break;
+                        }
+                        Err(e) => {
+                            tracing::warn!(error = %e, "UDP receive failed");
+                            break;
+                        }
+                    }
+                }
+                socket.set_read_timeout(Some(RECV_TIMEOUT))?;
+            }
+            Self::Serial {
+                path,
+                baud,
+                port,
+                decoder,
+                failed_at_ns,
+            } => {
+                let Some(p) = port else {
+                    std::thread::sleep(RECV_TIMEOUT);
+                    let now = monotonic_ns();
+                    if now.saturating_sub(*failed_at_ns) >= REOPEN_PERIOD_NS {
+                        *failed_at_ns = now;
+                        match SerialPort::open(path, *baud) {
+                            Ok(reopened) => {
+                                tracing::info!(path = %path.display(), "serial port reopened");
+                                *port = Some(reopened);
+                            }
+                            Err(e) => tracing::debug!(error = %e, "serial port still unavailable"),
+                        }
+                    }
+                    return Ok(());
+                };
+                let failure = match p.wait_readable(RECV_TIMEOUT) {
+                    Ok(Readiness::Nothing) => return Ok(()),
+                    Ok(Readiness::HungUp) => Some("hung up".to_string()),
+                    Ok(Readiness::Readable) => loop {
+                        match p.read(buf) {
+                            Ok(0) => break None,
+                            Ok(n) => {
+                                msgs.clear();
+                                let errors = decoder.push(buf.get(..n).unwrap_or(&[]), &mut msgs);
+                                node.on_parse_errors(errors);
+                                let now = monotonic_ns();
+                                for (h, m) in &msgs {
+                                    node.on_message(now, h, m);
+                                }
+                            }
+                            Err(e) if e.kind() == ErrorKind::WouldBlock => break None,
+                            Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                            Err(e) => break Some(e.to_string()),
+                        }
+                    },
+                    Err(e) => Some(e.to_string()),
+                };
+                if let Some(why) = failure {
+                    tracing::warn!(path = %path.display(), %why, "serial port failed; reopening every second");
+                    *port = None;
+                    *failed_at_ns = monotonic_ns();
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn send(&mut self, frame: &[u8]) {
+        match self {
+            Self::Udp { socket, peer } => {
+                if let Err(e) = socket.send_to(frame, *peer) {
+                    tracing::debug!(error = %e, "UDP send failed");
+                }
+            }
+            Self::Serial { port: Some(p), .. } => {
+                if let Err(e) = p.write_all(frame, WRITE_STALL) {
+                    tracing::debug!(error = %e, "serial write failed");
+                }
+            }
+            Self::Serial { port: None, .. } => {}
+        }
+    }
+}
+
+fn open_serial(path: &Path, baud: u32) -> Result<SerialPort> {
+    SerialPort::open(path, baud).with_context(|| {
+        format!(
+            "serial port {}: cannot open at {baud} baud (allowed: an existing serial device, e.g. serial:/dev/ttyTHS1:921600)",
+            path.display()
+        )
+    })
+}
 
 fn run(args: &Args) -> Result<()> {
     let (ipc_cfg, mut cfg): (IpcConfig, Px4LinkConfig) =
@@ -69,12 +225,11 @@ fn run(args: &Args) -> Result<()> {
     }
     cfg.validate()
         .map_err(|e| anyhow::anyhow!("--link/--remote: {}", e.message))?;
-    let LinkAddress::Udp(listen) = cfg.address().map_err(|e| anyhow::anyhow!(e.message))?;
-    let mut peer: SocketAddr = cfg
+    let address = cfg.address().map_err(|e| anyhow::anyhow!(e.message))?;
+    let remote = cfg
         .remote_address()
         .map_err(|e| anyhow::anyhow!(e.message))?;
-    let socket = UdpSocket::bind(listen).with_context(|| format!("binding {listen}"))?;
-    socket.set_read_timeout(Some(RECV_TIMEOUT))?;
+    let mut transport = Transport::open(&address, remote)?;
 
     let prefix = IpcPrefix::resolve(args.ipc_prefix.as_deref(), &ipc_cfg.prefix)?;
     let ipc = Ipc::open("px4-link", &prefix)?;
@@ -86,120 +241,40 @@ fn run(args: &Args) -> Result<()> {
     let mut heartbeat = ipc.heartbeat(Duration::from_millis(ipc_cfg.heartbeat_deadline_ms))?;
     let beat_ns = ipc_cfg.heartbeat_period_ms * 1_000_000;
 
-    let mut link = Px4Link::new(cfg.settings());
-    // Ids of the requests in flight, in order (the link answers them in order).
-    let mut ids: VecDeque<(u64, u32)> = VecDeque::new();
-    let (mut buf, mut frame, mut msgs) = (vec![0u8; 65_536], Vec::new(), Vec::new());
-    let (mut seq, mut last_beat, mut last_state_ns) = (0u8, 0u64, 0u64);
-    tracing::info!(%listen, %peer, "px4-link running");
+    let mut node = LinkNode::new(cfg.settings());
+    let (mut buf, mut frame) = (vec![0u8; 65_536], Vec::new());
+    let (mut last_beat, mut seq) = (0u64, 0u8);
+    tracing::info!(link = %cfg.link, "px4-link running");
     while !ipc.shutdown_requested() {
+        transport.receive(&mut node, &mut buf)?;
         let now = monotonic_ns();
-        // Everything the autopilot sent; the first receive may block briefly.
-        loop {
-            match socket.recv_from(&mut buf) {
-                Ok((n, from)) => {
-                    peer = from;
-                    msgs.clear();
-                    for _ in 0..decode_datagram(buf.get(..n).unwrap_or(&[]), &mut msgs) {
-                        link.parse_error();
-                    }
-                    for (h, m) in &msgs {
-                        link.on_message(monotonic_ns(), h, m);
-                    }
-                    socket.set_read_timeout(Some(Duration::from_micros(1)))?;
-                }
-                Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => break,
-                Err(e) => {
-                    tracing::warn!(error = %e, "UDP receive failed");
-                    break;
-                }
-            }
-        }
-        socket.set_read_timeout(Some(RECV_TIMEOUT))?;
-        let now = now.max(monotonic_ns());
         while let Ok(Some(s)) = setpoints.receive() {
-            link.set_setpoint(now, s.payload());
+            node.on_setpoint(now, s.payload());
         }
         while let Ok(Some(r)) = requests.receive() {
-            let r = *r.payload();
-            let request = match LinkRequestKind::from_raw(r.kind) {
-                Some(LinkRequestKind::Arm) => Some(Request::Arm),
-                Some(LinkRequestKind::Disarm) => Some(Request::Disarm),
-                Some(LinkRequestKind::Takeoff)
-                    if r.altitude_m.is_finite() && r.altitude_m > 0.0 =>
-                {
-                    Some(Request::Takeoff {
-                        altitude_m: r.altitude_m as f32,
-                    })
-                }
-                Some(LinkRequestKind::Offboard) => Some(Request::Offboard),
-                Some(LinkRequestKind::Land) => Some(Request::Land),
-                Some(LinkRequestKind::Hold) => Some(Request::Hold),
-                _ => None,
-            };
-            match request {
-                Some(q) => {
-                    ids.push_back((r.id, r.kind));
-                    link.request(q);
-                }
-                None => {
-                    tracing::warn!(kind = r.kind, "unreadable request refused");
-                    let o = outcome(r.id, r.kind, LinkOutcomeKind::Invalid, 0);
-                    outcomes.send(o.msg, &o)?;
-                }
-            }
+            node.on_request(now, r.payload());
         }
         while let Ok(Some(c)) = safety.receive() {
-            let c = *c.payload();
-            let request = match SafetyAction::from_raw(c.action) {
-                SafetyAction::None => continue,
-                SafetyAction::Hold => Request::Hold,
-                SafetyAction::SafeLand | SafetyAction::Abort => Request::Land,
-            };
-            // At once: nothing queued may delay a safety order.
-            tracing::warn!(?request, "safety command");
-            link.clear_requests();
-            ids.clear();
-            ids.push_back((0, 0));
-            link.request(request);
+            node.on_safety(now, c.payload());
         }
-        let header = link.header(0);
-        for m in link.poll(now) {
+        let header = node.header(0);
+        for m in node.poll(now) {
             frame.clear();
             encode(
                 &mut frame,
-                mavlink::MavHeader {
+                MavHeader {
                     sequence: seq,
                     ..header
                 },
                 m,
             )?;
             seq = seq.wrapping_add(1);
-            if let Err(e) = socket.send_to(&frame, peer) {
-                tracing::debug!(error = %e, "UDP send failed");
-            }
+            transport.send(&frame);
         }
-        for (_, o) in link.take_outcomes() {
-            let (id, kind) = ids.pop_front().unwrap_or((0, 0));
-            let (code, result) = match o {
-                Outcome::Accepted => (
-                    LinkOutcomeKind::Accepted,
-                    MavResult::MAV_RESULT_ACCEPTED as u32,
-                ),
-                Outcome::Rejected(r) => (LinkOutcomeKind::Rejected, r as u32),
-                Outcome::TimedOut => (LinkOutcomeKind::TimedOut, 0),
-                Outcome::NoSetpointStream => (LinkOutcomeKind::NoSetpointStream, 0),
-            };
-            let msg = outcome(id, kind, code, result);
-            outcomes.send(msg.msg, &msg)?;
+        for o in node.take_outcomes() {
+            outcomes.send(o.msg, &o)?;
         }
-        if let Some(mut state) = link.vehicle_state(now)
-            && state.msg.capture_ns != last_state_ns
-        {
-            last_state_ns = state.msg.capture_ns;
-            state
-                .msg
-                .push_stage(Stage::Px4Link, state.msg.capture_ns, monotonic_ns());
+        if let Some(state) = node.vehicle_state(now) {
             states.send(state.msg, &state)?;
         }
         if now.saturating_sub(last_beat) >= beat_ns {
@@ -209,15 +284,4 @@ fn run(args: &Args) -> Result<()> {
     }
     tracing::info!("px4-link stopped");
     Ok(())
-}
-
-fn outcome(id: u64, kind: u32, code: LinkOutcomeKind, result: u32) -> LinkOutcome {
-    LinkOutcome {
-        msg: Header::captured_at(monotonic_ns()),
-        id,
-        kind,
-        outcome: code as u32,
-        result,
-        reserved: 0,
-    }
 }

@@ -124,7 +124,8 @@ impl Simulator {
     /// A simulator for `scenario` with every random process seeded from `seed`.
     pub fn new(scenario: &LoadedScenario, seed: u64) -> Result<Self, SimError> {
         let world = World::new(scenario.world_params(seed))?;
-        let commander = Commander::new(Px4Params::default())?;
+        let mut commander = Commander::new(Px4Params::default())?;
+        commander.set_faults(scenario.scenario.faults.clone())?;
         let calibration = CameraCalibration::load(scenario.calibration_path())?;
         let pad = PadModel::load(scenario.pad_path())?;
         let mut down = scenario.scenario.camera.sensor.clone();

@@ -17,6 +17,7 @@ use crate::depth::DepthCameraParams;
 use crate::estimator_noise::EstimatorNoiseParams;
 use crate::ground_vehicle::GroundVehicleParams;
 use crate::params::ParamError;
+use crate::px4::commander::Faults;
 use crate::quadrotor::AirframeParams;
 use crate::wind::WindParams;
 use crate::world::{Aabb, CrashThresholds, WorldParams};
@@ -129,6 +130,9 @@ pub struct Scenario {
     /// The forward depth camera.
     #[serde(default)]
     pub depth: DepthParams,
+    /// Faults the simulated autopilot injects (none by default).
+    #[serde(default)]
+    pub faults: Faults,
 }
 
 fn default_seed() -> u64 {
@@ -193,6 +197,9 @@ impl Validate for Scenario {
             .sensor
             .validate()
             .map_err(|e| from_param("depth.sensor", e))?;
+        self.faults
+            .validate()
+            .map_err(|e| from_param("faults", e))?;
         Ok(())
     }
 }

@@ -82,3 +82,45 @@ fn an_unknown_scenario_name_lists_the_shipped_ones() {
         "{e}"
     );
 }
+
+#[test]
+fn a_faults_table_is_read_and_reaches_the_autopilot() {
+    let text = format!(
+        "{}\n[faults]\nreject_arming_times = 2\nreject_offboard = true\ntelemetry_stop_s = 12.0\n",
+        base()
+    );
+    let p = write(&text, "faults");
+    let s = load(p.to_str().expect("utf-8"), &deploy()).expect("loads");
+    assert_eq!(s.scenario.faults.reject_arming_times, 2);
+    assert!(s.scenario.faults.reject_offboard);
+    assert_eq!(s.scenario.faults.telemetry_stop_s, Some(12.0));
+    let sim = crate::lockstep::Simulator::new(&s, 1).expect("simulator");
+    assert_eq!(sim.commander().faults(), &s.scenario.faults);
+}
+
+#[test]
+fn a_bad_fault_is_named_in_one_line() {
+    let e = error_of(
+        &format!("{}\n[faults]\ntelemetry_stop_s = -1.0\n", base()),
+        "fault-neg",
+    );
+    assert!(
+        e.contains("faults.telemetry_stop_s") && e.contains("-1"),
+        "{e}"
+    );
+    assert!(!e.contains('\n'), "{e}");
+    let e = error_of(
+        &format!(
+            "{}\n[faults]\nreject_arming = true\nreject_arming_times = 1\n",
+            base()
+        ),
+        "fault-both",
+    );
+    assert!(e.contains("faults.reject_arming_times"), "{e}");
+    let e = error_of(
+        &format!("{}\n[faults]\nreject_landing = true\n", base()),
+        "fault-unknown",
+    );
+    assert!(e.contains("reject_landing"), "{e}");
+    assert!(!e.contains('\n'), "{e}");
+}

@@ -115,6 +115,41 @@ impl Px4Params {
     }
 }
 
+/// Faults the simulated autopilot injects, from a scenario's `[faults]` table, so the
+/// stack's handling of a refusing or silent autopilot can be tested. None by default.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Faults {
+    /// Every arm command is answered DENIED (PX4: arming refused for good).
+    pub reject_arming: bool,
+    /// The first N arm commands are answered TEMPORARILY_REJECTED (PX4: preflight
+    /// checks not passing yet), later ones as usual.
+    pub reject_arming_times: u32,
+    /// Every switch to OFFBOARD (DO_SET_MODE or SET_MODE) is answered DENIED.
+    pub reject_offboard: bool,
+    /// From this simulated time, s, the autopilot sends nothing at all (no heartbeat,
+    /// telemetry or ACK: a cut TX wire) while it keeps obeying what it receives and
+    /// flying its own failsafes.
+    pub telemetry_stop_s: Option<f64>,
+}
+
+impl Faults {
+    /// Checks the values, so a bad scenario fails before it flies.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        if self.reject_arming && self.reject_arming_times > 0 {
+            return Err(ParamError::new(
+                "reject_arming_times",
+                self.reject_arming_times,
+                "must be 0 when reject_arming = true (set one or the other)",
+            ));
+        }
+        if let Some(t) = self.telemetry_stop_s {
+            params::in_range("telemetry_stop_s", t, 0.0, 3600.0)?;
+        }
+        Ok(())
+    }
+}
+
 fn secs_to_ns(s: f64) -> u64 {
     (s.max(0.0) * 1e9) as u64
 }
@@ -284,6 +319,9 @@ pub struct Commander {
     streams: [Stream; 5],
     outgoing: Vec<MavMessage>,
     events: Vec<CommanderEvent>,
+    faults: Faults,
+    arm_rejections: u32,
+    silent: bool,
 }
 
 impl Commander {
@@ -319,6 +357,9 @@ impl Commander {
             ],
             outgoing: Vec::new(),
             events: Vec::new(),
+            faults: Faults::default(),
+            arm_rejections: 0,
+            silent: false,
         })
     }
 
@@ -372,9 +413,38 @@ impl Commander {
         now_ns.saturating_sub(last_ns) <= self.params.loss_ns()
     }
 
-    /// Takes the MAVLink messages produced since the last call, oldest first.
+    /// Injects `faults` from now on (they are checked first).
+    pub fn set_faults(&mut self, faults: Faults) -> Result<(), ParamError> {
+        faults.validate()?;
+        self.faults = faults;
+        Ok(())
+    }
+
+    /// The faults in effect.
+    pub fn faults(&self) -> &Faults {
+        &self.faults
+    }
+
+    /// Whether the `telemetry_stop_s` fault has silenced the autopilot.
+    pub fn silent(&self) -> bool {
+        self.silent
+    }
+
+    fn update_silence(&mut self, now_ns: u64) {
+        if let Some(t) = self.faults.telemetry_stop_s
+            && !self.silent
+            && now_ns >= secs_to_ns(t)
+        {
+            tracing::warn!(t_s = t, "fault: autopilot telemetry stops");
+            self.silent = true;
+        }
+    }
+
+    /// Takes the MAVLink messages produced since the last call, oldest first (none once
+    /// the `telemetry_stop_s` fault has silenced the autopilot).
     pub fn take_outgoing(&mut self) -> Vec<MavMessage> {
-        std::mem::take(&mut self.outgoing)
+        let out = std::mem::take(&mut self.outgoing);
+        if self.silent { Vec::new() } else { out }
     }
 
     /// Takes the failsafe / auto-disarm events since the last call.
@@ -393,6 +463,7 @@ impl Commander {
         vehicle: &VehicleStatus,
     ) {
         self.crashed |= vehicle.crashed;
+        self.update_silence(now_ns);
         match msg {
             MavMessage::COMMAND_LONG(cmd)
                 if addressed_to_us(cmd.target_system, cmd.target_component) =>
@@ -512,8 +583,12 @@ impl Commander {
             return MavResult::MAV_RESULT_ACCEPTED;
         }
         if arm {
-            if self.crashed {
+            if self.crashed || self.faults.reject_arming {
                 return MavResult::MAV_RESULT_DENIED;
+            }
+            if self.arm_rejections < self.faults.reject_arming_times {
+                self.arm_rejections += 1;
+                return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
             }
             if self.mode == FlightMode::Offboard && !self.offboard_available(now_ns) {
                 // PX4's mode requirements: OFFBOARD without a stream cannot arm.
@@ -557,6 +632,9 @@ impl Commander {
         match ModeRequest::from_main_sub(main, sub) {
             ModeRequest::Unknown => MavResult::MAV_RESULT_ACCEPTED,
             ModeRequest::NotSimulated => MavResult::MAV_RESULT_UNSUPPORTED,
+            ModeRequest::Simulated(FlightMode::Offboard) if self.faults.reject_offboard => {
+                MavResult::MAV_RESULT_DENIED
+            }
             ModeRequest::Simulated(FlightMode::Offboard) if !self.offboard_available(now_ns) => {
                 MavResult::MAV_RESULT_TEMPORARILY_REJECTED
             }
@@ -619,6 +697,7 @@ impl Commander {
     /// and [`Self::setpoint`] to the world.
     pub fn update(&mut self, now_ns: u64, vehicle: &VehicleStatus) {
         self.crashed |= vehicle.crashed;
+        self.update_silence(now_ns);
         if self.crashed && self.armed {
             self.armed = false;
             self.events.push(CommanderEvent::DisarmCrash);

@@ -779,3 +779,95 @@ fn enu_from_local_ned_inverts_the_report() {
     let p = enu_from_local_ned(2.0, 1.0, -3.0);
     assert_eq!(p, Vector3::new(1.0, 2.0, 3.0));
 }
+
+fn with_faults(f: Faults) -> Commander {
+    let mut c = new();
+    c.set_faults(f).unwrap();
+    c
+}
+
+#[test]
+fn the_reject_arming_fault_denies_every_arm() {
+    let mut c = with_faults(Faults {
+        reject_arming: true,
+        ..Faults::default()
+    });
+    for t in 0..3 {
+        let r = command(&mut c, t * S, &arm_msg(true), &ground());
+        assert_eq!(r, MavResult::MAV_RESULT_DENIED);
+    }
+    assert!(!c.armed());
+}
+
+#[test]
+fn the_reject_arming_times_fault_rejects_temporarily_then_arms() {
+    let mut c = with_faults(Faults {
+        reject_arming_times: 2,
+        ..Faults::default()
+    });
+    let v = ground();
+    assert_eq!(
+        command(&mut c, 0, &arm_msg(true), &v),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+    );
+    assert_eq!(
+        command(&mut c, S, &arm_msg(true), &v),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+    );
+    assert_eq!(
+        command(&mut c, 2 * S, &arm_msg(true), &v),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert!(c.armed());
+}
+
+#[test]
+fn the_reject_offboard_fault_denies_offboard_even_with_a_stream() {
+    let mut c = with_faults(Faults {
+        reject_offboard: true,
+        ..Faults::default()
+    });
+    let v = ground();
+    let t = stream(&mut c, 0, 2 * S, &v);
+    assert!(c.offboard_available(t));
+    assert_eq!(
+        command(&mut c, t, &set_mode_msg(6.0, 0.0), &v),
+        MavResult::MAV_RESULT_DENIED
+    );
+    assert_ne!(c.mode(), FlightMode::Offboard);
+    // Other modes still switch.
+    assert_eq!(
+        command(&mut c, t, &set_mode_msg(4.0, 3.0), &v),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+}
+
+#[test]
+fn the_telemetry_stop_fault_silences_everything_but_commands_still_act() {
+    let mut c = with_faults(Faults {
+        telemetry_stop_s: Some(1.0),
+        ..Faults::default()
+    });
+    let v = ground();
+    c.update(0, &v);
+    assert!(!c.take_outgoing().is_empty(), "talks before");
+    c.update(S, &v);
+    assert!(c.take_outgoing().is_empty(), "silent from 1 s");
+    c.handle_message(S + MS, &COMPANION, &arm_msg(true), &v);
+    assert!(c.take_outgoing().is_empty(), "not even the ACK");
+    assert!(c.armed(), "the command still acted");
+    c.update(5 * S, &v);
+    assert!(c.take_outgoing().is_empty());
+}
+
+#[test]
+fn contradictory_arming_faults_are_refused() {
+    let e = new()
+        .set_faults(Faults {
+            reject_arming: true,
+            reject_arming_times: 2,
+            ..Faults::default()
+        })
+        .unwrap_err();
+    assert_eq!(e.field, "reject_arming_times");
+}

@@ -1,3 +1,4 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 //! Tests of `frames`.
 
 use super::*;
@@ -77,4 +78,30 @@ fn frd_rates() {
         &flu_to_frd(&Vector3::new(1.0, 2.0, 3.0)),
         &Vector3::new(1.0, -2.0, -3.0)
     ));
+}
+
+#[test]
+fn an_attitude_sent_by_the_autopilot_comes_back_as_the_same_attitude() {
+    for (r, p, y) in [
+        (0.0, 0.0, 0.0),
+        (0.3, -0.2, 1.1),
+        (-0.5, 0.4, -2.9),
+        (0.1, 0.1, 3.1),
+    ] {
+        let q = UnitQuaternion::from_euler_angles(r, p, y);
+        let back = world_from_body_enu(quaternion_wxyz(&ned_from_frd(&q))).unwrap();
+        assert!(back.angle_to(&q) < 1e-6, "({r}, {p}, {y})");
+    }
+}
+
+#[test]
+fn vectors_and_rates_round_trip_between_the_two_ends() {
+    let v = Vector3::new(1.0, -2.0, 3.0);
+    assert!(close(&enu_from_ned(ned_from_enu(&v)), &v));
+    let w = flu_to_frd(&v);
+    assert!(close(
+        &flu_from_frd([w.x as f32, w.y as f32, w.z as f32]),
+        &v
+    ));
+    assert!((ned_yaw(0.3) - yaw_enu_to_ned(0.3)).abs() < 1e-15);
 }

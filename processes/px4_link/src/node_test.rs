@@ -1,0 +1,239 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use ipc_types::msg::{LinkOutcomeKind, Text};
+use mavlink::dialects::common::{
+    ATTITUDE_QUATERNION_DATA, COMMAND_ACK_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA,
+    MavAutopilot, MavCmd, MavModeFlag, MavState, MavType,
+};
+
+use super::*;
+
+const PX4: MavHeader = MavHeader {
+    system_id: 1,
+    component_id: 1,
+    sequence: 0,
+};
+
+fn request(id: u64, kind: u32) -> LinkRequest {
+    LinkRequest {
+        msg: Header::default(),
+        id,
+        kind,
+        reserved: 0,
+        altitude_m: 2.0,
+    }
+}
+
+fn safety(action: SafetyAction) -> SafetyCommand {
+    SafetyCommand {
+        msg: Header::default(),
+        action: action as u32,
+        reserved: 0,
+        source: Text::new("test"),
+        reason: Text::new("test"),
+    }
+}
+
+fn commands(msgs: &[MavMessage]) -> Vec<MavCmd> {
+    msgs.iter()
+        .filter_map(|m| match m {
+            MavMessage::COMMAND_LONG(c) if c.command != MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => {
+                Some(c.command)
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+fn heartbeat() -> MavMessage {
+    MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: MavType::MAV_TYPE_QUADROTOR,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+        base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+        system_status: MavState::MAV_STATE_STANDBY,
+        mavlink_version: 3,
+    })
+}
+
+fn telemetry(node: &mut LinkNode, now_ns: u64) {
+    node.on_message(
+        now_ns,
+        &PX4,
+        &MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA::default()),
+    );
+    node.on_message(
+        now_ns,
+        &PX4,
+        &MavMessage::ATTITUDE_QUATERNION(ATTITUDE_QUATERNION_DATA {
+            q1: 1.0,
+            ..Default::default()
+        }),
+    );
+}
+
+#[test]
+fn an_unreadable_request_is_answered_invalid_with_its_id_at_once() {
+    let mut node = LinkNode::new(LinkSettings::default());
+    node.on_request(5, &request(7, 99));
+    let mut takeoff = request(8, LinkRequestKind::Takeoff as u32);
+    takeoff.altitude_m = f64::NAN;
+    node.on_request(6, &takeoff);
+    let got = node.take_outcomes();
+    assert_eq!(got.len(), 2);
+    assert_eq!((got[0].id, got[0].kind), (7, 99));
+    assert_eq!(got[0].outcome, LinkOutcomeKind::Invalid as u32);
+    assert_eq!(got[1].id, 8);
+    assert_eq!(got[1].outcome, LinkOutcomeKind::Invalid as u32);
+    assert!(commands(node.poll(10)).is_empty(), "nothing sent for them");
+}
+
+#[test]
+fn outcomes_carry_the_ids_of_their_requests_in_order() {
+    let mut node = LinkNode::new(LinkSettings::default());
+    node.on_message(0, &PX4, &heartbeat());
+    node.on_request(0, &request(41, LinkRequestKind::Arm as u32));
+    node.on_request(0, &request(42, LinkRequestKind::Takeoff as u32));
+    assert_eq!(
+        commands(node.poll(1)),
+        vec![MavCmd::MAV_CMD_COMPONENT_ARM_DISARM]
+    );
+    let ack = |command| {
+        MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+            command,
+            result: MavResult::MAV_RESULT_ACCEPTED,
+            ..Default::default()
+        })
+    };
+    node.on_message(2, &PX4, &ack(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM));
+    assert_eq!(commands(node.poll(3)), vec![MavCmd::MAV_CMD_NAV_TAKEOFF]);
+    let mut denied = ack(MavCmd::MAV_CMD_NAV_TAKEOFF);
+    if let MavMessage::COMMAND_ACK(a) = &mut denied {
+        a.result = MavResult::MAV_RESULT_DENIED;
+    }
+    node.on_message(4, &PX4, &denied);
+    let got = node.take_outcomes();
+    assert_eq!(got.len(), 2);
+    assert_eq!(
+        (got[0].id, got[0].kind, got[0].outcome),
+        (
+            41,
+            LinkRequestKind::Arm as u32,
+            LinkOutcomeKind::Accepted as u32
+        )
+    );
+    assert_eq!(
+        (got[1].id, got[1].outcome, got[1].result),
+        (
+            42,
+            LinkOutcomeKind::Rejected as u32,
+            MavResult::MAV_RESULT_DENIED as u32
+        )
+    );
+}
+
+#[test]
+fn a_safety_land_cancels_every_queued_request_and_sends_nav_land_on_the_next_poll() {
+    let mut node = LinkNode::new(LinkSettings::default());
+    node.on_message(0, &PX4, &heartbeat());
+    node.on_request(0, &request(1, LinkRequestKind::Arm as u32));
+    node.on_request(0, &request(2, LinkRequestKind::Takeoff as u32));
+    node.on_request(0, &request(3, LinkRequestKind::Offboard as u32));
+    assert_eq!(
+        commands(node.poll(1)),
+        vec![MavCmd::MAV_CMD_COMPONENT_ARM_DISARM]
+    );
+    node.on_safety(2, &safety(SafetyAction::SafeLand));
+    assert_eq!(commands(node.poll(3)), vec![MavCmd::MAV_CMD_NAV_LAND]);
+    let got = node.take_outcomes();
+    let ids: Vec<_> = got.iter().map(|o| o.id).collect();
+    assert_eq!(ids, vec![1, 2, 3]);
+    for o in &got {
+        assert_eq!(o.outcome, LinkOutcomeKind::Rejected as u32);
+        assert_eq!(o.result, MavResult::MAV_RESULT_CANCELLED as u32);
+    }
+    // The late ACK of the dropped ARM does not answer the LAND.
+    node.on_message(
+        4,
+        &PX4,
+        &MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+            command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            result: MavResult::MAV_RESULT_ACCEPTED,
+            ..Default::default()
+        }),
+    );
+    assert!(node.take_outcomes().is_empty());
+    node.on_message(
+        5,
+        &PX4,
+        &MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+            command: MavCmd::MAV_CMD_NAV_LAND,
+            result: MavResult::MAV_RESULT_ACCEPTED,
+            ..Default::default()
+        }),
+    );
+    let got = node.take_outcomes();
+    assert_eq!(got.len(), 1);
+    assert_eq!(
+        (got[0].id, got[0].kind, got[0].outcome),
+        (
+            SAFETY_REQUEST_ID,
+            LinkRequestKind::Land as u32,
+            LinkOutcomeKind::Accepted as u32
+        )
+    );
+}
+
+#[test]
+fn a_repeated_safety_order_still_in_flight_is_not_restarted() {
+    let mut node = LinkNode::new(LinkSettings::default());
+    node.on_message(0, &PX4, &heartbeat());
+    node.on_safety(0, &safety(SafetyAction::Abort));
+    assert_eq!(commands(node.poll(1)), vec![MavCmd::MAV_CMD_NAV_LAND]);
+    node.on_safety(2, &safety(SafetyAction::SafeLand));
+    assert!(commands(node.poll(3)).is_empty(), "no second LAND at once");
+    assert!(node.take_outcomes().is_empty(), "nothing cancelled");
+    // A different order replaces it.
+    node.on_safety(4, &safety(SafetyAction::Hold));
+    assert_eq!(commands(node.poll(5)), vec![MavCmd::MAV_CMD_DO_SET_MODE]);
+    let got = node.take_outcomes();
+    assert_eq!(got.len(), 1);
+    assert_eq!(got[0].kind, LinkRequestKind::Land as u32);
+    assert_eq!(got[0].result, MavResult::MAV_RESULT_CANCELLED as u32);
+}
+
+#[test]
+fn a_cleared_safety_command_does_nothing() {
+    let mut node = LinkNode::new(LinkSettings::default());
+    node.on_request(0, &request(1, LinkRequestKind::Arm as u32));
+    node.on_safety(0, &safety(SafetyAction::None));
+    assert!(node.take_outcomes().is_empty());
+    assert!(node.status(0).busy);
+}
+
+#[test]
+fn the_state_is_handed_out_once_per_telemetry_then_again_when_stale_with_its_old_stamp() {
+    let mut node = LinkNode::new(LinkSettings::default());
+    assert!(node.vehicle_state(0).is_none(), "nothing heard yet");
+    node.on_message(0, &PX4, &heartbeat());
+    telemetry(&mut node, 10_000_000);
+    let s = node.vehicle_state(10_000_000).expect("first state");
+    assert_eq!(s.msg.capture_ns, 10_000_000);
+    assert_eq!(s.link.connected, 1);
+    assert!(node.vehicle_state(20_000_000).is_none(), "no new telemetry");
+    telemetry(&mut node, 30_000_000);
+    assert_eq!(
+        node.vehicle_state(30_000_000).unwrap().msg.capture_ns,
+        30_000_000
+    );
+    // Silence: the same state again after the stale period, its stamp unchanged.
+    let later = 30_000_000 + STALE_STATE_PERIOD_NS;
+    let s = node.vehicle_state(later).expect("republished");
+    assert_eq!(s.msg.capture_ns, 30_000_000);
+    assert_eq!(s.link.last_telemetry_ns, 30_000_000);
+    // Past the heartbeat timeout: connected drops, and that is published at once.
+    let lost = LinkSettings::default().heartbeat_timeout_ns + 1;
+    let s = node.vehicle_state(lost).expect("connection change");
+    assert_eq!(s.link.connected, 0);
+    assert_eq!(s.msg.capture_ns, 30_000_000);
+}
