@@ -16,6 +16,8 @@ const BAND: usize = 3;
 pub struct JerkPreconditioner {
     /// `l[i][k]` = L(i, i - k); `l[i][0]` is the diagonal.
     l: Vec<[f64; BAND + 1]>,
+    /// 1 / L(i, i).
+    inv: Vec<f64>,
     /// Whether the last [`JerkPreconditioner::factor`] succeeded.
     ready: bool,
 }
@@ -78,6 +80,8 @@ impl JerkPreconditioner {
                 }
             }
         }
+        self.inv.clear();
+        self.inv.extend(self.l.iter().map(|r| 1.0 / r[0]));
         self.ready = true;
         true
     }
@@ -90,26 +94,35 @@ impl JerkPreconditioner {
         if !self.ready || d.len() != 3 * m {
             return false;
         }
-        for axis in 0..3 {
-            // Forward: L y = d.
-            for i in 0..m {
-                let mut s = d[3 * i + axis];
-                for k in 1..=BAND.min(i) {
-                    s -= self.l[i][k] * d[3 * (i - k) + axis];
+        // The three axes share the factor: one pass carries three independent chains
+        // (the substitutions are latency-bound), and the diagonal is multiplied by its
+        // inverse rather than divided by.
+        for i in 0..m {
+            let row = &self.l[i];
+            let mut s = [d[3 * i], d[3 * i + 1], d[3 * i + 2]];
+            for k in 1..=BAND.min(i) {
+                let j = 3 * (i - k);
+                for a in 0..3 {
+                    s[a] -= row[k] * d[j + a];
                 }
-                d[3 * i + axis] = s / self.l[i][0];
             }
-            // Backward: L^T z = y.
-            for i in (0..m).rev() {
-                let mut s = d[3 * i + axis];
-                for k in 1..=BAND {
-                    let r = i + k;
-                    if r >= m {
-                        break;
-                    }
-                    s -= self.l[r][k] * d[3 * r + axis];
+            for a in 0..3 {
+                d[3 * i + a] = s[a] * self.inv[i];
+            }
+        }
+        for i in (0..m).rev() {
+            let mut s = [d[3 * i], d[3 * i + 1], d[3 * i + 2]];
+            for k in 1..=BAND {
+                let r = i + k;
+                if r >= m {
+                    break;
                 }
-                d[3 * i + axis] = s / self.l[i][0];
+                for a in 0..3 {
+                    s[a] -= self.l[r][k] * d[3 * r + a];
+                }
+            }
+            for a in 0..3 {
+                d[3 * i + a] = s[a] * self.inv[i];
             }
         }
         true
