@@ -21,6 +21,7 @@ struct Open {
 impl Eq for Open {}
 
 impl Ord for Open {
+    #[inline]
     fn cmp(&self, o: &Self) -> Ordering {
         // Min-heap on f, ties to the larger g (deeper node).
         o.f.total_cmp(&self.f).then(self.g.total_cmp(&o.g))
@@ -28,6 +29,7 @@ impl Ord for Open {
 }
 
 impl PartialOrd for Open {
+    #[inline]
     fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
         Some(self.cmp(o))
     }
@@ -47,15 +49,41 @@ pub struct AStar {
 }
 
 /// Octile distance in 3-D between two cells, in cells.
+#[inline]
 fn octile(a: [i32; 3], b: [i32; 3]) -> f32 {
-    let mut d = [
-        (a[0] - b[0]).abs() as f32,
-        (a[1] - b[1]).abs() as f32,
-        (a[2] - b[2]).abs() as f32,
-    ];
-    d.sort_by(f32::total_cmp);
-    (3f32.sqrt() - 2f32.sqrt()) * d[0] + (2f32.sqrt() - 1.0) * d[1] + d[2]
+    let x = (a[0] - b[0]).abs();
+    let y = (a[1] - b[1]).abs();
+    let z = (a[2] - b[2]).abs();
+    let lo = x.min(y).min(z) as f32;
+    let hi = x.max(y).max(z) as f32;
+    let mid = (x + y + z) as f32 - lo - hi;
+    (3f32.sqrt() - 2f32.sqrt()) * lo + (2f32.sqrt() - 1.0) * mid + hi
 }
+
+/// The 26 neighbour offsets and their step lengths, in cells.
+const NEIGHBOURS: [([i32; 3], f32); 26] = {
+    let mut out = [([0i32; 3], 0f32); 26];
+    let mut k = 0;
+    let mut dz = -1;
+    while dz <= 1 {
+        let mut dy = -1;
+        while dy <= 1 {
+            let mut dx = -1;
+            while dx <= 1 {
+                let m = (dx * dx + dy * dy + dz * dz) as usize;
+                if m != 0 {
+                    let step = [0.0, 1.0, std::f32::consts::SQRT_2, 1.732_050_8][m];
+                    out[k] = ([dx, dy, dz], step);
+                    k += 1;
+                }
+                dx += 1;
+            }
+            dy += 1;
+        }
+        dz += 1;
+    }
+    out
+};
 
 impl AStar {
     /// A search state with a limit of `max_expansions` expanded cells per search.
@@ -164,49 +192,37 @@ impl AStar {
                 break;
             }
             let c = unlin(o.idx);
-            for dz in -1..=1 {
-                for dy in -1..=1 {
-                    for dx in -1..=1 {
-                        if dx == 0 && dy == 0 && dz == 0 {
-                            continue;
-                        }
-                        let nc = [c[0] + dx, c[1] + dy, c[2] + dz];
-                        if (0..3).any(|i| nc[i] < 0 || nc[i] >= dims[i]) {
-                            continue;
-                        }
-                        let ni = lin(nc);
-                        let nu = ni as usize;
-                        let fresh = self.stamp[nu] != cur;
-                        if !fresh && self.closed[nu] {
-                            continue;
-                        }
-                        let step = match dx.abs() + dy.abs() + dz.abs() {
-                            1 => 1.0,
-                            2 => std::f32::consts::SQRT_2,
-                            _ => 1.732_050_8,
-                        };
-                        let ng = o.g + step;
-                        if !fresh && ng >= self.g[nu] {
-                            continue;
-                        }
-                        if fresh {
-                            // Occupancy is asked once per cell per search.
-                            self.stamp[nu] = cur;
-                            self.closed[nu] = false;
-                            if map.is_occupied(&centre(nc)) {
-                                self.closed[nu] = true;
-                                continue;
-                            }
-                        }
-                        self.g[nu] = ng;
-                        self.parent[nu] = o.idx;
-                        self.heap.push(Open {
-                            f: ng + octile(nc, t) * TIE,
-                            g: ng,
-                            idx: ni,
-                        });
+            for &(d, step) in &NEIGHBOURS {
+                let nc = [c[0] + d[0], c[1] + d[1], c[2] + d[2]];
+                if (0..3).any(|i| nc[i] < 0 || nc[i] >= dims[i]) {
+                    continue;
+                }
+                let ni = lin(nc);
+                let nu = ni as usize;
+                let fresh = self.stamp[nu] != cur;
+                if !fresh && self.closed[nu] {
+                    continue;
+                }
+                let ng = o.g + step;
+                if !fresh && ng >= self.g[nu] {
+                    continue;
+                }
+                if fresh {
+                    // Occupancy is asked once per cell per search.
+                    self.stamp[nu] = cur;
+                    self.closed[nu] = false;
+                    if map.is_occupied(&centre(nc)) {
+                        self.closed[nu] = true;
+                        continue;
                     }
                 }
+                self.g[nu] = ng;
+                self.parent[nu] = o.idx;
+                self.heap.push(Open {
+                    f: ng + octile(nc, t) * TIE,
+                    g: ng,
+                    idx: ni,
+                });
             }
         }
         if !found {

@@ -57,7 +57,8 @@ impl BSpline {
         }
         let segs = n - 3;
         let x = (t / self.ts).clamp(0.0, segs as f64);
-        let s = (x.floor() as usize).min(segs - 1);
+        // x >= 0 after the clamp: truncation is the floor (and is inlined).
+        let s = (x as usize).min(segs - 1);
         let u = x - s as f64;
         let q = &self.points[s..s + 4];
         let (u2, u3) = (u * u, u * u * u);

@@ -7,6 +7,21 @@
 pub trait Objective {
     /// The cost at `x`; writes the gradient into `g` (same length as `x`).
     fn eval(&mut self, x: &[f64], g: &mut [f64]) -> f64;
+
+    /// Called after every accepted iteration with the new point; returning true stops
+    /// the solver there ([`Stop::Cancelled`]). The planner stops as soon as the curve
+    /// enters a new obstacle, as EGO-Planner does, instead of converging first.
+    fn cancel(&mut self, _x: &[f64], _iteration: usize) -> bool {
+        false
+    }
+
+    /// Applies an initial inverse-Hessian approximation H0 to `d` in place and returns
+    /// true, or returns false (the default) for the usual scaled identity. A good H0 (the
+    /// planner's: the exact inverse of the smoothness term's Hessian) turns a badly
+    /// conditioned problem into a few iterations.
+    fn precondition(&mut self, _d: &mut [f64]) -> bool {
+        false
+    }
 }
 
 /// Solver settings.
@@ -58,6 +73,8 @@ pub enum Stop {
     LineSearchFailed,
     /// The cost or gradient was not finite at the start.
     NotFinite,
+    /// [`Objective::cancel`] asked to stop.
+    Cancelled,
 }
 
 /// What a minimization did.
@@ -86,11 +103,26 @@ pub struct Lbfgs {
     g: Vec<f64>,
     x0: Vec<f64>,
     g0: Vec<f64>,
+    hy: Vec<f64>,
     history: [f64; 8],
 }
 
+/// Dot product with four independent accumulators: a single running sum is one long
+/// chain of dependent additions, and the two-loop recursion is mostly dot products.
+#[inline]
 fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0.0f64; 4];
+    let mut ca = a.chunks_exact(4);
+    let mut cb = b.chunks_exact(4);
+    for (x, y) in (&mut ca).zip(&mut cb) {
+        for k in 0..4 {
+            acc[k] += x[k] * y[k];
+        }
+    }
+    let tail: f64 = ca.remainder().iter().zip(cb.remainder()).map(|(x, y)| x * y).sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 impl Lbfgs {
@@ -116,7 +148,7 @@ impl Lbfgs {
             v.clear();
             v.resize(m, 0.0);
         }
-        for v in [&mut self.d, &mut self.g, &mut self.x0, &mut self.g0] {
+        for v in [&mut self.d, &mut self.g, &mut self.x0, &mut self.g0, &mut self.hy] {
             v.clear();
             v.resize(n, 0.0);
         }
@@ -164,7 +196,23 @@ impl Lbfgs {
                     *d -= a * y;
                 }
             }
-            if stored > 0 {
+            let preconditioned = f.precondition(&mut self.d);
+            if stored > 0 && preconditioned {
+                // Scale H0 by s.y / y.H0 y, the curvature the last step measured.
+                let j = (head + m - 1) % m;
+                self.hy.copy_from_slice(&self.y[j * n..(j + 1) * n]);
+                if f.precondition(&mut self.hy) {
+                    let yj = &self.y[j * n..(j + 1) * n];
+                    let sj = &self.s[j * n..(j + 1) * n];
+                    let gamma = dot(sj, yj) / dot(yj, &self.hy);
+                    if gamma.is_finite() && gamma > 0.0 {
+                        for d in self.d.iter_mut() {
+                            *d *= gamma;
+                        }
+                    }
+                }
+            }
+            if stored > 0 && !preconditioned {
                 let j = (head + m - 1) % m;
                 let sj = &self.s[j * n..(j + 1) * n];
                 let yj = &self.y[j * n..(j + 1) * n];
@@ -186,15 +234,25 @@ impl Lbfgs {
                 }
             }
             let mut dg = dot(&self.d, &self.g);
+            let mut preconditioned = preconditioned;
             if !(dg < 0.0) {
-                // Not a descent direction: restart from steepest descent.
+                // Not a descent direction: restart from steepest descent (preconditioned
+                // when that is one).
                 for (d, g) in self.d.iter_mut().zip(&self.g) {
                     *d = -g;
                 }
                 stored = 0;
                 dg = -gn * gn;
+                if f.precondition(&mut self.d) && dot(&self.d, &self.g) < 0.0 {
+                    dg = dot(&self.d, &self.g);
+                } else {
+                    preconditioned = false;
+                    for (d, g) in self.d.iter_mut().zip(&self.g) {
+                        *d = -g;
+                    }
+                }
             }
-            let step0 = if iter == 0 && stored == 0 {
+            let step0 = if stored == 0 && !preconditioned {
                 (1.0 / gn).min(1.0)
             } else {
                 1.0
@@ -230,6 +288,9 @@ impl Lbfgs {
                 stored = (stored + 1).min(m);
             }
             iter += 1;
+            if f.cancel(x, iter) {
+                break Stop::Cancelled;
+            }
             let past = set.past.min(self.history.len());
             if past > 0 {
                 if iter > past {

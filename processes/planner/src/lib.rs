@@ -19,6 +19,7 @@ pub mod lbfgs;
 pub mod map;
 pub mod node;
 pub mod plan;
+pub mod precond;
 pub mod replan;
 
 pub use bspline::{BSpline, State};

@@ -125,7 +125,10 @@ fn run(args: &Args) -> Result<()> {
                 return true;
             };
             let view = map_header.as_ref().and_then(|h| CellView::new(h, &cells));
+            // The library reads no clock: the step (in practice the plan) is timed here.
+            let before = monotonic_ns();
             let out = node.step(now, state, goal.as_ref(), view.as_ref(), input);
+            let step_ms = monotonic_ns().saturating_sub(before) as f64 * 1e-6;
             if let Some(t) = out.trajectory {
                 if let Err(e) = trajectories.send(t.msg, &t) {
                     failure = Some(anyhow::Error::from(e));
@@ -135,7 +138,8 @@ fn run(args: &Args) -> Result<()> {
                     tracing::warn!(id = t.id, "emergency stop published");
                 }
             }
-            if let Some(s) = out.stats {
+            if let Some(mut s) = out.stats {
+                s.planning_ms = step_ms;
                 if s.success == 0 {
                     tracing::debug!(bad_maps, "plan failed");
                 }

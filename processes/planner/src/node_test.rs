@@ -115,3 +115,27 @@ fn a_failed_plan_publishes_no_trajectory_but_its_statistics() {
     assert!(out.trajectory.is_none());
     assert_eq!(out.stats.unwrap().success, 0);
 }
+
+#[test]
+fn the_step_leaves_the_planning_time_to_the_caller_who_owns_the_clock() {
+    let mut node = PlannerNode::new(PlannerConfig::default());
+    let m = map();
+    let here = State::at_rest(Vector3::new(0.0, 0.0, 0.8));
+    let g = goal(1, [6.0, 0.0, 0.8], GoalMode::Point);
+    let stats = node
+        .step(0, &here, Some(&g), Some(&m), &Header::default())
+        .stats
+        .unwrap();
+    assert_eq!((stats.success, stats.planning_ms), (1, 0.0));
+}
+
+#[test]
+fn a_start_in_the_inflation_publishes_no_trajectory_and_reports_the_failure() {
+    let mut node = PlannerNode::new(PlannerConfig::default());
+    let m = map();
+    let close = State::at_rest(Vector3::new(2.5, 0.0, 0.8));
+    let g = goal(1, [6.0, 0.0, 0.8], GoalMode::Point);
+    let out = node.step(0, &close, Some(&g), Some(&m), &Header::default());
+    assert!(out.trajectory.is_none() && node.current().is_none());
+    assert_eq!(out.stats.unwrap().success, 0);
+}

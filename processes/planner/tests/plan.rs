@@ -317,3 +317,34 @@ fn random_pillar_fields_give_collision_free_plans() {
     }
     assert!(ok >= 17, "{ok} of 20");
 }
+
+#[test]
+fn every_start_in_the_inflation_but_outside_the_box_fails_clearly_and_never_panics() {
+    let cfg = PlannerConfig::default();
+    let map = paper_map(&cfg);
+    let mut planner = Planner::new(cfg.clone());
+    let g = at(v(6.0, 0.0, 0.8));
+    let mut refused = 0;
+    // A ring of starts 0.05-0.28 m from the box's faces and edges (inside the 0.299 m
+    // inflation, outside the box), some moving toward it.
+    for k in 0..48 {
+        let a = k as f64 * std::f64::consts::TAU / 48.0;
+        let gap = 0.05 + 0.23 * (k % 4) as f64 / 3.0;
+        let p = v(3.0 + (0.3 + gap) * a.cos(), (0.6 + gap) * a.sin(), 0.6 + 0.1 * (k % 3) as f64);
+        let b = map.boxes()[0];
+        if b.distance(&p) == 0.0 || b.distance(&p) >= map.inflation() {
+            continue;
+        }
+        let s = State {
+            p,
+            v: v(-a.cos(), -a.sin(), 0.0) * (k % 2) as f64,
+            a: Vector3::zeros(),
+        };
+        match planner.plan(&map, &s, &goal(g)) {
+            Err(PlanError::StartOccupied) => refused += 1,
+            Ok(plan) => check(&map, &plan.spline, &s, &g, &cfg),
+            Err(e) => panic!("{p}: {e}"),
+        }
+    }
+    assert!(refused >= 30, "{refused}");
+}
