@@ -565,7 +565,7 @@ pub struct Trajectory {
     /// 1 for an emergency-stop trajectory.
     pub emergency: u32,
     /// Control points, m.
-    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::array"))]
+    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::points_xyz"))]
     pub control_points: [[f64; 3]; MAX_CONTROL_POINTS],
 }
 
@@ -993,6 +993,27 @@ mod ser {
         s: S,
     ) -> Result<S::Ok, S::Error> {
         s.collect_seq(v)
+    }
+
+    /// A point as `{x, y, z}`.
+    #[derive(Serialize)]
+    struct Xyz {
+        x: f64,
+        y: f64,
+        z: f64,
+    }
+
+    /// Points as objects `{x, y, z}`, not as arrays of arrays: log viewers' JSON Schema
+    /// readers (Foxglove's) take arrays of numbers or of objects only.
+    pub(super) fn points_xyz<S: Serializer, const N: usize>(
+        v: &[[f64; 3]; N],
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        s.collect_seq(v.iter().map(|p| Xyz {
+            x: p[0],
+            y: p[1],
+            z: p[2],
+        }))
     }
 
     /// Text as the string it holds, not as a length and 48 bytes.

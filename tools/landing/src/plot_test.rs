@@ -107,6 +107,7 @@ fn both_views_are_written_decodable_full_size_and_show_the_uav_path_in_phase_col
     let dir = temp("views").join("new-subdir");
     let _ = std::fs::remove_dir_all(&dir);
     let files = write_plots(&dir, &log).unwrap();
+    eprintln!("wrote {} and {}", files[0].display(), files[1].display());
     assert_eq!(files, vec![dir.join("top.png"), dir.join("3d.png")]);
     let phases = phase_colours(&log);
     assert_eq!(phases.len(), 5);
@@ -213,6 +214,7 @@ fn a_histogram_shows_bars_and_marks_p50_and_p99() {
     v.push(f64::NAN);
     let path = temp("hist").join("lat.png");
     write_histogram(&path, "planner latency", &v).unwrap();
+    eprintln!("wrote {}", path.display());
     let img = read(&path);
     assert_eq!((img.cols(), img.rows()), HISTOGRAM_SIZE);
     let finite: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();

@@ -9,6 +9,12 @@
 //! serialization of the type's default value, so the two cannot disagree. Non-finite
 //! floats are written as `null` (JSON has no NaN). Chunks are zstd-compressed.
 //!
+//! Foxglove's JSON Schema reader takes objects, scalars and arrays of scalars or objects
+//! (not arrays of arrays, not `null` types): the schemas stay within that (trajectory
+//! control points are `{x, y, z}` objects), and the tests hold every message to it. It
+//! reads integers as JavaScript numbers: nanosecond stamps are exact up to 2^53 ns
+//! (104 days of uptime on the monotonic clock).
+//!
 //! Camera and depth images are not recorded: a JSON image is base64 text (4/3 the raw
 //! size, 1.2 MB per 640x480 colour frame) and would dominate the file; their headers
 //! can be recorded if wanted ([`Recordable`] covers them).
@@ -432,11 +438,15 @@ pub fn info(path: &Path) -> Result<RecordingInfo, RecordError> {
 impl fmt::Display for RecordingInfo {
     /// A table for the terminal: file, time range, then one line per topic.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let size = if self.bytes >= 1_000_000 {
+            format!("{:.1} MB", self.bytes as f64 / 1e6)
+        } else {
+            format!("{:.1} kB", self.bytes as f64 / 1e3)
+        };
         writeln!(
             f,
-            "file      {} ({:.1} MB){}",
+            "file      {} ({size}){}",
             self.path.display(),
-            self.bytes as f64 / 1e6,
             if self.complete {
                 ""
             } else {
@@ -478,7 +488,7 @@ impl fmt::Display for RecordingInfo {
             "topic", "count", "rate Hz"
         )?;
         for c in &self.channels {
-            let rate = if duration_s > 0.0 {
+            let rate = if duration_s > 0.0 && c.count > 1 {
                 Cow::Owned(format!("{:.1}", c.count as f64 / duration_s))
             } else {
                 Cow::Borrowed("-")
