@@ -81,6 +81,7 @@ impl Stage {
 
 /// When one stage took a message in and let it out, in monotonic nanoseconds.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::StageStamp/v1")]
 pub struct StageStamp {
@@ -99,6 +100,7 @@ pub struct StageStamp {
 /// `capture_ns` is the capture time of the sensor data the message derives from, carried
 /// unchanged down the graph, so that any consumer can tell how old its input really is.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::Header/v1")]
 pub struct Header {
@@ -160,6 +162,7 @@ impl Header {
 ///
 /// Named at each use by what it maps (`world_from_body`, `camera_from_pad`).
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("landing::Pose/v1")]
 pub struct Pose {
@@ -225,6 +228,7 @@ impl PixelEncoding {
 
 /// Metadata of a camera frame; the pixels are the `[u8]` slice payload behind it.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::CameraFrameHeader/v1")]
 pub struct CameraFrameHeader {
@@ -261,6 +265,7 @@ impl CameraFrameHeader {
 
 /// Pinhole intrinsics, pixels.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::Intrinsics/v1")]
 pub struct Intrinsics {
@@ -276,6 +281,7 @@ pub struct Intrinsics {
 
 /// Metadata of a depth frame; the depths are the `[u16]` slice payload behind it.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::DepthFrameHeader/v1")]
 pub struct DepthFrameHeader {
@@ -297,6 +303,7 @@ pub struct DepthFrameHeader {
 
 /// The pad pose seen in one camera frame.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("landing::PadObservation/v1")]
 pub struct PadObservation {
@@ -307,6 +314,7 @@ pub struct PadObservation {
     /// Pad in the world, through the vehicle state at capture time.
     pub world_from_pad: Pose,
     /// Covariance of world_from_pad, (x, y, z, roll, pitch, yaw), row-major.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::array"))]
     pub covariance: [f64; 36],
     /// RMS reprojection error over all used corners, px.
     pub reprojection_error_px: f64,
@@ -403,6 +411,7 @@ impl LandedState {
 
 /// Health of the link to the autopilot.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::LinkHealth/v1")]
 pub struct LinkHealth {
@@ -420,6 +429,7 @@ pub struct LinkHealth {
 
 /// The vehicle's estimated state, as the autopilot reports it (never ground truth).
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::VehicleState/v1")]
 pub struct VehicleState {
@@ -473,6 +483,7 @@ impl CellState {
 /// Metadata of the local occupancy window; cells are the `[u8]` slice payload behind it,
 /// x fastest, then y, then z, one [`CellState`] each.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::OccupancyMapHeader/v1")]
 pub struct OccupancyMapHeader {
@@ -515,6 +526,7 @@ impl GoalMode {
 
 /// A goal for the planner, world frame.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::PlannerGoal/v1")]
 pub struct PlannerGoal {
@@ -536,6 +548,7 @@ pub struct PlannerGoal {
 
 /// A uniform cubic B-spline trajectory in the world frame.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("landing::Trajectory/v1")]
 pub struct Trajectory {
@@ -552,6 +565,7 @@ pub struct Trajectory {
     /// 1 for an emergency-stop trajectory.
     pub emergency: u32,
     /// Control points, m.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::points_xyz"))]
     pub control_points: [[f64; 3]; MAX_CONTROL_POINTS],
 }
 
@@ -578,6 +592,7 @@ impl Trajectory {
 
 /// Planning statistics, one per planning call.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::PlannerStats/v1")]
 pub struct PlannerStats {
@@ -602,6 +617,7 @@ pub struct PlannerStats {
 /// A field that is not to be controlled has its bit cleared in `valid`: NaN never goes on
 /// the wire (PX4 reads NaN as "ignore", but a NaN from a bug must not look like intent).
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::Setpoint/v1")]
 pub struct Setpoint {
@@ -722,6 +738,7 @@ impl Text {
 
 /// The mission state machine's status, published on every transition and periodically.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::FsmStatus/v1")]
 pub struct FsmStatus {
@@ -808,6 +825,7 @@ impl LinkRequestKind {
 
 /// A request to px4-link (fsm -> px4-link); answered by a [`LinkOutcome`] with its id.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::LinkRequest/v1")]
 pub struct LinkRequest {
@@ -841,6 +859,7 @@ pub enum LinkOutcomeKind {
 
 /// px4-link's answer to a [`LinkRequest`].
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::LinkOutcome/v1")]
 pub struct LinkOutcome {
@@ -860,6 +879,7 @@ pub struct LinkOutcome {
 
 /// An order from the watchdog or an operator, executed at once by px4-link and fsm.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::SafetyCommand/v1")]
 pub struct SafetyCommand {
@@ -877,6 +897,7 @@ pub struct SafetyCommand {
 
 /// Health of one supervised process as the watchdog sees it.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::ProcessHealth/v1")]
 pub struct ProcessHealth {
@@ -894,6 +915,7 @@ pub struct ProcessHealth {
 
 /// The watchdog's view of the whole stack.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::WatchdogView/v1")]
 pub struct WatchdogView {
@@ -962,6 +984,7 @@ pub struct TruthState {
 /// A ground-truth event from the simulator, on the evaluator-only topic
 /// ([`crate::services::SIM_TRUTH`]). No pipeline process may read it.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::TruthEvent/v1")]
 pub struct TruthEvent {
@@ -981,6 +1004,49 @@ pub struct TruthEvent {
     pub reserved: u32,
     /// Crash: why.
     pub reason: Text,
+}
+
+/// Serialization for recordings (`landing run --record`), behind the `serde` feature: the
+/// recorder writes these structs as JSON so that a log viewer shows every field by name.
+#[cfg(feature = "serde")]
+mod ser {
+    use serde::{Serialize, Serializer};
+
+    /// Arrays longer than 32, which serde's derive does not cover, as plain sequences.
+    pub(super) fn array<S: Serializer, T: Serialize, const N: usize>(
+        v: &[T; N],
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        s.collect_seq(v)
+    }
+
+    /// A point as `{x, y, z}`.
+    #[derive(Serialize)]
+    struct Xyz {
+        x: f64,
+        y: f64,
+        z: f64,
+    }
+
+    /// Points as objects `{x, y, z}`, not as arrays of arrays: log viewers' JSON Schema
+    /// readers (Foxglove's) take arrays of numbers or of objects only.
+    pub(super) fn points_xyz<S: Serializer, const N: usize>(
+        v: &[[f64; 3]; N],
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        s.collect_seq(v.iter().map(|p| Xyz {
+            x: p[0],
+            y: p[1],
+            z: p[2],
+        }))
+    }
+
+    /// Text as the string it holds, not as a length and 48 bytes.
+    impl Serialize for super::Text {
+        fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+            s.serialize_str(self.as_str())
+        }
+    }
 }
 
 #[cfg(test)]

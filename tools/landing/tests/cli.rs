@@ -35,6 +35,8 @@ fn every_subcommand_has_help() {
         vec!["config", "check"],
         vec!["pad"],
         vec!["pad", "print"],
+        vec!["mcap"],
+        vec!["mcap", "info"],
     ] {
         let mut a = args.clone();
         a.push("--help");
