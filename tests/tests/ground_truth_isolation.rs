@@ -33,7 +33,10 @@ fn no_pipeline_process_opens_the_truth_topic() {
         rust_files(&dir.join("src"), &mut files);
         for f in files {
             let text = std::fs::read_to_string(&f).expect("read");
-            if text.contains("SIM_TRUTH") || text.contains("TruthEvent") || text.contains("TruthState") {
+            if text.contains("SIM_TRUTH")
+                || text.contains("TruthEvent")
+                || text.contains("TruthState")
+            {
                 offenders.push(f);
             }
         }

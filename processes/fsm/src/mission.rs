@@ -127,10 +127,12 @@ pub struct Fsm {
     h_cmd: f64,
     z_cmd: f64,
     go_arounds: u32,
+    xy_integral: Vector3<f64>,
     lost_z0: f64,
     lost_since_update: u64,
     mode_lost_since: Option<u64>,
     last_tick_ns: Option<u64>,
+    dt: f64,
     last_status_ns: Option<u64>,
     transitioned: bool,
     transitions: Vec<Transition>,
@@ -168,10 +170,12 @@ impl Fsm {
             h_cmd: 1.0,
             z_cmd: 0.0,
             go_arounds: 0,
+            xy_integral: Vector3::zeros(),
             lost_z0: 0.0,
             lost_since_update: 0,
             mode_lost_since: None,
             last_tick_ns: None,
+            dt: 0.0,
             last_status_ns: None,
             transitioned: true,
             transitions: Vec::new(),
@@ -210,10 +214,16 @@ impl Fsm {
         self.started = true;
     }
 
-    /// The newest vehicle state, received at `now_ns`.
+    /// The newest vehicle state, received at `now_ns`. Its age counts from its telemetry
+    /// time (`msg.capture_ns`, px4-link's receive time of the autopilot's message), so a
+    /// state px4-link repeats while the autopilot is silent does not look fresh.
     pub fn on_vehicle_state(&mut self, now_ns: u64, v: &VehicleState) {
         if v.world_from_body.is_finite() && v.velocity.iter().all(|x| x.is_finite()) {
-            self.vehicle = Some((now_ns, *v));
+            let t = match v.msg.capture_ns {
+                0 => now_ns,
+                t => t.min(now_ns),
+            };
+            self.vehicle = Some((t, *v));
         }
     }
 
@@ -297,6 +307,7 @@ impl Fsm {
             .unwrap_or(0.0)
             .min(0.2);
         self.last_tick_ns = Some(now_ns);
+        self.dt = dt;
         let mut out = Outputs::default();
         self.check_links(now_ns);
         match self.state {
@@ -656,6 +667,7 @@ impl Fsm {
     fn enter_track(&mut self, now_ns: u64, reason: String) {
         let from = self.state;
         self.go(now_ns, MissionState::Track, reason);
+        self.xy_integral = Vector3::zeros();
         self.new_goal_epoch(now_ns);
         self.guidance = Guidance::Planner;
         if let (Some(p), Some(est)) = (self.position(), self.filter.estimate(now_ns)) {
@@ -750,9 +762,10 @@ impl Fsm {
         }
         let height = p.z - est.position.z;
         let rel_v = (self.velocity() - est.velocity).xy().norm();
-        // Descend only while aligned; hold the height otherwise (and at the commit
-        // height until the commit gates hold).
-        let aligned = e < self.cfg.align_m;
+        // Descend only while close to the commit gate; hold the height otherwise (and
+        // at the commit height until the commit gates hold), so the vehicle converges
+        // over the pad before it is low.
+        let aligned = e < 1.5 * self.cfg.land_align_m;
         let floor = self.cfg.commit_height_m - 0.1;
         let rate = if aligned && self.h_cmd > floor {
             self.cfg.descend_rate_m_s
@@ -760,11 +773,20 @@ impl Fsm {
             0.0
         };
         self.h_cmd = (self.h_cmd - rate * dt).max(floor);
+        self.integrate_xy(&est, dt);
         out.setpoint = Some(self.pad_setpoint(now_ns, &est, est.position.z + self.h_cmd, -rate));
-        if height < self.cfg.commit_height_m
+        let gates = height < self.cfg.commit_height_m
             && e < self.cfg.land_align_m
-            && rel_v < self.cfg.land_speed_gate_m_s
-        {
+            && rel_v < self.cfg.land_speed_gate_m_s;
+        if !gates {
+            self.align_since = None;
+        }
+        // The gates must hold a moment: one lucky frame of a noisy estimate is no commit.
+        let held = gates && {
+            let since = *self.align_since.get_or_insert(now_ns);
+            now_ns.saturating_sub(since) as f64 * 1e-9 >= 0.5 * self.cfg.align_hold_s
+        };
+        if held {
             self.z_cmd = p.z;
             self.go(
                 now_ns,
@@ -835,6 +857,7 @@ impl Fsm {
             self.cfg.land_rate_m_s * ((2.0 * gate - e) / gate).clamp(0.0, 1.0)
         };
         self.z_cmd = (self.z_cmd - rate * dt).max(est.position.z - 0.3);
+        self.integrate_xy(&est, dt);
         out.setpoint = Some(self.pad_setpoint(now_ns, &est, self.z_cmd, -rate));
     }
 
@@ -970,9 +993,23 @@ impl Fsm {
         self.hold_setpoint(now_ns, self.hold)
     }
 
+    /// Accumulates the horizontal error over the pad (vehicle behind the pad: positive
+    /// along the pad's direction), so the setpoint leads the pad by what the autopilot
+    /// lags.
+    fn integrate_xy(&mut self, est: &PadEstimate, dt: f64) {
+        let Some(p) = self.position() else { return };
+        let mut e = est.position - p;
+        e.z = 0.0;
+        self.xy_integral += e * (self.cfg.xy_integral_gain * dt);
+        let n = self.xy_integral.norm();
+        if n > self.cfg.xy_integral_max_m {
+            self.xy_integral *= self.cfg.xy_integral_max_m / n;
+        }
+    }
+
     /// Over the pad at height `z`, moving with it (velocity feed-forward), `vz` down.
     fn pad_setpoint(&self, now_ns: u64, est: &PadEstimate, z: f64, vz: f64) -> Setpoint {
-        let p = Vector3::new(est.position.x, est.position.y, z);
+        let p = Vector3::new(est.position.x, est.position.y, z) + self.xy_integral;
         let v = Vector3::new(est.velocity.x, est.velocity.y, est.velocity.z + vz);
         self.setpoint(now_ns, p, v, Vector3::zeros())
     }

@@ -121,7 +121,12 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
             acc[k] += x[k] * y[k];
         }
     }
-    let tail: f64 = ca.remainder().iter().zip(cb.remainder()).map(|(x, y)| x * y).sum();
+    let tail: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
     (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
@@ -148,7 +153,13 @@ impl Lbfgs {
             v.clear();
             v.resize(m, 0.0);
         }
-        for v in [&mut self.d, &mut self.g, &mut self.x0, &mut self.g0, &mut self.hy] {
+        for v in [
+            &mut self.d,
+            &mut self.g,
+            &mut self.x0,
+            &mut self.g0,
+            &mut self.hy,
+        ] {
             v.clear();
             v.resize(n, 0.0);
         }

@@ -39,7 +39,12 @@ fn applying_the_factor_inverts_the_jerk_hessian_on_every_axis() {
         }
         assert!(p.apply(&mut d));
         for i in 0..3 * m {
-            assert!((d[i] - z[i]).abs() < 1e-6 * (1.0 + z[i].abs()), "n {n} i {i}: {} vs {}", d[i], z[i]);
+            assert!(
+                (d[i] - z[i]).abs() < 1e-6 * (1.0 + z[i].abs()),
+                "n {n} i {i}: {} vs {}",
+                d[i],
+                z[i]
+            );
         }
     }
 }

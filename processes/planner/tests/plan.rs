@@ -330,7 +330,11 @@ fn every_start_in_the_inflation_but_outside_the_box_fails_clearly_and_never_pani
     for k in 0..48 {
         let a = k as f64 * std::f64::consts::TAU / 48.0;
         let gap = 0.05 + 0.23 * (k % 4) as f64 / 3.0;
-        let p = v(3.0 + (0.3 + gap) * a.cos(), (0.6 + gap) * a.sin(), 0.6 + 0.1 * (k % 3) as f64);
+        let p = v(
+            3.0 + (0.3 + gap) * a.cos(),
+            (0.6 + gap) * a.sin(),
+            0.6 + 0.1 * (k % 3) as f64,
+        );
         let b = map.boxes()[0];
         if b.distance(&p) == 0.0 || b.distance(&p) >= map.inflation() {
             continue;

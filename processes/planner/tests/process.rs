@@ -11,8 +11,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use ipc_types::msg::{
-    CellState, GoalMode, Header, OccupancyMapHeader, PlannerGoal, PlannerStats, Pose,
-    Trajectory, VehicleState,
+    CellState, GoalMode, Header, OccupancyMapHeader, PlannerGoal, PlannerStats, Pose, Trajectory,
+    VehicleState,
 };
 use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
@@ -53,7 +53,13 @@ impl Running {
     fn wait_for(&self, needle: &str, timeout: Duration) {
         let end = Instant::now() + timeout;
         while Instant::now() < end {
-            if self.lines.lock().unwrap().iter().any(|l| l.contains(needle)) {
+            if self
+                .lines
+                .lock()
+                .unwrap()
+                .iter()
+                .any(|l| l.contains(needle))
+            {
                 return;
             }
             std::thread::sleep(Duration::from_millis(20));
@@ -120,11 +126,15 @@ fn a_state_a_map_and_a_goal_give_a_collision_free_trajectory_from_the_vehicle_an
     let trajectories = ipc
         .subscriber::<Trajectory>(services::PLANNER_TRAJECTORY)
         .unwrap();
-    let stats = ipc.subscriber::<PlannerStats>(services::PLANNER_STATS).unwrap();
+    let stats = ipc
+        .subscriber::<PlannerStats>(services::PLANNER_STATS)
+        .unwrap();
     let mut states = ipc
         .publisher::<VehicleState>(services::VEHICLE_STATE)
         .unwrap();
-    let mut goals = ipc.publisher::<PlannerGoal>(services::PLANNER_GOAL).unwrap();
+    let mut goals = ipc
+        .publisher::<PlannerGoal>(services::PLANNER_GOAL)
+        .unwrap();
     let (map, header, cells) = scene();
     let mut maps = ipc
         .slice_publisher::<u8, OccupancyMapHeader>(services::MAP_OCCUPANCY, cells.len())
@@ -183,13 +193,20 @@ fn a_state_a_map_and_a_goal_give_a_collision_free_trajectory_from_the_vehicle_an
         ts: t.knot_interval_s,
     };
     let start = spline.eval(0.0);
-    assert!((start.p - Vector3::from(here)).norm() < 1e-6, "{:?}", start.p);
+    assert!(
+        (start.p - Vector3::from(here)).norm() < 1e-6,
+        "{:?}",
+        start.p
+    );
     assert!(start.v.norm() < 1e-6);
     let view = CellView::new(&header, &cells).unwrap();
     let n = 2000;
     for k in 0..=n {
         let p = spline.eval(spline.duration() * k as f64 / n as f64).p;
-        assert!(!view.is_occupied(&p), "{p} is in an occupied or inflated cell");
+        assert!(
+            !view.is_occupied(&p),
+            "{p} is in an occupied or inflated cell"
+        );
         assert!(
             map.boxes()[0].distance(&p) >= 0.299 - 1e-6,
             "{p} is too close to the box"

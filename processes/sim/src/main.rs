@@ -89,8 +89,7 @@ fn run(args: &Args) -> Result<()> {
     let prefix = IpcPrefix::from_flag_or_env(args.ipc_prefix.as_deref())?;
     let ipc = Ipc::open("sim", &prefix)?;
     let mut truth = ipc.publisher::<ipc_types::msg::TruthEvent>(services::SIM_TRUTH)?;
-    let mut truth_state =
-        ipc.publisher::<ipc_types::msg::TruthState>(services::SIM_TRUTH_STATE)?;
+    let mut truth_state = ipc.publisher::<ipc_types::msg::TruthState>(services::SIM_TRUTH_STATE)?;
     let mut heartbeat = ipc.heartbeat(Duration::from_millis(500))?;
     let sim_ref = vehicle.simulator();
     let (cam_len, cam_geometry) = match sim_ref.down_camera() {

@@ -74,30 +74,36 @@ pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
         args.scenario
     );
     let mut children = Children::default();
-    children.push("sim", spawn(
-        &sim,
-        &[
-            "--scenario",
-            &args.scenario,
-            "--duration-s",
-            "600",
-            "--mavlink-listen",
-            &format!("127.0.0.1:{sim_port}"),
-            "--mavlink-remote",
-            &format!("127.0.0.1:{link_port}"),
-        ],
-    )?);
+    children.push(
+        "sim",
+        spawn(
+            &sim,
+            &[
+                "--scenario",
+                &args.scenario,
+                "--duration-s",
+                "600",
+                "--mavlink-listen",
+                &format!("127.0.0.1:{sim_port}"),
+                "--mavlink-remote",
+                &format!("127.0.0.1:{link_port}"),
+            ],
+        )?,
+    );
     children.push("camera-ingest", spawn(&ingest, &["--source", "sim"])?);
     children.push("aruco-pnp", spawn(&aruco, &[])?);
-    children.push("px4-link", spawn(
-        &link,
-        &[
-            "--link",
-            &format!("udp:127.0.0.1:{link_port}"),
-            "--remote",
-            &format!("127.0.0.1:{sim_port}"),
-        ],
-    )?);
+    children.push(
+        "px4-link",
+        spawn(
+            &link,
+            &[
+                "--link",
+                &format!("udp:127.0.0.1:{link_port}"),
+                "--remote",
+                &format!("127.0.0.1:{sim_port}"),
+            ],
+        )?,
+    );
     std::thread::sleep(Duration::from_millis(1500));
     eprintln!("bench perception: arming and taking off to 2 m through px4-link...");
     for (id, kind) in [(1, LinkRequestKind::Arm), (2, LinkRequestKind::Takeoff)] {

@@ -8,22 +8,18 @@ mod bench_planner;
 mod bench_sim;
 mod companion;
 mod config_cmd;
-// Reporting pieces of `landing run`; until it calls them, only their tests do.
-#[allow(dead_code)]
 mod flight_log;
 mod map_cmd;
 mod pad_detect;
 mod pad_print;
 mod plan_cmd;
+mod plot;
 mod procs;
+mod record;
 mod run_cmd;
 mod run_eval;
 mod run_lockstep;
 mod run_processes;
-#[allow(dead_code)]
-mod plot;
-#[allow(dead_code)]
-mod record;
 mod stats;
 
 use std::path::PathBuf;

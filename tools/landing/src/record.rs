@@ -235,6 +235,7 @@ impl Recorder {
     }
 
     /// Messages written so far.
+    #[cfg_attr(not(test), allow(dead_code))]
     pub fn message_count(&self) -> u64 {
         self.messages
     }

@@ -14,14 +14,15 @@ use ipc_types::runtime::config::{self as cfgload, Validate, deploy_dir};
 use optics::mount::down_camera_from_body;
 use optics::{CameraCalibration, PadModel};
 use planner::PlannerNode;
-use serde::Serialize;
 use sim::lockstep::Simulator;
 
 use crate::config_cmd::StackConfig;
+use crate::flight_log::{FlightLog, FlightSample, Outcome, RunSummary, Touchdown};
+use crate::plot;
+use crate::record::Recorder;
 use crate::run_eval::Evaluator;
-use crate::run_lockstep::{self, End, Pipeline, RunStats};
+use crate::run_lockstep::{self, End, Pipeline, Recording};
 use crate::run_processes;
-use crate::stats::percentile;
 
 /// Arguments of `landing run`.
 #[derive(Debug, Args)]
@@ -46,94 +47,70 @@ pub struct RunArgs {
     /// clock, as systemd does on the vehicle, instead of the one-process lockstep.
     #[arg(long)]
     processes: bool,
+    /// Record every message the stages exchange into an MCAP file (JSON, open it in
+    /// Foxglove Studio; `landing mcap info FILE` lists it).
+    #[arg(long, value_name = "FILE.mcap")]
+    record: Option<PathBuf>,
+    /// Write a top view and a 3-D view of the UAV and UGV trajectories (top.png, 3d.png)
+    /// and a histogram of the planning times into this directory.
+    #[arg(long, value_name = "DIR")]
+    plot: Option<PathBuf>,
     /// --processes: where each process's log goes (default: a new directory under the
     /// system's temporary directory).
     #[arg(long, value_name = "DIR")]
     log_dir: Option<PathBuf>,
 }
 
-/// The end-of-run summary (the JSON fields).
-#[derive(Debug, Clone, Serialize)]
-pub struct RunSummary {
-    scenario: String,
+/// The evaluator's record as the flight log the summary and the plots read.
+fn flight_log(
+    name: &str,
     seed: u64,
-    outcome: &'static str,
-    touchdown_error_m: Option<f64>,
-    touchdown_rel_speed_mps: Option<f64>,
-    flight_time_s: f64,
-    distance_m: f64,
-    target_speed_kmh: f64,
-    uav_max_speed_kmh: f64,
-    uav_avg_speed_kmh: f64,
-    planning_time_ms_p50: Option<f64>,
-    planning_time_ms_max: Option<f64>,
-    replans: u64,
-    collisions: u32,
-}
-
-fn summarize(name: &str, seed: u64, end: End, eval: &Evaluator, stats: &RunStats) -> RunSummary {
-    let outcome = match end {
-        End::Landed if eval.final_touchdown().is_some_and(|t| t.on_pad) => "landed",
-        End::Landed | End::SafeLanded => "safe_landed",
-        End::Crashed => "crashed",
-        End::Timeout => "timeout",
-    };
-    let td = eval.final_touchdown();
-    let airborne: Vec<_> = eval
+    eval: &Evaluator,
+    obstacles: Vec<([f64; 3], [f64; 3])>,
+) -> FlightLog {
+    let samples = eval
         .samples
         .iter()
-        .filter(|s| s.phase != MissionState::Idle)
-        .collect();
-    let t_end = td.map(|t| t.t_s).unwrap_or(f64::INFINITY);
-    let flying: Vec<_> = airborne.iter().filter(|s| s.t_s <= t_end).collect();
-    let flight_time_s = match (flying.first(), flying.last()) {
-        (Some(a), Some(b)) => b.t_s - a.t_s,
-        _ => 0.0,
-    };
-    let distance_m: f64 = flying
-        .windows(2)
-        .map(|w| {
-            let (a, b) = (w[0].uav, w[1].uav);
-            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+        .map(|s| FlightSample {
+            t_s: s.t_s,
+            uav: s.uav,
+            ugv_pad: s.pad,
+            phase: state_name(s.phase).to_string(),
+            uav_velocity: s.uav_velocity,
+            ugv_velocity: s.pad_velocity,
         })
-        .sum();
-    let speed = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    let uav_max = flying
-        .iter()
-        .map(|s| speed(s.uav_velocity))
-        .fold(0.0, f64::max);
-    let moving: Vec<f64> = eval
-        .samples
-        .iter()
-        .filter_map(|s| s.pad_velocity.map(speed))
-        .filter(|v| *v > 0.01)
         .collect();
-    let target = if moving.is_empty() {
-        0.0
-    } else {
-        moving.iter().sum::<f64>() / moving.len() as f64
-    };
-    let mut ms = stats.planning_ms.clone();
-    ms.sort_by(f64::total_cmp);
-    RunSummary {
+    let touchdown = eval.final_touchdown().map(|t| {
+        let at = eval
+            .samples
+            .iter()
+            .rev()
+            .find(|s| s.t_s <= t.t_s)
+            .or(eval.samples.last());
+        Touchdown {
+            t_s: t.t_s,
+            uav: at.map_or([0.0; 3], |s| s.uav),
+            pad: at.and_then(|s| s.pad).unwrap_or([0.0; 3]),
+            error_m: t.error_m,
+            rel_speed_mps: t.rel_speed_mps,
+            on_pad: t.on_pad,
+        }
+    });
+    FlightLog {
         scenario: name.to_string(),
         seed,
-        outcome,
-        touchdown_error_m: td.map(|t| t.error_m),
-        touchdown_rel_speed_mps: td.map(|t| t.rel_speed_mps),
-        flight_time_s,
-        distance_m,
-        target_speed_kmh: target * 3.6,
-        uav_max_speed_kmh: uav_max * 3.6,
-        uav_avg_speed_kmh: if flight_time_s > 0.0 {
-            distance_m / flight_time_s * 3.6
-        } else {
-            0.0
-        },
-        planning_time_ms_p50: (!ms.is_empty()).then(|| percentile(&ms, 50.0)),
-        planning_time_ms_max: ms.last().copied(),
-        replans: stats.plans.saturating_sub(1),
-        collisions: eval.collisions,
+        samples,
+        obstacles,
+        touchdown,
+    }
+}
+
+fn outcome_of(end: End, eval: &Evaluator) -> Outcome {
+    match end {
+        End::Landed if eval.final_touchdown().is_some_and(|t| t.on_pad) => Outcome::Landed,
+        End::Landed | End::SafeLanded => Outcome::SafeLanded,
+        End::Crashed => Outcome::Crashed,
+        End::Timeout => Outcome::Timeout,
     }
 }
 
@@ -158,12 +135,20 @@ pub fn run(args: &RunArgs) -> Result<bool> {
             e.message
         );
     }
+    let mut recorder = match &args.record {
+        Some(p) => Some(Recorder::create(p)?),
+        None => None,
+    };
     let mut eval = Evaluator::default();
     let tty = std::io::stderr().is_terminal();
     eprintln!(
         "run: {} (seed {seed}, {}): {}",
         scn.scenario.name,
-        if args.processes { "processes" } else { "lockstep" },
+        if args.processes {
+            "processes"
+        } else {
+            "lockstep"
+        },
         scn.scenario.description
     );
     let progress = |t: f64, state: MissionState, d: Option<f64>| {
@@ -187,7 +172,7 @@ pub fn run(args: &RunArgs) -> Result<bool> {
             deploy: &deploy,
             log_dir: &log_dir,
         };
-        let r = run_processes::run(&launch, &mut eval, progress)?;
+        let r = run_processes::run(&launch, &mut eval, &mut recorder, progress)?;
         if tty {
             eprintln!();
         }
@@ -210,8 +195,16 @@ pub fn run(args: &RunArgs) -> Result<bool> {
             fsm: Fsm::new(fsm_cfg),
             link: run_lockstep::link(),
         };
-        let (end, stats) =
-            run_lockstep::run(&mut sim, &mut pipe, scn.scenario.duration_s, &mut eval, progress)?;
+        let mut rec = Recording(recorder.take());
+        let (end, stats) = run_lockstep::run(
+            &mut sim,
+            &mut pipe,
+            scn.scenario.duration_s,
+            &mut eval,
+            &mut rec,
+            progress,
+        )?;
+        recorder = rec.0;
         if tty {
             eprintln!();
         }
@@ -228,23 +221,53 @@ pub fn run(args: &RunArgs) -> Result<bool> {
     }
     for t in &eval.touchdowns {
         eprintln!(
-            "  {:7.2} s  touchdown on the {} {:.3} m from the pad centre at {:.2} m/s ({}; pad estimate {} off)",
+            "  {:7.2} s  touchdown on the {} {:.3} m from the pad centre at {:.2} m/s ({})",
             t.t_s,
             if t.on_pad { "pad" } else { "ground" },
             t.error_m,
             t.rel_speed_mps,
-            state_name(t.phase),
-            t.estimate_error_m.map_or("-".into(), |e| format!("{e:.3} m"))
+            state_name(t.phase)
         );
     }
     for c in &eval.crashes {
         eprintln!("  crash: {c}");
     }
-    let summary = summarize(&scn.scenario.name, seed, end, &eval, &stats);
+    let obstacles = scn
+        .scenario
+        .obstacles
+        .iter()
+        .map(|b| (b.min_m, b.max_m))
+        .collect();
+    let log = flight_log(&scn.scenario.name, seed, &eval, obstacles);
+    let outcome = outcome_of(end, &eval);
+    let replans = u32::try_from(stats.plans.saturating_sub(1)).unwrap_or(u32::MAX);
+    let summary = RunSummary::from_log(
+        &log,
+        outcome,
+        &stats.planning_ms,
+        replans,
+        Some(eval.collisions),
+    );
+    if let Some(dir) = &args.plot {
+        let mut written = plot::write_plots(dir, &log)?;
+        if !stats.planning_ms.is_empty() {
+            let p = dir.join("planning_ms.png");
+            plot::write_histogram(&p, "planning time per call (ms)", &stats.planning_ms)?;
+            written.push(p);
+        }
+        for p in written {
+            eprintln!("  plot: {}", p.display());
+        }
+    }
+    if let Some(r) = recorder.take() {
+        let path = r.path().to_path_buf();
+        let n = r.finish()?;
+        eprintln!("  recording: {} ({n} messages)", path.display());
+    }
     if args.json {
         println!("{}", serde_json::to_string(&summary)?);
     } else {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        println!("{summary}");
     }
-    Ok(summary.outcome == "landed")
+    Ok(outcome == Outcome::Landed)
 }

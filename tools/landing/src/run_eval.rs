@@ -55,9 +55,6 @@ pub struct Touchdown {
     pub rel_speed_mps: f64,
     /// The fsm's state at that moment.
     pub phase: MissionState,
-    /// The pipeline's pad estimate off the true pad centre at the last sample before,
-    /// horizontally, m (None without an estimate).
-    pub estimate_error_m: Option<f64>,
 }
 
 /// Collects the truth during a run.
@@ -86,10 +83,6 @@ impl Evaluator {
                     error_m: x.hypot(y),
                     rel_speed_mps: (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(),
                     phase,
-                    estimate_error_m: self.samples.last().and_then(|s| {
-                        let (e, p) = (s.pad_estimate?, s.pad?);
-                        Some((e[0] - p[0]).hypot(e[1] - p[1]))
-                    }),
                 });
             }
             Some(TruthKind::Collision) => self.collisions += 1,

@@ -15,20 +15,20 @@ use aruco_pnp::{Frame, PadEstimator};
 use depth_map::{DepthMapper, DepthPixels, DepthView};
 use fsm::Fsm;
 use ipc_types::msg::{
-    Header, Intrinsics, LinkOutcome, LinkOutcomeKind, LinkRequest, LinkRequestKind, MissionState,
-    OccupancyMapHeader, PadObservation, PixelEncoding, PlannerGoal, Stage, Trajectory, TruthEvent,
-    VehicleState,
+    Header, Intrinsics, MissionState, OccupancyMapHeader, PadObservation, PixelEncoding,
+    PlannerGoal, Stage, Trajectory, TruthEvent, VehicleState,
 };
 use mavlink::MavHeader;
-use mavlink::dialects::common::{MavMessage, MavResult};
+use mavlink::dialects::common::MavMessage;
 use planner::PlannerNode;
 use planner::bspline::State;
 use planner::map::CellView;
 use px4_link::codec::{decode_datagram, encode};
-use px4_link::{LinkSettings, Outcome, Px4Link, Request};
+use px4_link::{LinkNode, LinkSettings};
 use sim::lockstep::Simulator;
 use state_history::StateHistory;
 
+use crate::record::{Recordable, Recorder};
 use crate::run_eval::{Evaluator, Sample};
 
 /// The fsm's tick, ns (50 Hz).
@@ -48,48 +48,8 @@ pub struct Pipeline {
     pub planner: PlannerNode,
     /// The mission.
     pub fsm: Fsm,
-    /// px4-link's protocol.
-    pub link: Px4Link,
-}
-
-/// px4-link's request bookkeeping: requests go out in order, answers come back in order.
-struct LinkIds {
-    ids: VecDeque<(u64, u32)>,
-}
-
-fn request_of(r: &LinkRequest) -> Option<Request> {
-    Some(match LinkRequestKind::from_raw(r.kind)? {
-        LinkRequestKind::Arm => Request::Arm,
-        LinkRequestKind::Disarm => Request::Disarm,
-        LinkRequestKind::Takeoff => Request::Takeoff {
-            altitude_m: r.altitude_m as f32,
-        },
-        LinkRequestKind::Offboard => Request::Offboard,
-        LinkRequestKind::Land => Request::Land,
-        LinkRequestKind::Hold => Request::Hold,
-    })
-}
-
-fn outcome_msg(now_ns: u64, id: u64, kind: u32, o: Outcome) -> LinkOutcome {
-    let (code, result) = match o {
-        Outcome::Accepted => (
-            LinkOutcomeKind::Accepted,
-            MavResult::MAV_RESULT_ACCEPTED as u32,
-        ),
-        Outcome::Rejected(r) => (LinkOutcomeKind::Rejected, r as u32),
-        Outcome::TimedOut => (LinkOutcomeKind::TimedOut, 0),
-        Outcome::NoSetpointStream => (LinkOutcomeKind::NoSetpointStream, 0),
-    };
-    let mut msg = Header::captured_at(now_ns);
-    msg.push_stage(Stage::Px4Link, now_ns, now_ns);
-    LinkOutcome {
-        msg,
-        id,
-        kind,
-        outcome: code as u32,
-        result,
-        reserved: 0,
-    }
+    /// px4-link (its node: requests, safety orders, setpoints, the vehicle state).
+    pub link: LinkNode,
 }
 
 /// How the run ended, as the simulator saw it.
@@ -124,6 +84,7 @@ pub fn run(
     pipe: &mut Pipeline,
     duration_s: f64,
     eval: &mut Evaluator,
+    rec: &mut Recording,
     mut progress: impl FnMut(f64, MissionState, Option<f64>),
 ) -> Result<(End, RunStats)> {
     let mut stats = RunStats::default();
@@ -152,13 +113,8 @@ pub fn run(
     let mut map_cells = vec![0u8; pipe.mapper.map().cell_count()];
     let mut map_header: Option<OccupancyMapHeader> = None;
     let mut history = StateHistory::new(100, 200_000_000);
-    let mut ids = LinkIds {
-        ids: VecDeque::new(),
-    };
     let mut wire = Vec::with_capacity(280);
-    let mut seq_out = 0u8;
     let mut decoded: Vec<(MavHeader, MavMessage)> = Vec::with_capacity(8);
-    let mut last_state_ns = 0u64;
     let mut vehicle: Option<VehicleState> = None;
     let mut goal: Option<PlannerGoal> = None;
     let mut traj_pending: VecDeque<(u64, Trajectory)> = VecDeque::new();
@@ -181,19 +137,10 @@ pub fn run(
         }
 
         // Companion -> autopilot, through the wire format.
-        let header = pipe.link.header(0);
         let out: Vec<MavMessage> = pipe.link.poll(now).to_vec();
         for m in &out {
             wire.clear();
-            encode(
-                &mut wire,
-                MavHeader {
-                    sequence: seq_out,
-                    ..header
-                },
-                m,
-            )?;
-            seq_out = seq_out.wrapping_add(1);
+            encode(&mut wire, pipe.link.next_header(), m)?;
             decoded.clear();
             decode_datagram(&wire, &mut decoded);
             for (h, msg) in &decoded {
@@ -212,21 +159,18 @@ pub fn run(
             };
             encode(&mut wire, h, m)?;
             decoded.clear();
-            if decode_datagram(&wire, &mut decoded) > 0 {
-                pipe.link.parse_error();
-            }
+            pipe.link
+                .on_parse_errors(decode_datagram(&wire, &mut decoded));
             for (h, msg) in &decoded {
                 pipe.link.on_message(now, h, msg);
             }
         }
-        for (_, o) in pipe.link.take_outcomes() {
-            let (id, kind) = ids.ids.pop_front().unwrap_or((0, 0));
-            pipe.fsm.on_outcome(&outcome_msg(now, id, kind, o));
+        for o in pipe.link.take_outcomes() {
+            rec.write("/px4/outcome", now, &o)?;
+            pipe.fsm.on_outcome(&o);
         }
-        if let Some(state) = pipe.link.vehicle_state(now)
-            && state.msg.capture_ns != last_state_ns
-        {
-            last_state_ns = state.msg.capture_ns;
+        if let Some(state) = pipe.link.vehicle_state(now) {
+            rec.write("/vehicle/state", now, &state)?;
             pipe.fsm.on_vehicle_state(now, &state);
             pipe.mapper.push_state_msg(&state);
             if let Some(tp) = depth_map::timed_pose_of(&state) {
@@ -235,6 +179,7 @@ pub fn run(
             vehicle = Some(state);
         }
         for t in &report.truth {
+            rec.write("/sim/truth", now, t)?;
             eval.on_truth(t, pipe.fsm.state());
             if ended.is_none() && is_crash(t) {
                 ended = Some((End::Crashed, now));
@@ -267,6 +212,7 @@ pub fn run(
                 let mut msg = Header::captured_at(capture_ns);
                 msg.push_stage(Stage::ArucoPnp, now, now);
                 if let Some(obs) = est.observation(msg) {
+                    rec.write("/pad/observation", now, &obs)?;
                     deliver_observation(pipe, now, &obs, &mut stats);
                 }
             }
@@ -305,26 +251,19 @@ pub fn run(
             next_fsm = now + FSM_PERIOD_NS;
             let o = pipe.fsm.tick(now);
             if let Some(sp) = o.setpoint {
-                pipe.link.set_setpoint(now, &sp);
+                rec.write("/fsm/setpoint", now, &sp)?;
+                pipe.link.on_setpoint(now, &sp);
             }
             for r in &o.requests {
-                match request_of(r) {
-                    Some(req) => {
-                        ids.ids.push_back((r.id, r.kind));
-                        pipe.link.request(req);
-                    }
-                    None => pipe.fsm.on_outcome(&LinkOutcome {
-                        id: r.id,
-                        kind: r.kind,
-                        outcome: LinkOutcomeKind::Invalid as u32,
-                        ..LinkOutcome::default()
-                    }),
-                }
+                rec.write("/px4/request", now, r)?;
+                pipe.link.on_request(now, r);
             }
             if let Some(g) = o.goal {
+                rec.write("/planner/goal", now, &g)?;
                 goal = Some(g);
             }
             if let Some(st) = o.status {
+                rec.write("/fsm/status", now, &st)?;
                 let s = MissionState::from_raw(st.state).unwrap_or(MissionState::Idle);
                 if ended.is_none() {
                     match s {
@@ -360,7 +299,9 @@ pub fn run(
                     .planner
                     .step(now, &state, goal.as_ref(), view.as_ref(), &v.msg);
                 let ms = t0.elapsed().as_secs_f64() * 1e3;
-                if o.stats.is_some() {
+                if let Some(mut st) = o.stats {
+                    st.planning_ms = ms;
+                    rec.write("/planner/stats", now, &st)?;
                     stats.planning_ms.push(ms);
                 }
                 if let Some(t) = o.trajectory {
@@ -372,6 +313,7 @@ pub fn run(
         }
         while traj_pending.front().is_some_and(|t| t.0 <= now) {
             if let Some((_, t)) = traj_pending.pop_front() {
+                rec.write("/planner/trajectory", now, &t)?;
                 pipe.fsm.on_trajectory(&t);
             }
         }
@@ -392,28 +334,27 @@ pub fn run(
 
 fn deliver_observation(pipe: &mut Pipeline, now: u64, obs: &PadObservation, stats: &mut RunStats) {
     stats.observations += 1;
-    let u = pipe.fsm.on_observation(now, obs);
-    if std::env::var_os("LANDING_DEBUG_OBS").is_some() {
-        let st = pipe.fsm.status(now);
-        eprintln!(
-            "obs t={:.3} {:?} {:?} cam_z={:.2} n={} state={} est={:?} vel={:?}",
-            now as f64 * 1e-9,
-            u,
-            obs.world_from_pad.translation,
-            obs.camera_from_pad.translation[2],
-            obs.marker_count,
-            st.state,
-            st.pad_position,
-            st.pad_velocity
-        );
-    }
+    pipe.fsm.on_observation(now, obs);
 }
 
 fn is_crash(t: &TruthEvent) -> bool {
     t.kind == ipc_types::msg::TruthKind::Crash as u32
 }
 
-/// The default px4-link settings (the process's defaults).
-pub fn link() -> Px4Link {
-    Px4Link::new(LinkSettings::default())
+/// px4-link's node with the process's default settings.
+pub fn link() -> LinkNode {
+    LinkNode::new(LinkSettings::default())
+}
+
+/// An optional MCAP recording of every message the stages exchange (simulated time).
+pub struct Recording(pub Option<Recorder>);
+
+impl Recording {
+    /// Records `msg` on `topic` when recording.
+    pub fn write<T: Recordable>(&mut self, topic: &str, now_ns: u64, msg: &T) -> Result<()> {
+        if let Some(r) = &mut self.0 {
+            r.write_message(topic, now_ns, msg)?;
+        }
+        Ok(())
+    }
 }

@@ -11,13 +11,19 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use fsm::Transition;
-use ipc_types::msg::{FsmStatus, MissionState, PlannerStats, TruthEvent, TruthKind, TruthState};
+use iceoryx2::prelude::ZeroCopySend;
+use ipc_types::msg::{
+    FsmStatus, LinkOutcome, LinkRequest, MissionState, PadObservation, PlannerGoal, PlannerStats,
+    Setpoint, Trajectory, TruthEvent, TruthKind, TruthState, VehicleState,
+};
+use ipc_types::runtime::ipc::Subscriber;
 use ipc_types::runtime::ipc::{Wake, run_wait_loop};
 use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
 use sim::scenario::LoadedScenario;
 
 use crate::procs::{Children, binary, free_udp_port};
+use crate::record::{Recordable, Recorder};
 use crate::run_eval::{Evaluator, Sample};
 use crate::run_lockstep::{End, RunStats};
 
@@ -40,6 +46,7 @@ pub struct Launch<'a> {
 pub fn run(
     launch: &Launch<'_>,
     eval: &mut Evaluator,
+    recorder: &mut Option<Recorder>,
     mut progress: impl FnMut(f64, MissionState, Option<f64>),
 ) -> Result<(End, RunStats, Vec<Transition>)> {
     let prefix = IpcPrefix::unique("run");
@@ -49,6 +56,10 @@ pub fn run(
     let truth_state = ipc.subscriber::<TruthState>(services::SIM_TRUTH_STATE)?;
     let status = ipc.subscriber::<FsmStatus>(services::FSM_STATUS)?;
     let planner_stats = ipc.subscriber::<PlannerStats>(services::PLANNER_STATS)?;
+    let taps = match recorder {
+        Some(_) => Some(Taps::open(&ipc)?),
+        None => None,
+    };
 
     let scn = launch.scenario;
     let (sim_port, link_port) = (free_udp_port()?, free_udp_port()?);
@@ -71,27 +82,53 @@ pub fn run(
     let stages: Vec<(&str, Vec<&str>)> = vec![
         (
             "px4-link",
-            vec!["--config", &config, "--link", &link_arg, "--remote", &sim_addr],
+            vec![
+                "--config", &config, "--link", &link_arg, "--remote", &sim_addr,
+            ],
         ),
         (
             "camera-ingest",
-            vec!["--config", &config, "--deploy-dir", &deploy, "--source", "sim", "--camera", &calibration],
+            vec![
+                "--config",
+                &config,
+                "--deploy-dir",
+                &deploy,
+                "--source",
+                "sim",
+                "--camera",
+                &calibration,
+            ],
         ),
         (
             "aruco-pnp",
-            vec!["--config", &config, "--deploy-dir", &deploy, "--camera", &calibration, "--pad", &pad],
+            vec![
+                "--config",
+                &config,
+                "--deploy-dir",
+                &deploy,
+                "--camera",
+                &calibration,
+                "--pad",
+                &pad,
+            ],
         ),
         ("depth-map", vec!["--config", &config, "--input", "sim"]),
         ("planner", vec!["--config", &config]),
-        (
-            "fsm",
-            vec!["--config", &config, &preset, &commit],
-        ),
+        ("fsm", vec!["--config", &config, &preset, &commit]),
         (
             "sim",
             vec![
-                "--scenario", &scenario_arg, "--seed", &seed, "--duration-s", &duration,
-                "--deploy-dir", &deploy, "--mavlink-listen", &sim_addr, "--mavlink-remote",
+                "--scenario",
+                &scenario_arg,
+                "--seed",
+                &seed,
+                "--duration-s",
+                &duration,
+                "--deploy-dir",
+                &deploy,
+                "--mavlink-listen",
+                &sim_addr,
+                "--mavlink-remote",
                 &link_addr,
             ],
         ),
@@ -129,14 +166,30 @@ pub fn run(
     let mut next_progress = 0.0f64;
     let wall_limit = Instant::now() + Duration::from_secs_f64(scn.scenario.duration_s + 15.0);
     let start_ns = monotonic_ns();
+    // A recording wakes on every recorded topic: subscriber queues are short.
+    let mut listeners = vec![truth_state.listener(), status.listener(), truth.listener()];
+    if let Some(t) = &taps {
+        listeners.extend([
+            t.states.listener(),
+            t.observations.listener(),
+            t.trajectories.listener(),
+            t.setpoints.listener(),
+            t.goals.listener(),
+            t.requests.listener(),
+            t.outcomes.listener(),
+        ]);
+    }
     run_wait_loop(
-        &[truth_state.listener(), status.listener(), truth.listener()],
+        &listeners,
         &[],
         Some(Duration::from_millis(100)),
         |_wake: Wake| {
             let step = (|| -> Result<()> {
                 while let Some(s) = status.receive()? {
                     let st = *s.payload();
+                    if let Some(r) = recorder.as_mut() {
+                        r.write_message("/fsm/status", monotonic_ns(), &st)?;
+                    }
                     let state = MissionState::from_raw(st.state).unwrap_or(MissionState::Idle);
                     pad_estimate = (st.pad_valid != 0).then_some(st.pad_position);
                     if state != phase {
@@ -149,7 +202,13 @@ pub fn run(
                         phase = state;
                     }
                 }
+                if let (Some(t), Some(r)) = (&taps, recorder.as_mut()) {
+                    t.record(r, monotonic_ns())?;
+                }
                 while let Some(p) = planner_stats.receive()? {
+                    if let Some(r) = recorder.as_mut() {
+                        r.write_message("/planner/stats", monotonic_ns(), p.payload())?;
+                    }
                     stats.planning_ms.push(p.planning_ms);
                     if p.success != 0 {
                         stats.plans += 1;
@@ -157,6 +216,9 @@ pub fn run(
                 }
                 while let Some(t) = truth.receive()? {
                     let t = *t.payload();
+                    if let Some(r) = recorder.as_mut() {
+                        r.write_message("/sim/truth", monotonic_ns(), &t)?;
+                    }
                     eval.on_truth(&t, phase);
                     if t.kind == TruthKind::Crash as u32 && ended.is_none() {
                         ended = Some((End::Crashed, Instant::now()));
@@ -225,4 +287,52 @@ pub fn run(
         return Err(e);
     }
     Ok((result.unwrap_or(End::Timeout), stats, transitions))
+}
+
+/// Subscribers to the pipeline topics a recording keeps (besides those the run watches).
+struct Taps {
+    states: Subscriber<VehicleState>,
+    observations: Subscriber<PadObservation>,
+    trajectories: Subscriber<Trajectory>,
+    setpoints: Subscriber<Setpoint>,
+    goals: Subscriber<PlannerGoal>,
+    requests: Subscriber<LinkRequest>,
+    outcomes: Subscriber<LinkOutcome>,
+}
+
+impl Taps {
+    fn open(ipc: &Ipc) -> Result<Self> {
+        Ok(Self {
+            states: ipc.subscriber(services::VEHICLE_STATE)?,
+            observations: ipc.subscriber(services::PAD_OBSERVATION)?,
+            trajectories: ipc.subscriber(services::PLANNER_TRAJECTORY)?,
+            setpoints: ipc.subscriber(services::FSM_SETPOINT)?,
+            goals: ipc.subscriber(services::PLANNER_GOAL)?,
+            requests: ipc.subscriber(services::PX4_REQUEST)?,
+            outcomes: ipc.subscriber(services::PX4_OUTCOME)?,
+        })
+    }
+
+    /// Everything that arrived since the last call, stamped `now_ns`.
+    fn record(&self, r: &mut Recorder, now_ns: u64) -> Result<()> {
+        fn drain<T: Recordable + std::fmt::Debug + Copy + ZeroCopySend>(
+            sub: &Subscriber<T>,
+            r: &mut Recorder,
+            topic: &str,
+            now_ns: u64,
+        ) -> Result<()> {
+            while let Some(s) = sub.receive()? {
+                r.write_message(topic, now_ns, s.payload())?;
+            }
+            Ok(())
+        }
+        drain(&self.states, r, "/vehicle/state", now_ns)?;
+        drain(&self.observations, r, "/pad/observation", now_ns)?;
+        drain(&self.trajectories, r, "/planner/trajectory", now_ns)?;
+        drain(&self.setpoints, r, "/fsm/setpoint", now_ns)?;
+        drain(&self.goals, r, "/planner/goal", now_ns)?;
+        drain(&self.requests, r, "/px4/request", now_ns)?;
+        drain(&self.outcomes, r, "/px4/outcome", now_ns)?;
+        Ok(())
+    }
 }

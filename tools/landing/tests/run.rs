@@ -1,0 +1,217 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! `landing run`: whole missions in the simulator, as a user runs them. Every scenario of
+//! the paper lands on its pad within 10 cm (the simulator's ground truth measures it),
+//! in one process and with every stage its own OS process; a refusing or silent
+//! autopilot ends in a defined, logged landing in place; recordings and plots are files a
+//! user can open.
+
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+fn landing(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_landing"))
+        .args(args)
+        .env("LANDING_LOG", "warn")
+        .output()
+        .expect("run landing")
+}
+
+fn summary(out: &Output) -> Value {
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(stdout.trim()).unwrap_or_else(|e| {
+        panic!(
+            "not one JSON object ({e}): {stdout}\nstderr: {}",
+            String::from_utf8_lossy(&out.stderr)
+        )
+    })
+}
+
+fn lands(args: &[&str]) -> Value {
+    let out = landing(args);
+    let s = summary(&out);
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(s["outcome"], "landed", "{s}\n{log}");
+    assert!(out.status.success(), "{log}");
+    let err = s["touchdown_error_m"].as_f64().unwrap();
+    assert!(err <= 0.10, "touchdown {err} m from the pad centre\n{log}");
+    assert_eq!(s["collisions"].as_u64(), Some(0), "{s}");
+    s
+}
+
+fn temp(name: &str, text: &str) -> String {
+    let dir = std::env::temp_dir().join(format!("landing-run-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p.to_str().unwrap().to_string()
+}
+
+#[test]
+fn paper_sim_lands_on_the_moving_pad_in_lockstep() {
+    let s = lands(&["run", "--json"]);
+    assert_eq!(s["scenario"], "paper-sim");
+    // The paper's vehicle: 2.8 km/h.
+    let v = s["target_speed_kmh"].as_f64().unwrap();
+    assert!((v - 2.8).abs() < 0.1, "{v}");
+    for key in [
+        "seed",
+        "touchdown_rel_speed_mps",
+        "flight_time_s",
+        "distance_m",
+        "uav_max_speed_kmh",
+        "uav_avg_speed_kmh",
+        "planning_time_ms_p50",
+        "planning_time_ms_max",
+        "replans",
+    ] {
+        assert!(s[key].is_number(), "{key}: {s}");
+    }
+}
+
+#[test]
+fn indoor_static_lands() {
+    lands(&["run", "--scenario", "indoor-static", "--json"]);
+}
+
+#[test]
+fn indoor_moving_lands() {
+    lands(&["run", "--scenario", "indoor-moving", "--json"]);
+}
+
+#[test]
+fn outdoor_1_lands_in_wind() {
+    lands(&["run", "--scenario", "outdoor-1", "--json"]);
+}
+
+#[test]
+fn outdoor_2_lands_in_wind() {
+    lands(&["run", "--scenario", "outdoor-2", "--json"]);
+}
+
+#[test]
+fn obstacle_demo_lands_without_touching_the_box() {
+    let s = lands(&["run", "--scenario", "obstacle-demo", "--json"]);
+    assert!(s["replans"].as_u64().unwrap() >= 1, "{s}");
+}
+
+#[test]
+fn paper_sim_lands_with_every_stage_its_own_process() {
+    let logs = std::env::temp_dir().join(format!("landing-run-logs-{}", std::process::id()));
+    let logs = logs.to_str().unwrap();
+    let s = lands(&["run", "--processes", "--json", "--log-dir", logs]);
+    assert_eq!(s["scenario"], "paper-sim");
+    for p in [
+        "sim",
+        "camera-ingest",
+        "aruco-pnp",
+        "depth-map",
+        "planner",
+        "fsm",
+        "px4-link",
+    ] {
+        assert!(
+            std::path::Path::new(logs)
+                .join(format!("{p}.log"))
+                .is_file(),
+            "{p}.log"
+        );
+    }
+}
+
+#[test]
+fn a_recording_and_the_plots_are_written_and_readable() {
+    let dir = std::env::temp_dir().join(format!("landing-run-plots-{}", std::process::id()));
+    let rec = dir.join("run.mcap");
+    std::fs::create_dir_all(&dir).unwrap();
+    let (dir_s, rec_s) = (dir.to_str().unwrap(), rec.to_str().unwrap());
+    lands(&[
+        "run",
+        "--scenario",
+        "indoor-moving",
+        "--json",
+        "--record",
+        rec_s,
+        "--plot",
+        dir_s,
+    ]);
+    for f in ["top.png", "3d.png"] {
+        let meta = std::fs::metadata(dir.join(f)).unwrap();
+        assert!(meta.len() > 10_000, "{f}: {} bytes", meta.len());
+    }
+    let info = landing(&["mcap", "info", rec_s, "--json"]);
+    assert!(info.status.success());
+    let v: Value = serde_json::from_slice(&info.stdout).unwrap();
+    let topics: Vec<&str> = v["channels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["topic"].as_str().unwrap())
+        .collect();
+    for t in [
+        "/vehicle/state",
+        "/pad/observation",
+        "/fsm/setpoint",
+        "/fsm/status",
+        "/px4/request",
+        "/px4/outcome",
+        "/sim/truth",
+    ] {
+        assert!(topics.contains(&t), "{t} missing: {topics:?}");
+    }
+}
+
+/// indoor-static with a `[faults]` table added.
+fn faulty(name: &str, faults: &str) -> String {
+    let base = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../deploy/scenarios/indoor-static.toml"
+    ))
+    .unwrap();
+    let text = base.replace("name = \"indoor-static\"", &format!("name = \"{name}\""))
+        + "\n[faults]\n"
+        + faults
+        + "\n";
+    temp(&format!("{name}.toml"), &text)
+}
+
+#[test]
+fn an_autopilot_that_refuses_to_arm_ends_the_mission_on_the_ground() {
+    let scn = faulty("no-arm", "reject_arming = true");
+    let out = landing(&["run", "--scenario", &scn, "--json"]);
+    let s = summary(&out);
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(s["outcome"], "safe_landed", "{s}\n{log}");
+    assert_eq!(out.status.code(), Some(1));
+    assert!(log.contains("Arm failed 3 times"), "{log}");
+}
+
+#[test]
+fn an_autopilot_that_refuses_offboard_lands_in_place() {
+    let scn = faulty("no-offboard", "reject_offboard = true");
+    let out = landing(&["run", "--scenario", &scn, "--json"]);
+    let s = summary(&out);
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(s["outcome"], "safe_landed", "{s}\n{log}");
+    assert!(log.contains("Offboard failed 3 times"), "{log}");
+}
+
+#[test]
+fn telemetry_that_stops_in_flight_ends_in_a_landing_in_place() {
+    let scn = faulty("silent", "telemetry_stop_s = 6.0");
+    let out = landing(&["run", "--scenario", &scn, "--json"]);
+    let s = summary(&out);
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(s["outcome"], "safe_landed", "{s}\n{log}");
+    assert!(log.contains("telemetry lost"), "{log}");
+}
+
+#[test]
+fn an_unknown_scenario_is_one_line_and_exit_2() {
+    let out = landing(&["run", "--scenario", "no-such-scenario"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    let lines: Vec<_> = err.lines().filter(|l| !l.starts_with("run:")).collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(lines[0].contains("no-such-scenario"), "{err}");
+}
