@@ -27,9 +27,12 @@ bootstrap:
 build: bootstrap
 	$(CARGO) build --release --workspace
 
-# Until the mission exists, the demo runs the IPC benchmark.
+# The paper's simulated mission: take off, find the pad on its moving vehicle, track
+# it, land on it; then the same with every stage its own OS process. Plots and an MCAP
+# recording go to demo-out/.
 demo: build
-	./target/release/landing bench ipc
+	./target/release/landing run --scenario paper-sim --plot demo-out --record demo-out/paper-sim.mcap
+	./target/release/landing run --scenario paper-sim --processes --log-dir demo-out/logs
 
 lint: bootstrap
 	@if $(CARGO) fmt --version >/dev/null 2>&1; then $(CARGO) fmt --all -- --check; else echo "rustfmt not installed: format check skipped"; fi
@@ -49,3 +52,4 @@ peers:
 
 bench: build
 	./target/release/landing bench ipc
+	./target/release/landing bench planner
