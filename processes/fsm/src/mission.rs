@@ -244,10 +244,10 @@ impl Fsm {
         if count < 4 || !(t.knot_interval_s.is_finite() && t.knot_interval_s > 0.0) {
             return;
         }
-        if let Some((id, _, _)) = &self.trajectory {
-            if t.id <= *id {
-                return;
-            }
+        if let Some((id, _, _)) = &self.trajectory
+            && t.id <= *id
+        {
+            return;
         }
         // Only plans made for the current goal, or an emergency stop.
         if t.start_ns < self.goal_epoch_ns && t.emergency == 0 {
@@ -263,17 +263,18 @@ impl Fsm {
 
     /// An answer from px4-link.
     pub fn on_outcome(&mut self, o: &LinkOutcome) {
-        if let Some(p) = &mut self.pending {
-            if p.id == o.id && p.sent_ns.is_some() {
-                let kind = match o.outcome {
-                    1 => LinkOutcomeKind::Accepted,
-                    2 => LinkOutcomeKind::Rejected,
-                    3 => LinkOutcomeKind::TimedOut,
-                    4 => LinkOutcomeKind::NoSetpointStream,
-                    _ => LinkOutcomeKind::Invalid,
-                };
-                p.answer = Some((kind, o.result));
-            }
+        if let Some(p) = &mut self.pending
+            && p.id == o.id
+            && p.sent_ns.is_some()
+        {
+            let kind = match o.outcome {
+                1 => LinkOutcomeKind::Accepted,
+                2 => LinkOutcomeKind::Rejected,
+                3 => LinkOutcomeKind::TimedOut,
+                4 => LinkOutcomeKind::NoSetpointStream,
+                _ => LinkOutcomeKind::Invalid,
+            };
+            p.answer = Some((kind, o.result));
         }
     }
 

@@ -157,7 +157,7 @@ pub fn run(args: &RunArgs) -> Result<bool> {
         if tty {
             eprint!("\r{line}   ");
             let _ = std::io::stderr().flush();
-        } else if (t as u64) % 10 == 0 {
+        } else if (t as u64).is_multiple_of(10) {
             eprintln!("{line}");
         }
     };
@@ -180,8 +180,8 @@ pub fn run(args: &RunArgs) -> Result<bool> {
         r
     } else {
         let mut sim = Simulator::new(&scn, seed).context("building the simulator")?;
-        let calibration = CameraCalibration::load(&scn.calibration_path())?;
-        let pad = PadModel::load(&scn.pad_path())?;
+        let calibration = CameraCalibration::load(scn.calibration_path())?;
+        let pad = PadModel::load(scn.pad_path())?;
         let estimator = PadEstimator::new(
             calibration,
             pad,

@@ -110,9 +110,7 @@ impl Evaluator {
         let flown = |t: &&Touchdown| t.phase != MissionState::Idle;
         self.touchdowns
             .iter()
-            .filter(flown)
-            .filter(|t| t.on_pad)
-            .next_back()
-            .or_else(|| self.touchdowns.iter().filter(flown).next_back())
+            .rfind(|t| flown(t) && t.on_pad)
+            .or_else(|| self.touchdowns.iter().rfind(flown))
     }
 }

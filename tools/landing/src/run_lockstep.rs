@@ -238,10 +238,10 @@ pub fn run(
                     scale_m: 0.001,
                 },
             )?;
-            if pipe.mapper.process(&view, capture_ns).is_ok() {
-                if let Ok(h) = pipe.mapper.map().write_wire(&mut map_cells) {
-                    map_header = Some(h);
-                }
+            if pipe.mapper.process(&view, capture_ns).is_ok()
+                && let Ok(h) = pipe.mapper.map().write_wire(&mut map_cells)
+            {
+                map_header = Some(h);
             }
             depth_pool.push(buf);
         }
@@ -268,12 +268,11 @@ pub fn run(
                 if ended.is_none() {
                     match s {
                         MissionState::Landed => ended = Some((End::Landed, now)),
-                        MissionState::SafeLand | MissionState::Abort => {
+                        MissionState::SafeLand | MissionState::Abort
                             if sim.world().contact() != sim::quadrotor::ContactState::Airborne
-                                && !sim.world().armed()
-                            {
-                                ended = Some((End::SafeLanded, now));
-                            }
+                                && !sim.world().armed() =>
+                        {
+                            ended = Some((End::SafeLanded, now));
                         }
                         _ => {}
                     }

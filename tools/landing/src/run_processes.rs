@@ -262,11 +262,11 @@ pub fn run(
                     _ => {}
                 }
             }
-            if let Some((end, at)) = ended {
-                if at.elapsed() >= Duration::from_secs(1) {
-                    result = Some(end);
-                    return false;
-                }
+            if let Some((end, at)) = ended
+                && at.elapsed() >= Duration::from_secs(1)
+            {
+                result = Some(end);
+                return false;
             }
             if t_s >= scn.scenario.duration_s || Instant::now() >= wall_limit {
                 result = Some(End::Timeout);
