@@ -8,6 +8,7 @@ pub mod clock;
 pub mod config;
 pub mod ipc;
 pub mod logging;
+pub mod process_main;
 pub mod shutdown;
 
 pub use clock::{Clock, MonotonicClock, SimClock, monotonic_ns};
@@ -16,3 +17,4 @@ pub use ipc::{
     Heartbeat, Ipc, IpcError, IpcPrefix, LoopExit, MessageHeader, PeriodicWait, Publisher,
     SlicePublisher, SliceSubscriber, Subscriber, Wake, run_wait_loop,
 };
+pub use process_main::process_main;

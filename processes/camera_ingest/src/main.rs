@@ -23,7 +23,7 @@ use clap::Parser;
 use ipc_types::msg::{CameraFrameHeader, Stage};
 use ipc_types::runtime::config::{self, deploy_dir};
 use ipc_types::runtime::{
-    Heartbeat, Ipc, IpcError, IpcPrefix, PeriodicWait, SlicePublisher, logging, monotonic_ns,
+    Heartbeat, Ipc, IpcError, IpcPrefix, PeriodicWait, SlicePublisher, monotonic_ns,
 };
 use ipc_types::services;
 use opencv::core::Mat;
@@ -70,15 +70,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    logging::init("info");
-    match run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::from(2)
-        }
-    }
+    ipc_types::runtime::process_main("info", run)
 }
 
 /// Flags, the stack file and defaults, resolved.

@@ -12,14 +12,11 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, anyhow};
 use clap::Parser;
-use clap::error::ErrorKind;
 use depth_map::{DepthError, DepthMapConfig, DepthMapper, DepthView, Input};
 use ipc_types::msg::{DepthFrameHeader, Header, OccupancyMapHeader, Stage, VehicleState};
 use ipc_types::runtime::config::{IpcConfig, load_process_or_default};
 use ipc_types::runtime::ipc::{Wake, run_wait_loop};
-use ipc_types::runtime::{
-    Ipc, IpcError, IpcPrefix, SlicePublisher, Subscriber, logging, monotonic_ns,
-};
+use ipc_types::runtime::{Ipc, IpcError, IpcPrefix, SlicePublisher, Subscriber, monotonic_ns};
 use ipc_types::services;
 
 /// The iceoryx2 node and heartbeat name.
@@ -43,28 +40,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args = match Args::try_parse() {
-        Ok(a) => a,
-        Err(e) if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) => {
-            let _ = e.print();
-            return ExitCode::SUCCESS;
-        }
-        Err(e) => {
-            // One line: what is wrong; --help has the rest.
-            let text = e.to_string();
-            let first = text.lines().next().unwrap_or("error: bad arguments");
-            eprintln!("{first} (see --help)");
-            return ExitCode::from(2);
-        }
-    };
-    logging::init("info");
-    match run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::from(2)
-        }
-    }
+    ipc_types::runtime::process_main("info", run)
 }
 
 /// Losses the process counts besides the mapper's own counters.

@@ -18,7 +18,7 @@ use ipc_types::msg::{
 };
 use ipc_types::runtime::config::{IpcConfig, Validate, load_process_or_default};
 use ipc_types::runtime::ipc::{Wake, run_wait_loop};
-use ipc_types::runtime::{Ipc, IpcPrefix, logging, monotonic_ns};
+use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
 
 /// Flies the landing mission: take off, find the pad, track it, descend, land on it.
@@ -42,15 +42,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    logging::init("info");
-    match run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::from(2)
-        }
-    }
+    ipc_types::runtime::process_main("info", run)
 }
 
 fn parse_xyz(s: &str) -> Option<[f64; 3]> {

@@ -16,7 +16,7 @@ use ipc_types::msg::{
 };
 use ipc_types::runtime::config::{IpcConfig, load_process_or_default};
 use ipc_types::runtime::ipc::{Wake, run_wait_loop};
-use ipc_types::runtime::{Ipc, IpcPrefix, logging, monotonic_ns};
+use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
 use nalgebra::Vector3;
 use planner::{CellView, PlannerConfig, PlannerNode, State};
@@ -34,15 +34,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    logging::init("info");
-    match run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::from(2)
-        }
-    }
+    ipc_types::runtime::process_main("info", run)
 }
 
 /// How often the replanning policy is consulted when no message wakes the loop.

@@ -16,7 +16,7 @@ use anyhow::{Context, Result};
 use clap::Parser;
 use ipc_types::msg::{LinkOutcome, LinkRequest, SafetyCommand, Setpoint, VehicleState};
 use ipc_types::runtime::config::{IpcConfig, load_process_or_default};
-use ipc_types::runtime::{Ipc, IpcPrefix, Validate, logging, monotonic_ns};
+use ipc_types::runtime::{Ipc, IpcPrefix, Validate, monotonic_ns};
 use ipc_types::services;
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
@@ -46,15 +46,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    logging::init("info");
-    match run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::from(2)
-        }
-    }
+    ipc_types::runtime::process_main("info", run)
 }
 
 /// How long one receive may block: the loop's period when the autopilot is quiet.

@@ -17,7 +17,7 @@ use ipc_types::msg::{
 };
 use ipc_types::runtime::config::deploy_dir;
 use ipc_types::runtime::ipc::SliceSample;
-use ipc_types::runtime::{Ipc, IpcPrefix, logging, monotonic_ns};
+use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::runtime::{MessageHeader, SlicePublisher};
 use ipc_types::services;
 use sim::camera::PixelFormat;
@@ -56,15 +56,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    logging::init("info");
-    match run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::from(2)
-        }
-    }
+    ipc_types::runtime::process_main("info", run)
 }
 
 fn run(args: &Args) -> Result<()> {
