@@ -104,21 +104,30 @@ fn run(args: &Args) -> Result<()> {
                 Wake::Data(_) => {
                     // States first: the frame's capture time may need the newest one.
                     drain_states(&states, &mut history, &mut counters);
+                    // Only the newest frame: when this process lags, an older frame
+                    // would only add latency to the pose the fsm steers by.
+                    let mut newest = None;
                     loop {
-                        let sample = match frames.receive() {
-                            Ok(Some(s)) => s,
+                        match frames.receive() {
+                            Ok(Some(s)) => {
+                                if newest.replace(s).is_some() {
+                                    counters.skipped += 1;
+                                }
+                            }
                             Ok(None) => break,
                             Err(e) => {
                                 failure = Some(anyhow::Error::from(e));
                                 return false;
                             }
-                        };
+                        }
+                    }
+                    if let Some(sample) = newest {
                         let enter = monotonic_ns();
                         let header = *sample.user_header();
                         let Some(frame) = frame_of(&header, sample.payload()) else {
                             counters.bad_frames += 1;
                             tracing::debug!("frame with an inconsistent header dropped");
-                            continue;
+                            return true;
                         };
                         let body = history.at(header.msg.capture_ns).ok();
                         if body.is_none() {
@@ -160,6 +169,7 @@ fn run(args: &Args) -> Result<()> {
                             region_searches = c.region_searches,
                             fallbacks = c.fallbacks,
                             no_pad = counters.no_pad,
+                            skipped = counters.skipped,
                             bad_frames = counters.bad_frames,
                             no_state = counters.no_state,
                             bad_states = counters.bad_states,
@@ -182,6 +192,8 @@ fn run(args: &Args) -> Result<()> {
 /// What the process counts besides the estimator's own counters.
 #[derive(Debug, Default)]
 struct Counts {
+    /// Frames passed over because a newer one was already waiting.
+    skipped: u64,
     no_pad: u64,
     bad_frames: u64,
     no_state: u64,

@@ -111,7 +111,7 @@ impl Default for FsmConfig {
             commit_height_m: 0.6,
             land_align_m: 0.08,
             land_speed_gate_m_s: 0.3,
-            land_rate_m_s: 0.5,
+            land_rate_m_s: 0.7,
             xy_integral_gain: 0.0,
             xy_integral_max_m: 0.5,
             go_around_m: 0.4,

@@ -849,13 +849,13 @@ impl Fsm {
             }
             return;
         }
-        // Full rate while within the commit gate, slowing to a hover at twice it: the
-        // last half metre is where a lagging vehicle would miss the pad.
+        // Full rate while within half the commit gate, slowing to a hover at the gate:
+        // the last half metre is where a lagging vehicle would miss the pad.
         let gate = self.cfg.land_align_m;
         let rate = if height < 0.1 {
             self.cfg.land_rate_m_s
         } else {
-            self.cfg.land_rate_m_s * ((2.0 * gate - e) / gate).clamp(0.0, 1.0)
+            self.cfg.land_rate_m_s * ((gate - e) / (0.5 * gate)).clamp(0.0, 1.0)
         };
         self.z_cmd = (self.z_cmd - rate * dt).max(est.position.z - 0.3);
         self.integrate_xy(&est, dt);

@@ -3,7 +3,9 @@
 //!
 //! Each library gets its input when the process would: camera and depth frames at their
 //! publish time (capture + sensor latency), telemetry when the autopilot sends it, the
-//! planner's trajectory after the time the plan really took on this machine. MAVLink
+//! planner's trajectory one planner period (20 ms) after the call (the time the plan
+//! really took is measured and reported, not simulated: a seed flies the same on every
+//! machine). MAVLink
 //! goes through its wire encoding both ways, as on a socket. The pipeline sees only
 //! telemetry and sensor data; the ground truth goes to the evaluator only.
 
@@ -280,7 +282,7 @@ pub fn run(
             }
         }
 
-        // The planner, its output delayed by the time planning really took.
+        // The planner; its output arrives one planner period later.
         if now >= next_planner {
             next_planner = now + PLANNER_PERIOD_NS;
             if let Some(v) = &vehicle {
@@ -305,7 +307,9 @@ pub fn run(
                 }
                 if let Some(t) = o.trajectory {
                     stats.plans += 1;
-                    let ready = now + (ms * 1e6) as u64;
+                    // One planner period later: the plan's wall time is reported, not
+                    // simulated, so a seed gives the same flight on every machine.
+                    let ready = now + PLANNER_PERIOD_NS;
                     traj_pending.push_back((ready, t));
                 }
             }
