@@ -46,11 +46,15 @@ pub struct FsmConfig {
     pub land_speed_gate_m_s: f64,
     /// Touchdown descent rate, m/s.
     pub land_rate_m_s: f64,
-    /// Integral gain on the horizontal error over the pad, 1/s: removes the steady lag a
-    /// wind or the pad's motion leaves in the autopilot's position loop.
-    pub xy_integral_gain: f64,
-    /// Largest integral correction, m.
-    pub xy_integral_max_m: f64,
+    /// Land: height above the pad where the vehicle waits to be right over it, m.
+    pub flare_height_m: f64,
+    /// Land: horizontal error below which the vehicle drops from the flare height, m.
+    pub flare_align_m: f64,
+    /// Land: descent rate of the final drop, m/s.
+    pub drop_rate_m_s: f64,
+    /// Descend and Land: velocity added per metre of horizontal error over the pad, 1/s,
+    /// on top of the autopilot's own position gain (0 = the autopilot's alone).
+    pub relative_gain: f64,
     /// Horizontal error that aborts a descent or a touchdown into a climb back, m.
     pub go_around_m: f64,
     /// Go-arounds before the mission lands in place instead.
@@ -112,8 +116,10 @@ impl Default for FsmConfig {
             land_align_m: 0.08,
             land_speed_gate_m_s: 0.3,
             land_rate_m_s: 0.7,
-            xy_integral_gain: 0.0,
-            xy_integral_max_m: 0.5,
+            flare_height_m: 0.25,
+            flare_align_m: 0.04,
+            drop_rate_m_s: 0.8,
+            relative_gain: 1.0,
             go_around_m: 0.4,
             max_go_arounds: 3,
             lost_after_s: 1.0,
@@ -235,8 +241,10 @@ impl Validate for FsmConfig {
             ("land_speed_gate_m_s", self.land_speed_gate_m_s, 0.01, 5.0),
             ("land_rate_m_s", self.land_rate_m_s, 0.05, 3.0),
             ("go_around_m", self.go_around_m, 0.05, 5.0),
-            ("xy_integral_gain", self.xy_integral_gain, 0.0, 10.0),
-            ("xy_integral_max_m", self.xy_integral_max_m, 0.0, 5.0),
+            ("flare_height_m", self.flare_height_m, 0.05, 3.0),
+            ("flare_align_m", self.flare_align_m, 0.005, 1.0),
+            ("drop_rate_m_s", self.drop_rate_m_s, 0.1, 3.0),
+            ("relative_gain", self.relative_gain, 0.0, 10.0),
             ("lost_after_s", self.lost_after_s, 0.05, 30.0),
             ("lost_hold_s", self.lost_hold_s, 0.0, 30.0),
             ("lost_climb_m_s", self.lost_climb_m_s, 0.0, 5.0),

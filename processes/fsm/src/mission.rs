@@ -127,12 +127,11 @@ pub struct Fsm {
     h_cmd: f64,
     z_cmd: f64,
     go_arounds: u32,
-    xy_integral: Vector3<f64>,
+    dropping: bool,
     lost_z0: f64,
     lost_since_update: u64,
     mode_lost_since: Option<u64>,
     last_tick_ns: Option<u64>,
-    dt: f64,
     last_status_ns: Option<u64>,
     transitioned: bool,
     transitions: Vec<Transition>,
@@ -170,12 +169,11 @@ impl Fsm {
             h_cmd: 1.0,
             z_cmd: 0.0,
             go_arounds: 0,
-            xy_integral: Vector3::zeros(),
+            dropping: false,
             lost_z0: 0.0,
             lost_since_update: 0,
             mode_lost_since: None,
             last_tick_ns: None,
-            dt: 0.0,
             last_status_ns: None,
             transitioned: true,
             transitions: Vec::new(),
@@ -308,7 +306,6 @@ impl Fsm {
             .unwrap_or(0.0)
             .min(0.2);
         self.last_tick_ns = Some(now_ns);
-        self.dt = dt;
         let mut out = Outputs::default();
         self.check_links(now_ns);
         match self.state {
@@ -668,7 +665,6 @@ impl Fsm {
     fn enter_track(&mut self, now_ns: u64, reason: String) {
         let from = self.state;
         self.go(now_ns, MissionState::Track, reason);
-        self.xy_integral = Vector3::zeros();
         self.new_goal_epoch(now_ns);
         self.guidance = Guidance::Planner;
         if let (Some(p), Some(est)) = (self.position(), self.filter.estimate(now_ns)) {
@@ -774,7 +770,6 @@ impl Fsm {
             0.0
         };
         self.h_cmd = (self.h_cmd - rate * dt).max(floor);
-        self.integrate_xy(&est, dt);
         out.setpoint = Some(self.pad_setpoint(now_ns, &est, est.position.z + self.h_cmd, -rate));
         let gates = height < self.cfg.commit_height_m
             && e < self.cfg.land_align_m
@@ -789,6 +784,7 @@ impl Fsm {
         };
         if held {
             self.z_cmd = p.z;
+            self.dropping = false;
             self.go(
                 now_ns,
                 MissionState::Land,
@@ -849,16 +845,32 @@ impl Fsm {
             }
             return;
         }
-        // Full rate while within half the commit gate, slowing to a hover at the gate:
-        // the last half metre is where a lagging vehicle would miss the pad.
+        // Down to the flare height at the touchdown rate (slowing to a hover when off the
+        // commit gate); there, wait until the vehicle is right over the pad and moving
+        // with it, then drop: a gust has a fraction of a second to push it off, not the
+        // whole descent.
         let gate = self.cfg.land_align_m;
-        let rate = if height < 0.1 {
-            self.cfg.land_rate_m_s
+        let flare = self.cfg.flare_height_m.min(self.cfg.commit_height_m - 0.05);
+        let rel_v = (Vector3::from(v.velocity) - est.velocity).xy().norm();
+        if !self.dropping
+            && height <= flare + 0.03
+            && e < self.cfg.flare_align_m
+            && rel_v < self.cfg.land_speed_gate_m_s
+        {
+            self.dropping = true;
+        }
+        let rate = if self.dropping {
+            self.cfg.drop_rate_m_s
         } else {
             self.cfg.land_rate_m_s * ((gate - e) / (0.5 * gate)).clamp(0.0, 1.0)
         };
-        self.z_cmd = (self.z_cmd - rate * dt).max(est.position.z - 0.3);
-        self.integrate_xy(&est, dt);
+        let floor = if self.dropping {
+            est.position.z - 0.3
+        } else {
+            est.position.z + flare
+        };
+        let rate = if self.z_cmd <= floor { 0.0 } else { rate };
+        self.z_cmd = (self.z_cmd - rate * dt).max(floor);
         out.setpoint = Some(self.pad_setpoint(now_ns, &est, self.z_cmd, -rate));
     }
 
@@ -994,24 +1006,19 @@ impl Fsm {
         self.hold_setpoint(now_ns, self.hold)
     }
 
-    /// Accumulates the horizontal error over the pad (vehicle behind the pad: positive
-    /// along the pad's direction), so the setpoint leads the pad by what the autopilot
-    /// lags.
-    fn integrate_xy(&mut self, est: &PadEstimate, dt: f64) {
-        let Some(p) = self.position() else { return };
-        let mut e = est.position - p;
-        e.z = 0.0;
-        self.xy_integral += e * (self.cfg.xy_integral_gain * dt);
-        let n = self.xy_integral.norm();
-        if n > self.cfg.xy_integral_max_m {
-            self.xy_integral *= self.cfg.xy_integral_max_m / n;
-        }
-    }
-
     /// Over the pad at height `z`, moving with it (velocity feed-forward), `vz` down.
+    /// Descending, the horizontal error also feeds the velocity (`relative_gain`): the
+    /// autopilot's own position gain alone lets a gust carry the vehicle off while it
+    /// descends.
     fn pad_setpoint(&self, now_ns: u64, est: &PadEstimate, z: f64, vz: f64) -> Setpoint {
-        let p = Vector3::new(est.position.x, est.position.y, z) + self.xy_integral;
-        let v = Vector3::new(est.velocity.x, est.velocity.y, est.velocity.z + vz);
+        let p = Vector3::new(est.position.x, est.position.y, z);
+        let mut v = Vector3::new(est.velocity.x, est.velocity.y, est.velocity.z + vz);
+        if matches!(self.state, MissionState::Descend | MissionState::Land)
+            && let Some(u) = self.position()
+        {
+            v.x += self.cfg.relative_gain * (est.position.x - u.x);
+            v.y += self.cfg.relative_gain * (est.position.y - u.y);
+        }
         self.setpoint(now_ns, p, v, Vector3::zeros())
     }
 }
