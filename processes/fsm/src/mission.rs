@@ -763,7 +763,7 @@ impl Fsm {
         // at the commit height until the commit gates hold), so the vehicle converges
         // over the pad before it is low.
         let aligned = e < 1.5 * self.cfg.land_align_m;
-        let floor = self.cfg.commit_height_m - 0.1;
+        let floor = self.cfg.commit_height_m - (0.25 * self.cfg.commit_height_m).min(0.1);
         let rate = if aligned && self.h_cmd > floor {
             self.cfg.descend_rate_m_s
         } else {
@@ -864,10 +864,11 @@ impl Fsm {
         } else {
             self.cfg.land_rate_m_s * ((gate - e) / (0.5 * gate)).clamp(0.0, 1.0)
         };
+        // Never back up: a vehicle that committed below the flare height waits there.
         let floor = if self.dropping {
             est.position.z - 0.3
         } else {
-            est.position.z + flare
+            (est.position.z + flare).min(self.z_cmd)
         };
         let rate = if self.z_cmd <= floor { 0.0 } else { rate };
         self.z_cmd = (self.z_cmd - rate * dt).max(floor);
