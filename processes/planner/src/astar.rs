@@ -46,6 +46,8 @@ pub struct AStar {
     current: u32,
     /// Expansion limit per search (bounds the time on a maze).
     pub max_expansions: usize,
+    /// Cells expanded over all searches so far (a work counter for the statistics).
+    pub expansions: u64,
 }
 
 /// Octile distance in 3-D between two cells, in cells.
@@ -225,6 +227,7 @@ impl AStar {
                 });
             }
         }
+        self.expansions += expanded as u64;
         if !found {
             return false;
         }

@@ -72,6 +72,8 @@ pub struct PlanStats {
     pub reallocations: u32,
     /// Restarts from the A* path after the first initialization failed.
     pub restarts: u32,
+    /// Cells A* expanded over all its searches.
+    pub astar_expansions: u64,
 }
 
 /// The planner: settings and every buffer reused from plan to plan.
@@ -151,6 +153,18 @@ impl Planner {
         goal: &Goal,
     ) -> Result<Plan, PlanError> {
         self.stats = PlanStats::default();
+        let expansions = self.astar.expansions;
+        let result = self.plan_inner(map, start, goal);
+        self.stats.astar_expansions = self.astar.expansions.wrapping_sub(expansions);
+        result
+    }
+
+    fn plan_inner<M: OccupancyQuery + ?Sized>(
+        &mut self,
+        map: &M,
+        start: &State,
+        goal: &Goal,
+    ) -> Result<Plan, PlanError> {
         let map = &Bounded::new(map);
         if !start.is_finite() || !goal.state.is_finite() {
             return Err(PlanError::NotFinite);
