@@ -71,7 +71,34 @@ fn main() {
         .map(|s| s.parse().unwrap())
         .collect();
     let seeds = if seeds.is_empty() { vec![1] } else { seeds };
-    let cfg = PlannerConfig::default();
+    let mut cfg = PlannerConfig::default();
+    let env = |name: &str| std::env::var(name).ok();
+    if let Some(v) = env("STALL") {
+        cfg.max_stalled_rounds = v.parse().unwrap();
+    }
+    if let Some(v) = env("BUDGET") {
+        cfg.work_budget = v.parse().unwrap();
+    }
+    if let Some(v) = env("ROUNDS") {
+        cfg.max_rebounds = v.parse().unwrap();
+    }
+    if let Some(v) = env("GTOL") {
+        cfg.g_tolerance = v.parse().unwrap();
+    }
+    if let Some(v) = env("MEM") {
+        cfg.lbfgs_memory = v.parse().unwrap();
+    }
+    let all = env("ALL").is_some();
+    // ONLY="seed:density:map,...": plan only these maps (the others are still generated).
+    let only: Vec<String> = env("ONLY")
+        .map(|v| {
+            v.split(',')
+                .filter(|s| !s.is_empty())
+                .map(str::to_string)
+                .collect()
+        })
+        .unwrap_or_default();
+    let quiet = env("QUIET").is_some();
     let mut planner = Planner::new(cfg.clone());
     let (s, g) = (
         State::at_rest(Vector3::new(0.0, 0.0, 1.0)),
@@ -79,23 +106,25 @@ fn main() {
     );
     for seed in seeds {
         let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
-        let (mut it, mut ex, mut qu, mut fails, mut ms) = (0u64, 0u64, 0u64, 0, Vec::new());
+        let (mut it, mut ex, mut qu, mut fails, mut restarts) = (0u64, 0u64, 0u64, 0, 0);
+        let mut ms = Vec::new();
+        let (mut jerk, mut dur, mut nok) = (0.0, 0.0, 0.0);
         for d in [0.05, 0.1, 0.15, 0.2] {
             for k in 0..50 {
                 let map = scene(&mut rng, d, &cfg);
+                if !only.is_empty() && !only.contains(&format!("{seed}:{d:.2}:{k}")) {
+                    continue;
+                }
                 let cm = Counting {
                     map: &map,
                     queries: Cell::new(0),
                 };
+                let goal = Goal {
+                    state: g,
+                    moving: false,
+                };
                 let t0 = Instant::now();
-                let r = planner.plan(
-                    &cm,
-                    &s,
-                    &Goal {
-                        state: g,
-                        moving: false,
-                    },
-                );
+                let r = planner.plan(&cm, &s, &goal);
                 let t = t0.elapsed().as_secs_f64() * 1e3;
                 ms.push(t);
                 let st = planner.stats();
@@ -103,9 +132,21 @@ fn main() {
                 ex += st.astar_expansions;
                 qu += cm.queries.get();
                 fails += r.is_err() as usize;
-                if r.is_err() || st.restarts > 0 || st.rebounds > 8 || t > 2.0 {
+                restarts += st.restarts;
+                if let Ok(p) = &r {
+                    let q = &p.spline.points;
+                    let j: f64 = (0..q.len() - 3)
+                        .map(|i| (q[i + 3] - q[i + 2] * 3.0 + q[i + 1] * 3.0 - q[i]).norm_squared())
+                        .sum::<f64>()
+                        / p.spline.ts.powi(5);
+                    jerk += j;
+                    dur += p.spline.duration();
+                    nok += 1.0;
+                }
+                let hard = r.is_err() || st.restarts > 0 || st.rebounds > 8 || t > 2.0;
+                if all || (!quiet && hard) {
                     println!(
-                        "seed {seed} density {d:.2} map {k}: {:?} {t:.2} ms it {} rb {} re {} realloc {} astar {} queries {}",
+                        "seed {seed} density {d:.2} map {k}: {:?} {t:.3} ms it {} rb {} re {} realloc {} astar {} queries {}",
                         r.as_ref().err(),
                         st.iterations,
                         st.rebounds,
@@ -118,9 +159,19 @@ fn main() {
             }
         }
         ms.sort_by(f64::total_cmp);
+        if ms.len() < 200 {
+            println!(
+                "seed {seed}: failures {fails}, restarts {restarts}, iterations {it}, A* expansions {ex}, queries {qu}"
+            );
+            continue;
+        }
         println!(
-            "seed {seed}: failures {fails}/200, iterations {it}, A* expansions {ex}, queries {qu}, ms p50 {:.3} p99 {:.3} (random maps only)",
-            ms[100], ms[197]
+            "seed {seed}: failures {fails}/200, restarts {restarts}, iterations {it}, A* expansions {ex}, queries {qu}, ms p50 {:.3} p99 {:.3} top6 {:.2?}, mean jerk {:.0} duration {:.3} (random maps only)",
+            ms[100],
+            ms[197],
+            &ms[194..],
+            jerk / nok,
+            dur / nok
         );
     }
 }
