@@ -16,6 +16,8 @@ struct Open {
     f: f32,
     g: f32,
     idx: u32,
+    /// The cell's coordinates (no division to recover them from `idx`).
+    c: [i32; 3],
 }
 
 impl Eq for Open {}
@@ -35,17 +37,27 @@ impl PartialOrd for Open {
     }
 }
 
+/// Per-cell search state, together so that a neighbour costs one cache line.
+#[derive(Debug, Clone, Copy, Default)]
+struct Node {
+    /// The search that last touched the cell (the rest is stale when it differs).
+    stamp: u32,
+    g: f32,
+    parent: u32,
+    closed: bool,
+}
+
 /// Reusable A* search state.
 #[derive(Debug, Clone, Default)]
 pub struct AStar {
-    stamp: Vec<u32>,
-    g: Vec<f32>,
-    parent: Vec<u32>,
-    closed: Vec<bool>,
+    nodes: Vec<Node>,
     heap: BinaryHeap<Open>,
     current: u32,
     /// Expansion limit per search (bounds the time on a maze).
     pub max_expansions: usize,
+
+    /// Cells expanded over all searches so far (a work counter for the statistics).
+    pub expansions: u64,
 }
 
 /// Octile distance in 3-D between two cells, in cells.
@@ -149,89 +161,99 @@ impl AStar {
                 i / (dims[0] * dims[1]),
             ]
         };
-        if self.stamp.len() < total {
-            self.stamp.resize(total, 0);
-            self.g.resize(total, 0.0);
-            self.parent.resize(total, 0);
-            self.closed.resize(total, false);
+        if self.nodes.len() < total {
+            self.nodes.resize(total, Node::default());
         }
         self.current = self.current.wrapping_add(1);
         if self.current == 0 {
-            self.stamp.iter_mut().for_each(|g| *g = 0);
+            self.nodes.iter_mut().for_each(|n| n.stamp = 0);
             self.current = 1;
         }
         let cur = self.current;
         self.heap.clear();
         let si = lin(s);
         let ti = lin(t);
-        self.stamp[si as usize] = cur;
-        self.g[si as usize] = 0.0;
-        self.parent[si as usize] = si;
-        self.closed[si as usize] = false;
+        self.nodes[si as usize] = Node {
+            stamp: cur,
+            g: 0.0,
+            parent: si,
+            closed: false,
+        };
+        // Linear offsets of the neighbours: away from the faces a neighbour is `idx + off`.
+        let mut offsets = [0i64; 26];
+        for (o, (d, _)) in offsets.iter_mut().zip(&NEIGHBOURS) {
+            *o = (d[2] as i64 * dims[1] as i64 + d[1] as i64) * dims[0] as i64 + d[0] as i64;
+        }
         // A slightly greedy heuristic: ties break toward the goal, far fewer expansions.
         const TIE: f32 = 1.0 + 1e-3;
         self.heap.push(Open {
             f: octile(s, t) * TIE,
             g: 0.0,
             idx: si,
+            c: s,
         });
         let mut expanded = 0usize;
         let mut found = false;
         while let Some(o) = self.heap.pop() {
             let oi = o.idx as usize;
-            if self.closed[oi] || o.g > self.g[oi] {
+            let node = self.nodes[oi];
+            if node.closed || o.g > node.g {
                 continue;
             }
             if o.idx == ti {
                 found = true;
                 break;
             }
-            self.closed[oi] = true;
+            self.nodes[oi].closed = true;
             expanded += 1;
             if expanded > self.max_expansions {
                 break;
             }
-            let c = unlin(o.idx);
-            for &(d, step) in &NEIGHBOURS {
+            let c = o.c;
+            let interior = (0..3).all(|i| c[i] > 0 && c[i] < dims[i] - 1);
+            for (k, &(d, step)) in NEIGHBOURS.iter().enumerate() {
                 let nc = [c[0] + d[0], c[1] + d[1], c[2] + d[2]];
-                if (0..3).any(|i| nc[i] < 0 || nc[i] >= dims[i]) {
+                if !interior && (0..3).any(|i| nc[i] < 0 || nc[i] >= dims[i]) {
                     continue;
                 }
-                let ni = lin(nc);
+                let ni = (o.idx as i64 + offsets[k]) as u32;
                 let nu = ni as usize;
-                let fresh = self.stamp[nu] != cur;
-                if !fresh && self.closed[nu] {
+                let n = &mut self.nodes[nu];
+                let fresh = n.stamp != cur;
+                if !fresh && n.closed {
                     continue;
                 }
                 let ng = o.g + step;
-                if !fresh && ng >= self.g[nu] {
+                if !fresh && ng >= n.g {
                     continue;
                 }
                 if fresh {
                     // Occupancy is asked once per cell per search.
-                    self.stamp[nu] = cur;
-                    self.closed[nu] = false;
+                    n.stamp = cur;
+                    n.closed = false;
                     if map.is_occupied(&centre(nc)) {
-                        self.closed[nu] = true;
+                        n.closed = true;
                         continue;
                     }
                 }
-                self.g[nu] = ng;
-                self.parent[nu] = o.idx;
+                n.g = ng;
+                n.parent = o.idx;
                 self.heap.push(Open {
                     f: ng + octile(nc, t) * TIE,
                     g: ng,
                     idx: ni,
+                    c: nc,
                 });
             }
         }
+        self.expansions += expanded as u64;
         if !found {
             return false;
         }
         let mut i = ti;
         out.push(*to);
         loop {
-            let p = self.parent[i as usize];
+            let p = self.nodes[i as usize].parent;
             if p == i || out.len() > total {
                 break;
             }

@@ -1,7 +1,7 @@
 //! Uniform cubic B-splines: evaluation, end-state control points, and the fit of a
 //! sampled curve to control points (the front end's initialization).
 
-use nalgebra::{DMatrix, DVector, Vector3};
+use nalgebra::Vector3;
 
 /// Position, velocity and acceleration at one instant.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -128,34 +128,78 @@ pub fn fit(samples: &[Vector3<f64>], ts: f64, start: &State, end: &State) -> Opt
     q[n - 3..].copy_from_slice(&e3);
     let m = n - 6;
     if m > 0 {
-        // Equations for samples 1..=k-2: (q_j + 4 q_{j+1} + q_{j+2}) / 6 = s_j.
-        let rows = k - 2;
-        let mut a = DMatrix::<f64>::zeros(rows, m);
-        let mut b = DMatrix::<f64>::zeros(rows, 3);
-        for (r, j) in (1..=k - 2).enumerate() {
-            let mut rhs = samples[j];
-            for (off, w) in [(0usize, 1.0 / 6.0), (1, 4.0 / 6.0), (2, 1.0 / 6.0)] {
+        // Normal equations A^T A x = A^T b for samples 1..=k-2, rows (q_j + 4 q_{j+1} +
+        // q_{j+2}) / 6 = s_j. A row touches three consecutive points, so A^T A is banded
+        // (half bandwidth 2): a[u][d] = (A^T A)(u, u - d). Built and solved in O(m).
+        let mut a = vec![[0.0f64; 3]; m];
+        let mut rhs = vec![Vector3::zeros(); m];
+        const W: [f64; 3] = [1.0 / 6.0, 4.0 / 6.0, 1.0 / 6.0];
+        for j in 1..=k - 2 {
+            let mut r = samples[j];
+            let mut row = [(0usize, 0.0f64); 3];
+            let mut len = 0;
+            for (off, w) in W.iter().enumerate() {
                 let idx = j + off;
                 if (3..n - 3).contains(&idx) {
-                    a[(r, idx - 3)] += w;
+                    row[len] = (idx - 3, *w);
+                    len += 1;
                 } else {
-                    rhs -= q[idx] * w;
+                    r -= q[idx] * *w;
                 }
             }
-            for c in 0..3 {
-                b[(r, c)] = rhs[c];
+            let row = &row[..len];
+            for &(u, wu) in row {
+                rhs[u] += r * wu;
+                for &(v, wv) in row {
+                    if v <= u {
+                        a[u][u - v] += wu * wv;
+                    }
+                }
             }
         }
-        let ata = a.transpose() * &a + DMatrix::<f64>::identity(m, m) * 1e-9;
-        let atb = a.transpose() * b;
-        let chol = ata.cholesky()?;
-        for c in 0..3 {
-            let col: DVector<f64> = atb.column(c).into();
-            let x = chol.solve(&col);
-            for i in 0..m {
-                q[3 + i][c] = x[i];
+        for d in a.iter_mut() {
+            d[0] += 1e-9;
+        }
+        // Banded Cholesky in place: a[i][d] becomes L(i, i - d).
+        for i in 0..m {
+            for d in (0..=2usize.min(i)).rev() {
+                let j = i - d;
+                let mut s = a[i][d];
+                for t in 1..=2 {
+                    if j < t || d + t > 2 {
+                        break;
+                    }
+                    s -= a[i][d + t] * a[j][t];
+                }
+                if d == 0 {
+                    if !(s > 0.0) {
+                        return None;
+                    }
+                    a[i][0] = s.sqrt();
+                } else {
+                    a[i][d] = s / a[j][0];
+                }
             }
         }
+        // L y = rhs, then L^T x = y, the three axes at once.
+        for i in 0..m {
+            let mut s = rhs[i];
+            for d in 1..=2usize.min(i) {
+                s -= rhs[i - d] * a[i][d];
+            }
+            rhs[i] = s / a[i][0];
+        }
+        for i in (0..m).rev() {
+            let mut s = rhs[i];
+            for d in 1..=2 {
+                if i + d >= m {
+                    break;
+                }
+                s -= rhs[i + d] * a[i + d][d];
+            }
+            rhs[i] = s / a[i][0];
+        }
+        q[3..3 + m].copy_from_slice(&rhs);
     }
     if q.iter().all(|p| p.iter().all(|v| v.is_finite())) {
         Some(BSpline { points: q, ts })

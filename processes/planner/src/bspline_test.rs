@@ -82,3 +82,61 @@ fn too_few_samples_or_a_bad_interval_give_no_spline() {
     assert!(fit(&five, 0.1, &st, &st).is_none());
     assert!(fit(&[Vector3::zeros(); 6], f64::NAN, &st, &st).is_none());
 }
+
+/// The least-squares fit by dense normal equations (the straightforward way), to check
+/// the banded solver against.
+fn dense_fit(samples: &[Vector3<f64>], ts: f64, start: &State, end: &State) -> Vec<Vector3<f64>> {
+    use nalgebra::{DMatrix, DVector};
+    let k = samples.len();
+    let n = k + 2;
+    let mut q = vec![Vector3::zeros(); n];
+    q[..3].copy_from_slice(&end_points(start, ts));
+    q[n - 3..].copy_from_slice(&end_points(end, ts));
+    let m = n - 6;
+    let mut a = DMatrix::<f64>::zeros(k - 2, m);
+    let mut b = DMatrix::<f64>::zeros(k - 2, 3);
+    for (r, j) in (1..=k - 2).enumerate() {
+        let mut rhs = samples[j];
+        for (off, w) in [(0usize, 1.0 / 6.0), (1, 4.0 / 6.0), (2, 1.0 / 6.0)] {
+            let idx = j + off;
+            if (3..n - 3).contains(&idx) {
+                a[(r, idx - 3)] += w;
+            } else {
+                rhs -= q[idx] * w;
+            }
+        }
+        for c in 0..3 {
+            b[(r, c)] = rhs[c];
+        }
+    }
+    let chol = (a.transpose() * &a).cholesky().unwrap();
+    let atb = a.transpose() * b;
+    for c in 0..3 {
+        let x = chol.solve(&DVector::from(atb.column(c)));
+        for i in 0..m {
+            q[3 + i][c] = x[i];
+        }
+    }
+    q
+}
+
+#[test]
+fn the_banded_fit_equals_the_dense_least_squares_solution() {
+    let a = state([0.0, 0.0, 1.0], [1.0, -0.5, 0.0], [0.0, 1.0, 0.3]);
+    let b = state([9.0, 3.0, 2.0], [0.0, 2.0, 0.0], [0.0, 0.0, -1.0]);
+    for k in [5, 6, 7, 12, 40, 62] {
+        let ts = 0.2;
+        // Wiggly samples, not a quintic, so the residual is not zero.
+        let samples: Vec<_> = (0..k)
+            .map(|i| {
+                let t = i as f64;
+                Vector3::new(t * 0.3, (t * 0.7).sin(), 1.0 + 0.2 * (t * 1.3).cos())
+            })
+            .collect();
+        let s = fit(&samples, ts, &a, &b).unwrap();
+        let d = dense_fit(&samples, ts, &a, &b);
+        for (x, y) in s.points.iter().zip(&d) {
+            assert!((x - y).norm() < 1e-6, "k {k}: {x} != {y}");
+        }
+    }
+}

@@ -33,8 +33,18 @@ pub struct PlannerConfig {
     pub max_iterations: usize,
     /// L-BFGS relative gradient tolerance.
     pub g_tolerance: f64,
-    /// Rebound rounds before a plan is given up.
+    /// Rebound rounds before a plan is given up, over both attempts: the first (from the
+    /// straight initialization) gets at most half, the restart from the A* path the rest.
     pub max_rebounds: usize,
+    /// Consecutive rebound rounds that find only collisions the existing pairs already
+    /// cover (no new obstacle, the collision weight doubled each time) before the attempt
+    /// is given up as stuck.
+    pub max_stalled_rounds: usize,
+    /// Work a plan may spend before it is given up, in L-BFGS iterations; an A* expansion
+    /// counts 1/16 (what it costs beside an iteration on ~40 control points). A ceiling
+    /// for the pathological plan (1000: ~4 ms on the development VM), not a deadline: a
+    /// plan that needs more is rare and late anyway, and the replanning tries again.
+    pub work_budget: usize,
     /// Fitness ellipsoid, axial semi-axis a, m.
     pub fitness_axial: f64,
     /// Fitness ellipsoid, radial semi-axis b, m.
@@ -68,6 +78,8 @@ impl Default for PlannerConfig {
             max_iterations: 200,
             g_tolerance: 0.01,
             max_rebounds: 20,
+            max_stalled_rounds: 3,
+            work_budget: 1000,
             fitness_axial: 20.0,
             fitness_radial: 1.0,
             replan_distance_m: 1.5,
@@ -100,6 +112,8 @@ impl Validate for PlannerConfig {
         check_range("max_iterations", self.max_iterations, 1, 10_000)?;
         check_range("g_tolerance", self.g_tolerance, 1e-9, 10.0)?;
         check_range("max_rebounds", self.max_rebounds, 0, 100)?;
+        check_range("max_stalled_rounds", self.max_stalled_rounds, 1, 100)?;
+        check_range("work_budget", self.work_budget, 10, 1_000_000)?;
         check_range("fitness_axial", self.fitness_axial, 0.01, 1000.0)?;
         check_range("fitness_radial", self.fitness_radial, 0.01, 1000.0)?;
         check_range("replan_distance_m", self.replan_distance_m, 0.1, 100.0)?;

@@ -139,6 +139,12 @@ impl Lbfgs {
         }
     }
 
+    /// Changes the iteration limit (the planner lowers it to what its work budget has
+    /// left).
+    pub fn set_max_iterations(&mut self, max_iterations: usize) {
+        self.settings.max_iterations = max_iterations;
+    }
+
     fn reserve(&mut self, n: usize) {
         let m = self.settings.memory.max(1);
         if self.n == n && self.s.len() == m * n {

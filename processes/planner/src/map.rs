@@ -68,6 +68,7 @@ pub const MAX_CELLS: usize = 64 << 20;
 pub struct GridMap {
     origin: Vector3<f64>,
     resolution: f64,
+    inv_resolution: f64,
     inflation: f64,
     dims: [usize; 3],
     cells: Vec<u8>,
@@ -112,6 +113,7 @@ impl GridMap {
         Ok(Self {
             origin: min,
             resolution,
+            inv_resolution: 1.0 / resolution,
             inflation,
             dims,
             cells: vec![0; cells],
@@ -186,28 +188,32 @@ impl GridMap {
         self.dims
     }
 
+    #[inline]
     fn index(&self, p: &Vector3<f64>) -> Option<usize> {
-        cell_index(&self.origin, self.resolution, self.dims, p)
+        cell_index(&self.origin, self.inv_resolution, self.dims, p)
     }
 }
 
-/// Linear index (x fastest) of the cell holding `p`, or `None` outside or for NaN.
+/// Linear index (x fastest) of the cell holding `p`, or `None` outside or for NaN;
+/// `inv_resolution` is 1 / the cell edge (a multiplication, not three divisions).
 #[inline]
 fn cell_index(
     origin: &Vector3<f64>,
-    resolution: f64,
+    inv_resolution: f64,
     dims: [usize; 3],
     p: &Vector3<f64>,
 ) -> Option<usize> {
     let mut ix = [0usize; 3];
     for i in 0..3 {
         // Truncation is the floor for f >= 0 and, unlike `floor`, is inlined on the
-        // baseline x86-64 target; `!(f >= 0)` also rejects NaN.
-        let f = (p[i] - origin[i]) / resolution;
+        // baseline x86-64 target; `!(f >= 0)` also rejects NaN. A dimension fits in u32
+        // (MAX_CELLS), and f64 -> u32 is one instruction where f64 -> usize is a branchy
+        // sequence.
+        let f = (p[i] - origin[i]) * inv_resolution;
         if !(f >= 0.0) || f >= dims[i] as f64 {
             return None;
         }
-        ix[i] = (f as usize).min(dims[i] - 1);
+        ix[i] = (f as u32 as usize).min(dims[i] - 1);
     }
     Some((ix[2] * dims[1] + ix[1]) * dims[0] + ix[0])
 }
@@ -242,6 +248,7 @@ impl OccupancyQuery for GridMap {
 pub struct CellView<'a> {
     origin: Vector3<f64>,
     resolution: f64,
+    inv_resolution: f64,
     dims: [usize; 3],
     cells: &'a [u8],
 }
@@ -263,6 +270,7 @@ impl<'a> CellView<'a> {
         Some(Self {
             origin,
             resolution: header.resolution,
+            inv_resolution: 1.0 / header.resolution,
             dims,
             cells: &cells[..n],
         })
@@ -275,7 +283,7 @@ impl OccupancyQuery for CellView<'_> {
     }
 
     fn is_occupied(&self, p: &Vector3<f64>) -> bool {
-        cell_index(&self.origin, self.resolution, self.dims, p).is_some_and(|i| {
+        cell_index(&self.origin, self.inv_resolution, self.dims, p).is_some_and(|i| {
             matches!(
                 CellState::from_raw(self.cells[i]),
                 CellState::Occupied | CellState::Inflated

@@ -352,3 +352,69 @@ fn every_start_in_the_inflation_but_outside_the_box_fails_clearly_and_never_pani
     }
     assert!(refused >= 30, "{refused}");
 }
+
+/// A field dense enough that plans need rebound rounds (and some a restart).
+fn dense_field(seed: u64) -> GridMap {
+    let mut s = seed;
+    let mut rnd = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut boxes = Vec::new();
+    while boxes.len() < 14 {
+        let (x, y) = (1.0 + rnd() * 8.0, -4.0 + rnd() * 8.0);
+        if (x * x + y * y).sqrt() < 1.0 || ((x - 10.0).powi(2) + y * y).sqrt() < 1.0 {
+            continue;
+        }
+        boxes.push(Aabb {
+            min: v(x - 0.15, y - 0.15, 0.0),
+            max: v(x + 0.15, y + 0.15, 3.0),
+        });
+    }
+    GridMap::from_boxes(v(-1.0, -5.0, 0.0), v(11.0, 5.0, 3.0), 0.15, 0.299, &boxes).unwrap()
+}
+
+#[test]
+fn no_plan_spends_more_than_its_work_budget_and_a_spent_budget_is_an_error() {
+    let (s, g) = (at(v(0.0, 0.0, 1.0)), at(v(10.0, 0.0, 1.0)));
+    // With the default budget, every plan stays within it (plus the one optimization
+    // under way when it ran out, itself capped at what was left).
+    let cfg = PlannerConfig::default();
+    let mut planner = Planner::new(cfg.clone());
+    let mut ok = 0;
+    for seed in 1..=30 {
+        let map = dense_field(seed * 7919);
+        let r = planner.plan(&map, &s, &goal(g));
+        let st = planner.stats();
+        let work = st.iterations as u64 + st.astar_expansions / 16;
+        assert!(work <= cfg.work_budget as u64 + 1, "seed {seed}: {st:?}");
+        assert!(st.rebounds as usize <= cfg.max_rebounds + 2, "seed {seed}: {st:?}");
+        if let Ok(plan) = r {
+            check(&map, &plan.spline, &s, &g, &cfg);
+            ok += 1;
+        }
+    }
+    assert!(ok >= 27, "{ok} of 30");
+    // A budget too small for any rebound: the plans that need one fail as OverBudget (or
+    // NoPath when A* itself ran out), never with a trajectory that was not checked.
+    let tiny = PlannerConfig {
+        work_budget: 10,
+        ..PlannerConfig::default()
+    };
+    let mut planner = Planner::new(tiny.clone());
+    let mut over = 0;
+    for seed in 1..=30 {
+        let map = dense_field(seed * 7919);
+        match planner.plan(&map, &s, &goal(g)) {
+            Ok(plan) => check(&map, &plan.spline, &s, &g, &tiny),
+            Err(PlanError::OverBudget) => over += 1,
+            Err(PlanError::NoPath | PlanError::Collides | PlanError::Infeasible(_)) => {}
+            Err(e) => panic!("seed {seed}: {e}"),
+        }
+        let st = planner.stats();
+        assert!(st.iterations as usize <= tiny.work_budget + 1, "seed {seed}: {st:?}");
+    }
+    assert!(over > 0);
+}
