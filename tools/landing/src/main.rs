@@ -183,7 +183,7 @@ fn main() -> ExitCode {
         },
         Command::Pad(PadCommand::Print(args)) => pad_print::run(&args),
         Command::Map(args) => map_cmd::run(&args),
-        Command::Run(args) => match run_cmd::run(&args) {
+        Command::Run(args) => match run_cmd::run(&args, cli.ipc_prefix.as_deref()) {
             Ok(false) => return ExitCode::from(1),
             other => other.map(|_| ()),
         },

@@ -115,7 +115,7 @@ fn outcome_of(end: End, eval: &Evaluator) -> Outcome {
 }
 
 /// Runs the mission and reports; exit code 1 when it did not land on the pad.
-pub fn run(args: &RunArgs) -> Result<bool> {
+pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
     let deploy = args.deploy_dir.clone().unwrap_or_else(deploy_dir);
     let cfg_path = args
         .config
@@ -171,6 +171,7 @@ pub fn run(args: &RunArgs) -> Result<bool> {
             config: &cfg_path,
             deploy: &deploy,
             log_dir: &log_dir,
+            ipc_prefix,
         };
         let r = run_processes::run(&launch, &mut eval, &mut recorder, progress)?;
         if tty {

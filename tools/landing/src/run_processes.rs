@@ -39,6 +39,8 @@ pub struct Launch<'a> {
     pub deploy: &'a Path,
     /// Where each process's log goes.
     pub log_dir: &'a Path,
+    /// The iceoryx2 prefix (`--ipc-prefix`); a fresh one when `None`.
+    pub ipc_prefix: Option<&'a str>,
 }
 
 /// Runs the mission with every stage as a process; returns how it ended, the statistics
@@ -49,7 +51,10 @@ pub fn run(
     recorder: &mut Option<Recorder>,
     mut progress: impl FnMut(f64, MissionState, Option<f64>),
 ) -> Result<(End, RunStats, Vec<Transition>)> {
-    let prefix = IpcPrefix::unique("run");
+    let prefix = match launch.ipc_prefix {
+        Some(p) => IpcPrefix::new(p)?,
+        None => IpcPrefix::unique("run"),
+    };
     let ipc = Ipc::open("landing-run", &prefix)?;
     // Subscribers before the publishers start: no event may be missed.
     let truth = ipc.subscriber::<TruthEvent>(services::SIM_TRUTH)?;
