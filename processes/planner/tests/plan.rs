@@ -390,7 +390,10 @@ fn no_plan_spends_more_than_its_work_budget_and_a_spent_budget_is_an_error() {
         let st = planner.stats();
         let work = st.iterations as u64 + st.astar_expansions / 16;
         assert!(work <= cfg.work_budget as u64 + 1, "seed {seed}: {st:?}");
-        assert!(st.rebounds as usize <= cfg.max_rebounds + 2, "seed {seed}: {st:?}");
+        assert!(
+            st.rebounds as usize <= cfg.max_rebounds + 2,
+            "seed {seed}: {st:?}"
+        );
         if let Ok(plan) = r {
             check(&map, &plan.spline, &s, &g, &cfg);
             ok += 1;
@@ -414,7 +417,10 @@ fn no_plan_spends_more_than_its_work_budget_and_a_spent_budget_is_an_error() {
             Err(e) => panic!("seed {seed}: {e}"),
         }
         let st = planner.stats();
-        assert!(st.iterations as usize <= tiny.work_budget + 1, "seed {seed}: {st:?}");
+        assert!(
+            st.iterations as usize <= tiny.work_budget + 1,
+            "seed {seed}: {st:?}"
+        );
     }
     assert!(over > 0);
 }
