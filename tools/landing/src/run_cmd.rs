@@ -136,7 +136,14 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         );
     }
     let mut recorder = match &args.record {
-        Some(p) => Some(Recorder::create(p)?),
+        Some(p) => {
+            // As --plot does: a new directory for the outputs is made, not refused.
+            if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("--record: cannot create {}", dir.display()))?;
+            }
+            Some(Recorder::create(p)?)
+        }
         None => None,
     };
     let mut eval = Evaluator::default();
