@@ -1,6 +1,8 @@
 //! Helpers for the workspace-level tests: where a pointer lives in this process's memory
 //! map, so a test can prove that a payload is read in place from shared memory.
 
+pub mod process;
+
 use std::path::PathBuf;
 
 /// The file mapping that holds an address, and the address's offset in that file.

@@ -9,15 +9,14 @@
 
 use std::collections::{HashMap, HashSet};
 use std::hash::{Hash, Hasher};
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::{Arc, Mutex};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use ipc_types::msg::{CameraFrameHeader, Header, PixelEncoding, Stage};
 use ipc_types::runtime::{Ipc, IpcPrefix};
 use ipc_types::services;
+use landing_tests::process::{Running, sim_binary};
 
 const WIDTH: u32 = 640;
 const HEIGHT: u32 = 480;
@@ -28,130 +27,6 @@ fn workspace() -> PathBuf {
 
 fn calibration_file() -> PathBuf {
     workspace().join("deploy/config/camera_down_640x480.yaml")
-}
-
-/// `target/<profile>/sim`, next to `target/<profile>/deps/<this test>`.
-fn sim_binary() -> PathBuf {
-    let exe = std::env::current_exe().unwrap();
-    let profile_dir = exe.parent().and_then(Path::parent).unwrap();
-    let sim = profile_dir.join("sim");
-    assert!(
-        sim.is_file(),
-        "{} is missing: build it with `cargo build --release -p sim` \
-         (`cargo test --release --workspace` builds it)",
-        sim.display()
-    );
-    sim
-}
-
-/// A child process that is killed when the test ends, however it ends; its stderr is
-/// collected line by line (ANSI colours removed).
-struct Running {
-    name: &'static str,
-    child: Child,
-    lines: Arc<Mutex<Vec<String>>>,
-    reader: Option<std::thread::JoinHandle<()>>,
-}
-
-impl Running {
-    fn start(name: &'static str, cmd: &mut Command) -> Self {
-        let mut child = cmd
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap_or_else(|e| panic!("start {name}: {e}"));
-        let stderr = child.stderr.take().unwrap();
-        let lines = Arc::new(Mutex::new(Vec::new()));
-        let sink = Arc::clone(&lines);
-        let reader = std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-                sink.lock().unwrap().push(strip_ansi(&line));
-            }
-        });
-        Self {
-            name,
-            child,
-            lines,
-            reader: Some(reader),
-        }
-    }
-
-    fn log(&self) -> String {
-        self.lines.lock().unwrap().join("\n")
-    }
-
-    /// Waits until a stderr line contains `needle`.
-    fn wait_for(&self, needle: &str, timeout: Duration) {
-        let end = Instant::now() + timeout;
-        while Instant::now() < end {
-            if self
-                .lines
-                .lock()
-                .unwrap()
-                .iter()
-                .any(|l| l.contains(needle))
-            {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        panic!("{} never said `{needle}`:\n{}", self.name, self.log());
-    }
-
-    fn is_running(&mut self) -> bool {
-        self.child.try_wait().unwrap().is_none()
-    }
-
-    /// Waits for the process to exit on its own.
-    fn wait_exit(&mut self, timeout: Duration) -> ExitStatus {
-        let end = Instant::now() + timeout;
-        loop {
-            if let Some(status) = self.child.try_wait().unwrap() {
-                if let Some(r) = self.reader.take() {
-                    r.join().unwrap();
-                }
-                return status;
-            }
-            assert!(
-                Instant::now() < end,
-                "{} did not exit:\n{}",
-                self.name,
-                self.log()
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-
-    /// SIGTERM (a systemd stop), then waits for the exit.
-    fn terminate(&mut self) -> ExitStatus {
-        // SAFETY: signalling our own child, whose pid stays valid until it is waited for.
-        unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
-        self.wait_exit(Duration::from_secs(10))
-    }
-}
-
-impl Drop for Running {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn strip_ansi(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    let mut chars = s.chars();
-    while let Some(c) = chars.next() {
-        if c == '\u{1b}' {
-            for c in chars.by_ref() {
-                if c.is_ascii_alphabetic() {
-                    break;
-                }
-            }
-        } else {
-            out.push(c);
-        }
-    }
-    out
 }
 
 /// The value of `key=N` in the process's `camera-ingest stopped` summary line.

@@ -4,10 +4,8 @@
 //! paper's box) and a point goal, and reads the trajectory and statistics back through
 //! shared memory as the controller would.
 
-use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
-use std::sync::{Arc, Mutex};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use ipc_types::msg::{
@@ -16,64 +14,9 @@ use ipc_types::msg::{
 };
 use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
+use landing_tests::process::Running;
 use nalgebra::Vector3;
 use planner::{Aabb, BSpline, CellView, GridMap, OccupancyQuery};
-
-/// The planner process, killed when the test ends however it ends; stderr collected.
-struct Running {
-    child: Child,
-    lines: Arc<Mutex<Vec<String>>>,
-}
-
-impl Running {
-    fn start(prefix: &IpcPrefix) -> Self {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_planner"))
-            .arg("--ipc-prefix")
-            .arg(prefix.as_str())
-            .env("NO_COLOR", "1")
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("start planner");
-        let stderr = child.stderr.take().unwrap();
-        let lines = Arc::new(Mutex::new(Vec::new()));
-        let sink = Arc::clone(&lines);
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-                sink.lock().unwrap().push(line);
-            }
-        });
-        Self { child, lines }
-    }
-
-    fn log(&self) -> String {
-        self.lines.lock().unwrap().join("\n")
-    }
-
-    fn wait_for(&self, needle: &str, timeout: Duration) {
-        let end = Instant::now() + timeout;
-        while Instant::now() < end {
-            if self
-                .lines
-                .lock()
-                .unwrap()
-                .iter()
-                .any(|l| l.contains(needle))
-            {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        panic!("planner never said `{needle}`:\n{}", self.log());
-    }
-}
-
-impl Drop for Running {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
 
 /// The paper's 60 x 120 x 120 cm box, inflated as the depth-map would (0.15 m cells,
 /// 0.299 m), as a `GridMap` for the occupancy and its wire cells.
@@ -139,7 +82,12 @@ fn a_state_a_map_and_a_goal_give_a_collision_free_trajectory_from_the_vehicle_an
     let mut maps = ipc
         .slice_publisher::<u8, OccupancyMapHeader>(services::MAP_OCCUPANCY, cells.len())
         .unwrap();
-    let planner = Running::start(&prefix);
+    let planner = Running::start(
+        "planner",
+        Command::new(env!("CARGO_BIN_EXE_planner"))
+            .arg("--ipc-prefix")
+            .arg(prefix.as_str()),
+    );
     planner.wait_for("planner running", Duration::from_secs(30));
 
     let here = [0.0, 0.0, 0.8];

@@ -7,7 +7,6 @@
 //! `cargo test --release --workspace` builds it.
 
 use std::net::UdpSocket;
-use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
@@ -17,18 +16,7 @@ use ipc_types::msg::{
 };
 use ipc_types::runtime::{Ipc, IpcPrefix};
 use ipc_types::services;
-
-fn sim_binary() -> PathBuf {
-    let exe = std::env::current_exe().unwrap();
-    let dir = exe.parent().and_then(Path::parent).unwrap();
-    let sim = dir.join("sim");
-    assert!(
-        sim.is_file(),
-        "{} missing: run cargo test --release --workspace",
-        sim.display()
-    );
-    sim
-}
+use landing_tests::process::sim_binary;
 
 struct Kill(Child);
 

@@ -1,0 +1,155 @@
+//! Stack binaries as child processes in tests: started with stderr collected, killed
+//! when the test ends however it ends, stopped with SIGTERM as systemd does.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// A child process that is killed when dropped; its stderr is collected line by line
+/// (ANSI colours removed). A failure to start or to wait panics: these are tests.
+pub struct Running {
+    name: &'static str,
+    child: Child,
+    lines: Arc<Mutex<Vec<String>>>,
+    reader: Option<JoinHandle<()>>,
+}
+
+impl Running {
+    /// Starts `cmd` (stdout discarded, stderr collected) and names it `name` in messages.
+    pub fn start(name: &'static str, cmd: &mut Command) -> Self {
+        let mut child = match cmd
+            .env("NO_COLOR", "1")
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+        {
+            Ok(c) => c,
+            Err(e) => panic!("start {name}: {e}"),
+        };
+        let lines = Arc::new(Mutex::new(Vec::new()));
+        let sink = Arc::clone(&lines);
+        let stderr = child.stderr.take();
+        let reader = std::thread::spawn(move || {
+            let Some(stderr) = stderr else { return };
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                sink.lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .push(strip_ansi(&line));
+            }
+        });
+        Self {
+            name,
+            child,
+            lines,
+            reader: Some(reader),
+        }
+    }
+
+    /// Everything the process wrote to stderr so far.
+    pub fn log(&self) -> String {
+        self.lines
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .join("\n")
+    }
+
+    /// Waits until a stderr line contains `needle`; panics with the log after `timeout`.
+    pub fn wait_for(&self, needle: &str, timeout: Duration) {
+        let end = Instant::now() + timeout;
+        while Instant::now() < end {
+            if self
+                .lines
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .iter()
+                .any(|l| l.contains(needle))
+            {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        panic!("{} never said `{needle}`:\n{}", self.name, self.log());
+    }
+
+    /// True while the process has not exited.
+    pub fn is_running(&mut self) -> bool {
+        matches!(self.child.try_wait(), Ok(None))
+    }
+
+    /// Waits for the process to exit on its own; panics with the log after `timeout`.
+    pub fn wait_exit(&mut self, timeout: Duration) -> ExitStatus {
+        let end = Instant::now() + timeout;
+        loop {
+            match self.child.try_wait() {
+                Ok(Some(status)) => {
+                    if let Some(r) = self.reader.take() {
+                        let _ = r.join();
+                    }
+                    return status;
+                }
+                Ok(None) => {}
+                Err(e) => panic!("waiting for {}: {e}", self.name),
+            }
+            assert!(
+                Instant::now() < end,
+                "{} did not exit:\n{}",
+                self.name,
+                self.log()
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// SIGTERM (a systemd stop), then waits for the exit.
+    pub fn terminate(&mut self) -> ExitStatus {
+        // SAFETY: signalling our own child, whose pid stays valid until it is waited for.
+        unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
+        self.wait_exit(Duration::from_secs(10))
+    }
+}
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// `s` without ANSI escape sequences.
+pub fn strip_ansi(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    let mut chars = s.chars();
+    while let Some(c) = chars.next() {
+        if c == '\u{1b}' {
+            for c in chars.by_ref() {
+                if c.is_ascii_alphabetic() {
+                    break;
+                }
+            }
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// The `sim` binary next to the running test executable (`target/<profile>/sim`, the
+/// test being `target/<profile>/deps/<test>`). Cargo builds it for `cargo test --release
+/// --workspace` (and `make test`), not for one package alone; panics with how to build it.
+pub fn sim_binary() -> PathBuf {
+    let profile_dir = std::env::current_exe()
+        .ok()
+        .and_then(|exe| exe.parent().and_then(Path::parent).map(Path::to_path_buf))
+        .unwrap_or_default();
+    let sim = profile_dir.join("sim");
+    assert!(
+        sim.is_file(),
+        "{} is missing: build it with `cargo build --release -p sim` \
+         (`cargo test --release --workspace` builds it)",
+        sim.display()
+    );
+    sim
+}
