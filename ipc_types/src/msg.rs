@@ -857,6 +857,20 @@ pub enum LinkOutcomeKind {
     Invalid = 5,
 }
 
+impl LinkOutcomeKind {
+    /// Decodes a raw outcome; a value no kind has reads as [`LinkOutcomeKind::Invalid`]
+    /// (never as accepted).
+    pub fn from_raw(raw: u32) -> Self {
+        match raw {
+            1 => Self::Accepted,
+            2 => Self::Rejected,
+            3 => Self::TimedOut,
+            4 => Self::NoSetpointStream,
+            _ => Self::Invalid,
+        }
+    }
+}
+
 /// px4-link's answer to a [`LinkRequest`].
 #[repr(C)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]

@@ -265,13 +265,7 @@ impl Fsm {
             && p.id == o.id
             && p.sent_ns.is_some()
         {
-            let kind = match o.outcome {
-                1 => LinkOutcomeKind::Accepted,
-                2 => LinkOutcomeKind::Rejected,
-                3 => LinkOutcomeKind::TimedOut,
-                4 => LinkOutcomeKind::NoSetpointStream,
-                _ => LinkOutcomeKind::Invalid,
-            };
+            let kind = LinkOutcomeKind::from_raw(o.outcome);
             p.answer = Some((kind, o.result));
         }
     }

@@ -2,23 +2,21 @@
 //! and densities): which maps restart or fail, and what each costs in L-BFGS iterations,
 //! rebound rounds, A* expansions and occupancy queries. Counters, not clocks: they are
 //! the same on a busy machine. `cargo run --release -p planner --example hard_maps -- 1 2 3`
-#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::cell::Cell;
 use std::time::Instant;
 
 use nalgebra::Vector3;
-use planner::{Aabb, Goal, GridMap, OccupancyQuery, Planner, PlannerConfig, State};
+use planner::fields::{FIELD_DENSITIES, FIELD_GOAL, FIELD_START, FieldRng, pillar_field};
+use planner::{Goal, GridMap, OccupancyQuery, Planner, PlannerConfig, State};
 
-struct Rng(u64);
+type Error = Box<dyn std::error::Error>;
 
-impl Rng {
-    fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-    }
+/// `value` parsed, or an error naming `what`.
+fn parse<T: std::str::FromStr>(what: &str, value: &str) -> Result<T, Error> {
+    value
+        .parse()
+        .map_err(|_| format!("{what} `{value}` is not a number of the right kind").into())
 }
 
 struct Counting<'a> {
@@ -39,54 +37,28 @@ impl OccupancyQuery for Counting<'_> {
     }
 }
 
-fn scene(rng: &mut Rng, density: f64, cfg: &PlannerConfig) -> GridMap {
-    let (start, goal) = (Vector3::new(0.0, 0.0, 1.0), Vector3::new(10.0, 0.0, 1.0));
-    let count = (density * 64.0).round() as usize;
-    let mut boxes = Vec::with_capacity(count);
-    while boxes.len() < count {
-        let c = Vector3::new(1.0 + 8.0 * rng.uniform(), -4.0 + 8.0 * rng.uniform(), 0.0);
-        let flat = |p: Vector3<f64>| Vector3::new(p.x, p.y, 0.0);
-        if (c - flat(start)).norm() < 1.0 || (c - flat(goal)).norm() < 1.0 {
-            continue;
-        }
-        let w = 0.15;
-        boxes.push(Aabb {
-            min: Vector3::new(c.x - w, c.y - w, 0.0),
-            max: Vector3::new(c.x + w, c.y + w, 3.0),
-        });
-    }
-    GridMap::from_boxes(
-        Vector3::new(-1.0, -5.0, 0.0),
-        Vector3::new(11.0, 5.0, 3.0),
-        cfg.resolution,
-        cfg.inflation,
-        &boxes,
-    )
-    .unwrap()
-}
-
-fn main() {
+fn main() -> Result<(), Error> {
     let seeds: Vec<u64> = std::env::args()
         .skip(1)
-        .map(|s| s.parse().unwrap())
-        .collect();
+        .map(|s| parse("seed", &s))
+        .collect::<Result<_, _>>()?;
     let seeds = if seeds.is_empty() { vec![1] } else { seeds };
     let mut cfg = PlannerConfig::default();
     let env = |name: &str| std::env::var(name).ok();
     if let Some(v) = env("STALL") {
-        cfg.max_stalled_rounds = v.parse().unwrap();
+        cfg.max_stalled_rounds = parse("STALL", &v)?;
     }
     if let Some(v) = env("BUDGET") {
-        cfg.work_budget = v.parse().unwrap();
+        cfg.work_budget = parse("BUDGET", &v)?;
     }
     if let Some(v) = env("ROUNDS") {
-        cfg.max_rebounds = v.parse().unwrap();
+        cfg.max_rebounds = parse("ROUNDS", &v)?;
     }
     if let Some(v) = env("GTOL") {
-        cfg.g_tolerance = v.parse().unwrap();
+        cfg.g_tolerance = parse("GTOL", &v)?;
     }
     if let Some(v) = env("MEM") {
-        cfg.lbfgs_memory = v.parse().unwrap();
+        cfg.lbfgs_memory = parse("MEM", &v)?;
     }
     let all = env("ALL").is_some();
     // ONLY="seed:density:map,...": plan only these maps (the others are still generated).
@@ -101,17 +73,17 @@ fn main() {
     let quiet = env("QUIET").is_some();
     let mut planner = Planner::new(cfg.clone());
     let (s, g) = (
-        State::at_rest(Vector3::new(0.0, 0.0, 1.0)),
-        State::at_rest(Vector3::new(10.0, 0.0, 1.0)),
+        State::at_rest(Vector3::from(FIELD_START)),
+        State::at_rest(Vector3::from(FIELD_GOAL)),
     );
     for seed in seeds {
-        let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+        let mut rng = FieldRng::new(seed);
         let (mut it, mut ex, mut qu, mut fails, mut restarts) = (0u64, 0u64, 0u64, 0, 0);
         let mut ms = Vec::new();
         let (mut jerk, mut dur, mut nok) = (0.0, 0.0, 0.0);
-        for d in [0.05, 0.1, 0.15, 0.2] {
+        for d in FIELD_DENSITIES {
             for k in 0..50 {
-                let map = scene(&mut rng, d, &cfg);
+                let map = pillar_field(&mut rng, d, cfg.resolution, cfg.inflation)?;
                 if !only.is_empty() && !only.contains(&format!("{seed}:{d:.2}:{k}")) {
                     continue;
                 }
@@ -174,4 +146,5 @@ fn main() {
             dur / nok
         );
     }
+    Ok(())
 }

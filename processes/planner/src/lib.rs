@@ -15,6 +15,7 @@ pub mod astar;
 pub mod bspline;
 pub mod config;
 pub mod cost;
+pub mod fields;
 pub mod lbfgs;
 pub mod map;
 pub mod node;

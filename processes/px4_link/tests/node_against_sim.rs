@@ -154,13 +154,7 @@ fn hover_at(x: f64, y: f64, z: f64) -> Setpoint {
 }
 
 fn kind(o: &LinkOutcome) -> LinkOutcomeKind {
-    match o.outcome {
-        1 => LinkOutcomeKind::Accepted,
-        2 => LinkOutcomeKind::Rejected,
-        3 => LinkOutcomeKind::TimedOut,
-        4 => LinkOutcomeKind::NoSetpointStream,
-        _ => LinkOutcomeKind::Invalid,
-    }
+    LinkOutcomeKind::from_raw(o.outcome)
 }
 
 #[test]

@@ -10,6 +10,7 @@ use std::time::Instant;
 use anyhow::Result;
 use clap::Args;
 use nalgebra::Vector3;
+use planner::fields::{FIELD_DENSITIES, FIELD_GOAL, FIELD_START, FieldRng, pillar_field};
 use planner::{
     Aabb, BSpline, Goal, GridMap, LIMIT_TOLERANCE, OccupancyQuery, Planner, PlannerConfig, State,
 };
@@ -34,21 +35,6 @@ pub struct PlannerArgs {
     verbose: bool,
 }
 
-/// Pillar densities, per m^2 of the field.
-const DENSITIES: [f64; 4] = [0.05, 0.1, 0.15, 0.2];
-
-/// xorshift64*: a tiny seeded generator, so the maps are the same on every machine.
-struct Rng(u64);
-
-impl Rng {
-    fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// One scene: map, boxes, start, goal.
 struct Scene {
     map: GridMap,
@@ -56,34 +42,11 @@ struct Scene {
     goal: State,
 }
 
-fn random_scene(rng: &mut Rng, density: f64, cfg: &PlannerConfig) -> Result<Scene> {
-    let (start, goal) = (Vector3::new(0.0, 0.0, 1.0), Vector3::new(10.0, 0.0, 1.0));
-    // The field: x 1..9, y -4..4 (64 m^2); pillars 0.3 x 0.3 m, floor to ceiling.
-    let count = (density * 64.0).round() as usize;
-    let mut boxes = Vec::with_capacity(count);
-    while boxes.len() < count {
-        let c = Vector3::new(1.0 + 8.0 * rng.uniform(), -4.0 + 8.0 * rng.uniform(), 0.0);
-        let flat = |p: Vector3<f64>| Vector3::new(p.x, p.y, 0.0);
-        if (c - flat(start)).norm() < 1.0 || (c - flat(goal)).norm() < 1.0 {
-            continue;
-        }
-        let w = 0.15;
-        boxes.push(Aabb {
-            min: Vector3::new(c.x - w, c.y - w, 0.0),
-            max: Vector3::new(c.x + w, c.y + w, 3.0),
-        });
-    }
-    let map = GridMap::from_boxes(
-        Vector3::new(-1.0, -5.0, 0.0),
-        Vector3::new(11.0, 5.0, 3.0),
-        cfg.resolution,
-        cfg.inflation,
-        &boxes,
-    )?;
+fn random_scene(rng: &mut FieldRng, density: f64, cfg: &PlannerConfig) -> Result<Scene> {
     Ok(Scene {
-        map,
-        start: State::at_rest(start),
-        goal: State::at_rest(goal),
+        map: pillar_field(rng, density, cfg.resolution, cfg.inflation)?,
+        start: State::at_rest(Vector3::from(FIELD_START)),
+        goal: State::at_rest(Vector3::from(FIELD_GOAL)),
     })
 }
 
@@ -243,10 +206,10 @@ fn round3(x: f64) -> f64 {
 pub fn run(args: &PlannerArgs) -> Result<()> {
     let cfg = PlannerConfig::default();
     let mut planner = Planner::new(cfg.clone());
-    let mut rng = Rng(args.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut rng = FieldRng::new(args.seed);
     let mut all = Group::default();
     let mut per = serde_json::Map::new();
-    for d in DENSITIES {
+    for d in FIELD_DENSITIES {
         let mut g = Group::default();
         for _ in 0..args.maps {
             let s = random_scene(&mut rng, d, &cfg)?;

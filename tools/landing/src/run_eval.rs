@@ -19,13 +19,11 @@ pub struct Sample {
     pub pad_velocity: Option<[f64; 3]>,
     /// The fsm's state.
     pub phase: MissionState,
-    /// The fsm's pad estimate (its status), m: what the pipeline believed.
-    pub pad_estimate: Option<[f64; 3]>,
 }
 
 impl Sample {
     /// The truth now.
-    pub fn of(sim: &Simulator, phase: MissionState, pad_estimate: Option<[f64; 3]>) -> Self {
+    pub fn of(sim: &Simulator, phase: MissionState) -> Self {
         let truth = sim.world().truth();
         let pad = sim.world().pad();
         Self {
@@ -37,7 +35,6 @@ impl Sample {
                 .map(|p| p.world_from_pad.translation.vector.into()),
             pad_velocity: pad.as_ref().map(|p| p.linear_velocity.into()),
             phase,
-            pad_estimate,
         }
     }
 }

@@ -117,6 +117,9 @@ pub fn run(
     let mut history = StateHistory::new(100, 200_000_000);
     let mut wire = Vec::with_capacity(280);
     let mut decoded: Vec<(MavHeader, MavMessage)> = Vec::with_capacity(8);
+    // Reused every physics step: the node's output is copied out because sending needs
+    // the node again (its header sequence).
+    let mut outgoing: Vec<MavMessage> = Vec::with_capacity(8);
     let mut vehicle: Option<VehicleState> = None;
     let mut goal: Option<PlannerGoal> = None;
     let mut traj_pending: VecDeque<(u64, Trajectory)> = VecDeque::new();
@@ -139,8 +142,9 @@ pub fn run(
         }
 
         // Companion -> autopilot, through the wire format.
-        let out: Vec<MavMessage> = pipe.link.poll(now).to_vec();
-        for m in &out {
+        outgoing.clear();
+        outgoing.extend_from_slice(pipe.link.poll(now));
+        for m in &outgoing {
             wire.clear();
             encode(&mut wire, pipe.link.next_header(), m)?;
             decoded.clear();
@@ -323,9 +327,7 @@ pub fn run(
 
         if now >= next_sample {
             next_sample = now + SAMPLE_PERIOD_NS;
-            let st = pipe.fsm.status(now);
-            let est = (st.pad_valid != 0).then_some(st.pad_position);
-            eval.sample(Sample::of(sim, pipe.fsm.state(), est));
+            eval.sample(Sample::of(sim, pipe.fsm.state()));
         }
         if now >= next_progress {
             next_progress = now + 1_000_000_000;

@@ -163,7 +163,6 @@ pub fn run(
     let mut stats = RunStats::default();
     let mut transitions: Vec<Transition> = Vec::new();
     let mut phase = MissionState::Idle;
-    let mut pad_estimate: Option<[f64; 3]> = None;
     let mut last_state: Option<TruthState> = None;
     let mut ended: Option<(End, Instant)> = None;
     let mut result: Option<End> = None;
@@ -196,7 +195,6 @@ pub fn run(
                         r.write_message("/fsm/status", monotonic_ns(), &st)?;
                     }
                     let state = MissionState::from_raw(st.state).unwrap_or(MissionState::Idle);
-                    pad_estimate = (st.pad_valid != 0).then_some(st.pad_position);
                     if state != phase {
                         transitions.push(Transition {
                             at_ns: st.since_ns.saturating_sub(start_ns),
@@ -238,7 +236,6 @@ pub fn run(
                         pad: (s.pad_valid != 0).then_some(s.pad_position),
                         pad_velocity: (s.pad_valid != 0).then_some(s.pad_velocity),
                         phase,
-                        pad_estimate,
                     });
                     last_state = Some(s);
                 }
