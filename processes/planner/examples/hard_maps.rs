@@ -57,6 +57,12 @@ fn main() -> Result<(), Error> {
     if let Some(v) = env("GTOL") {
         cfg.g_tolerance = parse("GTOL", &v)?;
     }
+    if let Some(v) = env("CPS") {
+        cfg.control_point_spacing = parse("CPS", &v)?;
+    }
+    if let Some(v) = env("RGTOL") {
+        cfg.rebound_g_tolerance = parse("RGTOL", &v)?;
+    }
     if let Some(v) = env("MEM") {
         cfg.lbfgs_memory = parse("MEM", &v)?;
     }
@@ -76,6 +82,8 @@ fn main() -> Result<(), Error> {
         State::at_rest(Vector3::from(FIELD_START)),
         State::at_rest(Vector3::from(FIELD_GOAL)),
     );
+    let mut all_ms: Vec<f64> = Vec::new();
+    let mut all_fail = 0usize;
     for seed in seeds {
         let mut rng = FieldRng::new(seed);
         let (mut it, mut ex, mut qu, mut fails, mut restarts) = (0u64, 0u64, 0u64, 0, 0);
@@ -130,6 +138,8 @@ fn main() -> Result<(), Error> {
                 }
             }
         }
+        all_ms.extend_from_slice(&ms);
+        all_fail += fails;
         ms.sort_by(f64::total_cmp);
         if ms.len() < 200 {
             println!(
@@ -138,12 +148,26 @@ fn main() -> Result<(), Error> {
             continue;
         }
         println!(
-            "seed {seed}: failures {fails}/200, restarts {restarts}, iterations {it}, A* expansions {ex}, queries {qu}, ms p50 {:.3} p99 {:.3} top6 {:.2?}, mean jerk {:.0} duration {:.3} (random maps only)",
+            "seed {seed}: failures {fails}/200, restarts {restarts}, iterations {it}, A* expansions {ex}, queries {qu}, ms total {:.1} p50 {:.3} p99 {:.3} top6 {:.2?}, mean jerk {:.0} duration {:.3} (random maps only)",
+            ms.iter().sum::<f64>(),
             ms[100],
             ms[197],
             &ms[194..],
             jerk / nok,
             dur / nok
+        );
+    }
+    if all_ms.len() >= 400 {
+        all_ms.sort_by(f64::total_cmp);
+        let q = |f: f64| all_ms[((all_ms.len() as f64 * f) as usize).min(all_ms.len() - 1)];
+        println!(
+            "all: {} maps, failures {all_fail}, ms p50 {:.3} p95 {:.3} p98 {:.3} p99 {:.3} max {:.3}",
+            all_ms.len(),
+            q(0.5),
+            q(0.95),
+            q(0.98),
+            q(0.99),
+            all_ms[all_ms.len() - 1]
         );
     }
     Ok(())

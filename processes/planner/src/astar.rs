@@ -4,37 +4,19 @@
 //! point is pushed to. Buffers are kept between searches and reset by a generation
 //! counter, so a search costs what it expands, not the size of the map.
 
-use std::cmp::Ordering;
+use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
 use nalgebra::Vector3;
 
 use crate::map::OccupancyQuery;
 
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Open {
-    f: f32,
-    g: f32,
-    idx: u32,
-    /// The cell's coordinates (no division to recover them from `idx`).
-    c: [i32; 3],
-}
-
-impl Eq for Open {}
-
-impl Ord for Open {
-    #[inline]
-    fn cmp(&self, o: &Self) -> Ordering {
-        // Min-heap on f, ties to the larger g (deeper node).
-        o.f.total_cmp(&self.f).then(self.g.total_cmp(&o.g))
-    }
-}
-
-impl PartialOrd for Open {
-    #[inline]
-    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-        Some(self.cmp(o))
-    }
+/// An open-list entry packed in one word: the f-value's bits above the cell index. f is
+/// finite and non-negative, so its bits order as the value does, and a heap of words
+/// moves a third of the bytes a struct would.
+#[inline]
+fn open_key(f: f32, idx: u32) -> Reverse<u64> {
+    Reverse(((f.to_bits() as u64) << 32) | idx as u64)
 }
 
 /// Per-cell search state, together so that a neighbour costs one cache line.
@@ -47,15 +29,23 @@ struct Node {
     closed: bool,
 }
 
+/// The default heuristic weight: ties break toward the goal, far fewer expansions than
+/// plain A* and the same path length to within 0.1%.
+pub const TIE_BREAK: f32 = 1.0 + 1e-3;
+
 /// Reusable A* search state.
 #[derive(Debug, Clone, Default)]
 pub struct AStar {
     nodes: Vec<Node>,
-    heap: BinaryHeap<Open>,
+    heap: BinaryHeap<Reverse<u64>>,
     current: u32,
     /// Expansion limit per search (bounds the time on a maze).
     pub max_expansions: usize,
 
+    /// Heuristic weight (>= 1): 1 + 1e-3 breaks ties toward the goal; larger values
+    /// trade path length for far fewer expansions (weighted A*: at most `weight` times
+    /// the shortest path).
+    pub weight: f32,
     /// Cells expanded over all searches so far (a work counter for the statistics).
     pub expansions: u64,
 }
@@ -102,6 +92,7 @@ impl AStar {
     pub fn new(max_expansions: usize) -> Self {
         Self {
             max_expansions,
+            weight: TIE_BREAK,
             ..Self::default()
         }
     }
@@ -185,22 +176,20 @@ impl AStar {
             *o = (d[2] as i64 * dims[1] as i64 + d[1] as i64) * dims[0] as i64 + d[0] as i64;
         }
         // A slightly greedy heuristic: ties break toward the goal, far fewer expansions.
-        const TIE: f32 = 1.0 + 1e-3;
-        self.heap.push(Open {
-            f: octile(s, t) * TIE,
-            g: 0.0,
-            idx: si,
-            c: s,
-        });
+        let tie = self.weight;
+        self.heap.push(open_key(octile(s, t) * tie, si));
         let mut expanded = 0usize;
         let mut found = false;
-        while let Some(o) = self.heap.pop() {
-            let oi = o.idx as usize;
+        while let Some(Reverse(key)) = self.heap.pop() {
+            let idx = key as u32;
+            let oi = idx as usize;
             let node = self.nodes[oi];
-            if node.closed || o.g > node.g {
+            // Lazy deletion: the first entry popped for a cell carries its best g (a
+            // better g means a smaller f for the same cell); later ones find it closed.
+            if node.closed {
                 continue;
             }
-            if o.idx == ti {
+            if idx == ti {
                 found = true;
                 break;
             }
@@ -209,21 +198,22 @@ impl AStar {
             if expanded > self.max_expansions {
                 break;
             }
-            let c = o.c;
+            let c = unlin(idx);
+            let g = node.g;
             let interior = (0..3).all(|i| c[i] > 0 && c[i] < dims[i] - 1);
             for (k, &(d, step)) in NEIGHBOURS.iter().enumerate() {
                 let nc = [c[0] + d[0], c[1] + d[1], c[2] + d[2]];
                 if !interior && (0..3).any(|i| nc[i] < 0 || nc[i] >= dims[i]) {
                     continue;
                 }
-                let ni = (o.idx as i64 + offsets[k]) as u32;
+                let ni = (idx as i64 + offsets[k]) as u32;
                 let nu = ni as usize;
                 let n = &mut self.nodes[nu];
                 let fresh = n.stamp != cur;
                 if !fresh && n.closed {
                     continue;
                 }
-                let ng = o.g + step;
+                let ng = g + step;
                 if !fresh && ng >= n.g {
                     continue;
                 }
@@ -237,13 +227,8 @@ impl AStar {
                     }
                 }
                 n.g = ng;
-                n.parent = o.idx;
-                self.heap.push(Open {
-                    f: ng + octile(nc, t) * TIE,
-                    g: ng,
-                    idx: ni,
-                    c: nc,
-                });
+                n.parent = idx;
+                self.heap.push(open_key(ng + octile(nc, t) * tie, ni));
             }
         }
         self.expansions += expanded as u64;

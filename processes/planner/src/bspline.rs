@@ -103,6 +103,48 @@ impl BSpline {
     }
 }
 
+/// Position weights of the four control points at `k / per_seg` of a segment, computed
+/// once per sampling density: the collision scans evaluate thousands of positions per
+/// rebound round, and a full [`BSpline::eval`] (velocity and acceleration too) costs
+/// three times as much.
+#[derive(Debug, Clone, Default)]
+pub struct SegmentSampler {
+    weights: Vec<[f64; 4]>,
+}
+
+impl SegmentSampler {
+    /// Weights for `per_seg` samples per segment (at least 1), reusing the buffer.
+    pub fn prepare(&mut self, per_seg: usize) {
+        let per_seg = per_seg.max(1);
+        if self.weights.len() == per_seg {
+            return;
+        }
+        self.weights.clear();
+        self.weights.extend((0..per_seg).map(|k| {
+            let u = k as f64 / per_seg as f64;
+            let (u2, u3, m) = (u * u, u * u * u, 1.0 - u);
+            [
+                m * m * m / 6.0,
+                (3.0 * u3 - 6.0 * u2 + 4.0) / 6.0,
+                (-3.0 * u3 + 3.0 * u2 + 3.0 * u + 1.0) / 6.0,
+                u3 / 6.0,
+            ]
+        }));
+    }
+
+    /// Samples per segment the weights are for.
+    pub fn per_segment(&self) -> usize {
+        self.weights.len()
+    }
+
+    /// The curve's position at sample `k` of segment `s` (`points[s..s + 4]` exist).
+    #[inline]
+    pub fn position(&self, points: &[Vector3<f64>], s: usize, k: usize) -> Vector3<f64> {
+        let w = &self.weights[k];
+        points[s] * w[0] + points[s + 1] * w[1] + points[s + 2] * w[2] + points[s + 3] * w[3]
+    }
+}
+
 /// The three control points that give a curve the state `s` at its start (`end` false)
 /// or at its end (`end` true), for knot interval `ts`.
 pub fn end_points(s: &State, ts: f64) -> [Vector3<f64>; 3] {

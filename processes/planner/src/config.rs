@@ -31,8 +31,13 @@ pub struct PlannerConfig {
     pub lbfgs_memory: usize,
     /// L-BFGS iteration limit per optimization.
     pub max_iterations: usize,
-    /// L-BFGS relative gradient tolerance.
+    /// L-BFGS relative gradient tolerance of the final passes (polish of the first
+    /// collision-free curve, refinement after time re-allocation).
     pub g_tolerance: f64,
+    /// L-BFGS relative gradient tolerance while the curve still collides: a rebound round
+    /// only has to move the points out, and its exact optimum is thrown away when the next
+    /// round adds pairs (0.05: half the work of 0.01 on dense fields).
+    pub rebound_g_tolerance: f64,
     /// Rebound rounds before a plan is given up, over both attempts: the first (from the
     /// straight initialization) gets at most half, the restart from the A* path the rest.
     pub max_rebounds: usize,
@@ -41,9 +46,10 @@ pub struct PlannerConfig {
     /// is given up as stuck.
     pub max_stalled_rounds: usize,
     /// Work a plan may spend before it is given up, in L-BFGS iterations; an A* expansion
-    /// counts 1/16 (what it costs beside an iteration on ~40 control points). A ceiling
-    /// for the pathological plan (1000: ~4 ms on the development VM), not a deadline: a
-    /// plan that needs more is rare and late anyway, and the replanning tries again.
+    /// counts 1/24 (what it costs beside an iteration on ~45 control points). A ceiling for
+    /// the pathological plan (200: ~1.6 ms on the development VM), not a deadline: a plan
+    /// that needs more is rare (2% of the benchmark's densest fields) and late anyway, and
+    /// the replanning tries again from where the drone is then.
     pub work_budget: usize,
     /// Fitness ellipsoid, axial semi-axis a, m.
     pub fitness_axial: f64,
@@ -77,9 +83,10 @@ impl Default for PlannerConfig {
             lbfgs_memory: 16,
             max_iterations: 200,
             g_tolerance: 0.01,
+            rebound_g_tolerance: 0.05,
             max_rebounds: 20,
             max_stalled_rounds: 3,
-            work_budget: 1000,
+            work_budget: 200,
             fitness_axial: 20.0,
             fitness_radial: 1.0,
             replan_distance_m: 1.5,
@@ -111,6 +118,7 @@ impl Validate for PlannerConfig {
         check_range("lbfgs_memory", self.lbfgs_memory, 1, 64)?;
         check_range("max_iterations", self.max_iterations, 1, 10_000)?;
         check_range("g_tolerance", self.g_tolerance, 1e-9, 10.0)?;
+        check_range("rebound_g_tolerance", self.rebound_g_tolerance, 1e-9, 10.0)?;
         check_range("max_rebounds", self.max_rebounds, 0, 100)?;
         check_range("max_stalled_rounds", self.max_stalled_rounds, 1, 100)?;
         check_range("work_budget", self.work_budget, 10, 1_000_000)?;

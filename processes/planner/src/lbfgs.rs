@@ -109,6 +109,17 @@ pub struct Lbfgs {
 
 /// Dot product with four independent accumulators: a single running sum is one long
 /// chain of dependent additions, and the two-loop recursion is mostly dot products.
+/// The ring-buffer slot of the `k`-th newest correction pair (`head` is the next slot to
+/// write, `m` the memory): no division in the two-loop recursion.
+#[inline]
+fn slot(head: usize, k: usize, m: usize) -> usize {
+    if head > k {
+        head - 1 - k
+    } else {
+        head + m - 1 - k
+    }
+}
+
 #[inline]
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len());
@@ -143,6 +154,11 @@ impl Lbfgs {
     /// left).
     pub fn set_max_iterations(&mut self, max_iterations: usize) {
         self.settings.max_iterations = max_iterations;
+    }
+
+    /// Changes the relative gradient tolerance for the next minimizations.
+    pub fn set_g_tolerance(&mut self, g_tolerance: f64) {
+        self.settings.g_tolerance = g_tolerance;
     }
 
     fn reserve(&mut self, n: usize) {
@@ -204,7 +220,7 @@ impl Lbfgs {
                 *d = -g;
             }
             for k in 0..stored {
-                let j = (head + m - 1 - k) % m;
+                let j = slot(head, k, m);
                 let sj = &self.s[j * n..(j + 1) * n];
                 let a = self.rho[j] * dot(sj, &self.d);
                 self.alpha[j] = a;
@@ -241,7 +257,7 @@ impl Lbfgs {
                 }
             }
             for k in (0..stored).rev() {
-                let j = (head + m - 1 - k) % m;
+                let j = slot(head, k, m);
                 let yj = &self.y[j * n..(j + 1) * n];
                 let b = self.rho[j] * dot(yj, &self.d);
                 let sj = &self.s[j * n..(j + 1) * n];

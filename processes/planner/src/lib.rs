@@ -27,5 +27,8 @@ pub use bspline::{BSpline, State};
 pub use config::PlannerConfig;
 pub use map::{Aabb, CellView, GridMap, MapError, OccupancyQuery};
 pub use node::{Output, PlannerNode, to_message};
-pub use plan::{Goal, LIMIT_TOLERANCE, Plan, PlanError, PlanStats, Planner, stop_trajectory};
+pub use plan::{
+    EXPANSIONS_PER_ITERATION, Goal, LIMIT_TOLERANCE, Plan, PlanError, PlanStats, Planner,
+    stop_trajectory,
+};
 pub use replan::{Decision, OnFailure, Reason, ReplanPolicy, predicted_collision};

@@ -6,8 +6,8 @@
 
 use nalgebra::Vector3;
 use planner::{
-    Aabb, BSpline, Goal, GridMap, LIMIT_TOLERANCE, OccupancyQuery, PlanError, Planner,
-    PlannerConfig, State,
+    Aabb, BSpline, EXPANSIONS_PER_ITERATION, Goal, GridMap, LIMIT_TOLERANCE, OccupancyQuery,
+    PlanError, Planner, PlannerConfig, State,
 };
 
 fn v(x: f64, y: f64, z: f64) -> Vector3<f64> {
@@ -388,7 +388,7 @@ fn no_plan_spends_more_than_its_work_budget_and_a_spent_budget_is_an_error() {
         let map = dense_field(seed * 7919);
         let r = planner.plan(&map, &s, &goal(g));
         let st = planner.stats();
-        let work = st.iterations as u64 + st.astar_expansions / 16;
+        let work = st.iterations as u64 + st.astar_expansions / EXPANSIONS_PER_ITERATION;
         assert!(work <= cfg.work_budget as u64 + 1, "seed {seed}: {st:?}");
         assert!(
             st.rebounds as usize <= cfg.max_rebounds + 2,
