@@ -310,7 +310,10 @@ impl Planner {
                 self.cfg.rebound_g_tolerance
             });
             self.optimize(map, &mut spline, w, vlim, alim, reference.as_deref());
-            let found = self.add_pairs(map, &spline)?;
+            let found = match self.add_pairs(map, &spline) {
+                Ok(found) => found,
+                Err(e) => return fallback.ok_or(e),
+            };
             match found {
                 Found::Clear => {}
                 found => {
