@@ -290,28 +290,12 @@ fn a_wall_with_no_gap_fails_without_a_trajectory() {
 fn random_pillar_fields_give_collision_free_plans() {
     let cfg = PlannerConfig::default();
     let mut planner = Planner::new(cfg.clone());
-    let mut seed = 7u64;
-    let mut rnd = move || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = FieldRng::new(7);
+    let (s, g) = (at(v(0.0, 0.0, 1.0)), at(v(10.0, 0.0, 1.0)));
     let mut ok = 0;
     for _ in 0..20 {
-        let mut boxes = Vec::new();
-        for _ in 0..12 {
-            let (x, y) = (1.5 + rnd() * 7.0, -4.0 + rnd() * 8.0);
-            boxes.push(Aabb {
-                min: v(x - 0.15, y - 0.15, 0.0),
-                max: v(x + 0.15, y + 0.15, 3.0),
-            });
-        }
-        let map = GridMap::from_boxes(v(-1.0, -5.0, 0.0), v(11.0, 5.0, 3.0), 0.15, 0.299, &boxes)
-            .unwrap();
-        let (s, g) = (at(v(0.0, 0.0, 1.0)), at(v(10.0, 0.0, 1.0)));
-        let r = planner.plan(&map, &s, &goal(g));
-        if let Ok(plan) = r {
+        let map = pillar_field(&mut rng, 0.2, cfg.resolution, cfg.inflation).unwrap();
+        if let Ok(plan) = planner.plan(&map, &s, &goal(g)) {
             check(&map, &plan.spline, &s, &g, &cfg);
             ok += 1;
         }
@@ -355,26 +339,10 @@ fn every_start_in_the_inflation_but_outside_the_box_fails_clearly_and_never_pani
 }
 
 /// A field dense enough that plans need rebound rounds (and some a restart).
+/// A field of the benchmark's densest kind (0.2 floor-to-ceiling pillars per m^2).
 fn dense_field(seed: u64) -> GridMap {
-    let mut s = seed;
-    let mut rnd = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 11) as f64 / (1u64 << 53) as f64
-    };
-    let mut boxes = Vec::new();
-    while boxes.len() < 14 {
-        let (x, y) = (1.0 + rnd() * 8.0, -4.0 + rnd() * 8.0);
-        if (x * x + y * y).sqrt() < 1.0 || ((x - 10.0).powi(2) + y * y).sqrt() < 1.0 {
-            continue;
-        }
-        boxes.push(Aabb {
-            min: v(x - 0.15, y - 0.15, 0.0),
-            max: v(x + 0.15, y + 0.15, 3.0),
-        });
-    }
-    GridMap::from_boxes(v(-1.0, -5.0, 0.0), v(11.0, 5.0, 3.0), 0.15, 0.299, &boxes).unwrap()
+    let cfg = PlannerConfig::default();
+    pillar_field(&mut FieldRng::new(seed), 0.2, cfg.resolution, cfg.inflation).unwrap()
 }
 
 #[test]
@@ -386,7 +354,7 @@ fn no_plan_spends_more_than_its_work_budget_and_a_spent_budget_is_an_error() {
     let mut planner = Planner::new(cfg.clone());
     let mut ok = 0;
     for seed in 1..=30 {
-        let map = dense_field(seed * 7919);
+        let map = dense_field(seed);
         let r = planner.plan(&map, &s, &goal(g));
         let st = planner.stats();
         let work = st.iterations as u64 + st.astar_expansions / EXPANSIONS_PER_ITERATION;
@@ -410,7 +378,7 @@ fn no_plan_spends_more_than_its_work_budget_and_a_spent_budget_is_an_error() {
     let mut planner = Planner::new(tiny.clone());
     let mut over = 0;
     for seed in 1..=30 {
-        let map = dense_field(seed * 7919);
+        let map = dense_field(seed);
         match planner.plan(&map, &s, &goal(g)) {
             Ok(plan) => check(&map, &plan.spline, &s, &g, &tiny),
             Err(PlanError::OverBudget) => over += 1,
