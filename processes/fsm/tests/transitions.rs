@@ -305,6 +305,15 @@ impl World {
         false
     }
 
+    /// Runs until `state` within `seconds`; otherwise fails the test with the transitions.
+    fn expect(&mut self, state: MissionState, seconds: f64) {
+        assert!(
+            self.run_until(state, seconds),
+            "no {state:?} within {seconds} s: {:?}",
+            self.reasons()
+        );
+    }
+
     fn run_for(&mut self, seconds: f64) {
         let end = self.t + (seconds * 1e9) as u64;
         while self.t < end {
@@ -337,13 +346,9 @@ fn config() -> FsmConfig {
 fn a_whole_mission_passes_every_nominal_state_in_order() {
     let mut w = World::new(config());
     w.pad_visible = false;
-    assert!(
-        w.run_until(MissionState::WaitForPad, 30.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::WaitForPad, 30.0);
     w.pad_visible = true;
-    assert!(w.run_until(MissionState::Landed, 60.0), "{:?}", w.reasons());
+    w.expect(MissionState::Landed, 60.0);
     let path: Vec<_> = w.fsm.transitions().iter().map(|t| t.to).collect();
     assert_eq!(
         path,
@@ -374,12 +379,12 @@ fn a_pad_seen_on_the_way_to_the_preset_point_is_tracked_at_once() {
     cfg.preset_m = [6.0, 0.0, 2.0];
     let mut w = World::new(cfg);
     w.pad = Some(Vector3::new(2.0, 0.0, PAD_HEIGHT));
-    assert!(w.run_until(MissionState::Track, 30.0), "{:?}", w.reasons());
+    w.expect(MissionState::Track, 30.0);
     assert_eq!(
         w.fsm.transitions().last().unwrap().from,
         MissionState::GoToPreset
     );
-    assert!(w.run_until(MissionState::Landed, 60.0), "{:?}", w.reasons());
+    w.expect(MissionState::Landed, 60.0);
 }
 
 #[test]
@@ -387,7 +392,7 @@ fn the_mission_lands_on_a_pad_moving_at_one_metre_per_second() {
     let mut w = World::new(config());
     w.pad = Some(Vector3::new(-1.0, -0.5, PAD_HEIGHT));
     w.pad_vel = Vector3::new(1.0, 0.2, 0.0);
-    assert!(w.run_until(MissionState::Landed, 60.0), "{:?}", w.reasons());
+    w.expect(MissionState::Landed, 60.0);
     assert!(
         (w.pos - w.pad.unwrap()).xy().norm() < 0.12,
         "{:?} {:?}",
@@ -405,11 +410,7 @@ fn the_mission_lands_on_a_pad_moving_at_one_metre_per_second() {
 fn arming_rejected_is_retried_within_the_limit_then_the_mission_lands_in_place() {
     let mut w = World::new(config());
     w.answer(LinkRequestKind::Arm, Answer::Reject);
-    assert!(
-        w.run_until(MissionState::SafeLand, 20.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::SafeLand, 20.0);
     assert_eq!(w.count(LinkRequestKind::Arm), 3);
     assert!(
         w.fsm.reason().contains("Arm failed 3 times"),
@@ -425,11 +426,7 @@ fn arming_rejected_is_retried_within_the_limit_then_the_mission_lands_in_place()
 fn arming_rejected_once_is_retried_and_the_mission_goes_on() {
     let mut w = World::new(config());
     w.answer(LinkRequestKind::Arm, Answer::RejectTimes(1));
-    assert!(
-        w.run_until(MissionState::GoToPreset, 20.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::GoToPreset, 20.0);
     assert_eq!(w.count(LinkRequestKind::Arm), 2);
 }
 
@@ -437,11 +434,7 @@ fn arming_rejected_once_is_retried_and_the_mission_goes_on() {
 fn offboard_rejected_lands_in_place() {
     let mut w = World::new(config());
     w.answer(LinkRequestKind::Offboard, Answer::Reject);
-    assert!(
-        w.run_until(MissionState::SafeLand, 30.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::SafeLand, 30.0);
     assert_eq!(w.count(LinkRequestKind::Offboard), 3);
     w.run_for(10.0);
     assert_eq!(w.count(LinkRequestKind::Land), 1, "{:?}", w.requests);
@@ -452,11 +445,7 @@ fn offboard_rejected_lands_in_place() {
 fn a_silent_px4_link_counts_as_failed_attempts() {
     let mut w = World::new(config());
     w.answer(LinkRequestKind::Arm, Answer::Silent);
-    assert!(
-        w.run_until(MissionState::SafeLand, 30.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::SafeLand, 30.0);
     assert!(w.fsm.reason().contains("no answer"), "{}", w.fsm.reason());
 }
 
@@ -464,11 +453,7 @@ fn a_silent_px4_link_counts_as_failed_attempts() {
 fn takeoff_that_never_climbs_times_out() {
     let mut w = World::new(config());
     w.frozen = true;
-    assert!(
-        w.run_until(MissionState::SafeLand, 40.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::SafeLand, 40.0);
     assert!(
         w.fsm.reason().starts_with("takeoff timed out"),
         "{}",
@@ -483,13 +468,9 @@ fn a_preset_point_never_reached_times_out() {
     cfg.preset_m = [10.0, 0.0, 2.0];
     let mut w = World::new(cfg);
     w.pad_visible = false;
-    assert!(w.run_until(MissionState::GoToPreset, 20.0));
+    w.expect(MissionState::GoToPreset, 20.0);
     w.frozen = true;
-    assert!(
-        w.run_until(MissionState::SafeLand, 10.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::SafeLand, 10.0);
     assert_eq!(w.fsm.reason(), "preset point not reached in time");
 }
 
@@ -499,14 +480,10 @@ fn waiting_for_a_pad_that_never_shows_climbs_to_search_then_times_out() {
     cfg.wait_timeout_s = 10.0;
     let mut w = World::new(cfg);
     w.pad_visible = false;
-    assert!(w.run_until(MissionState::WaitForPad, 20.0));
+    w.expect(MissionState::WaitForPad, 20.0);
     w.run_for(6.0);
     assert!(w.pos.z > 3.0, "searching climbs: {:?}", w.pos);
-    assert!(
-        w.run_until(MissionState::SafeLand, 10.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::SafeLand, 10.0);
     assert_eq!(w.fsm.reason(), "pad not seen in time");
 }
 
@@ -514,9 +491,9 @@ fn waiting_for_a_pad_that_never_shows_climbs_to_search_then_times_out() {
 fn a_pad_lost_while_tracking_holds_climbs_and_is_regained() {
     let mut w = World::new(config());
     w.pad = Some(Vector3::new(3.0, 0.0, PAD_HEIGHT));
-    assert!(w.run_until(MissionState::Track, 20.0), "{:?}", w.reasons());
+    w.expect(MissionState::Track, 20.0);
     w.pad_visible = false;
-    assert!(w.run_until(MissionState::Lost, 3.0), "{:?}", w.reasons());
+    w.expect(MissionState::Lost, 3.0);
     let z0 = w.pos.z;
     w.run_for(3.0);
     assert!(
@@ -526,22 +503,18 @@ fn a_pad_lost_while_tracking_holds_climbs_and_is_regained() {
         w.pos.z
     );
     w.pad_visible = true;
-    assert!(w.run_until(MissionState::Track, 2.0), "{:?}", w.reasons());
+    w.expect(MissionState::Track, 2.0);
     assert_eq!(w.fsm.reason(), "pad regained");
-    assert!(w.run_until(MissionState::Landed, 60.0), "{:?}", w.reasons());
+    w.expect(MissionState::Landed, 60.0);
 }
 
 #[test]
 fn a_pad_lost_for_good_ends_in_a_landing_in_place() {
     let mut w = World::new(config());
-    assert!(w.run_until(MissionState::Track, 20.0));
+    w.expect(MissionState::Track, 20.0);
     w.pad_visible = false;
-    assert!(w.run_until(MissionState::Lost, 3.0));
-    assert!(
-        w.run_until(MissionState::SafeLand, 12.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::Lost, 3.0);
+    w.expect(MissionState::SafeLand, 12.0);
     assert_eq!(w.fsm.reason(), "pad lost for 10 s");
     w.run_for(10.0);
     assert!(w.count(LinkRequestKind::Land) >= 1);
@@ -552,13 +525,9 @@ fn tracking_that_never_aligns_times_out() {
     let mut cfg = config();
     cfg.track_timeout_s = 5.0;
     let mut w = World::new(cfg);
-    assert!(w.run_until(MissionState::Track, 20.0));
+    w.expect(MissionState::Track, 20.0);
     w.frozen = true;
-    assert!(
-        w.run_until(MissionState::SafeLand, 10.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::SafeLand, 10.0);
     assert_eq!(w.fsm.reason(), "tracking timed out");
 }
 
@@ -567,17 +536,9 @@ fn a_descent_that_stalls_times_out() {
     let mut cfg = config();
     cfg.descend_timeout_s = 3.0;
     let mut w = World::new(cfg);
-    assert!(
-        w.run_until(MissionState::Descend, 30.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::Descend, 30.0);
     w.frozen = true;
-    assert!(
-        w.run_until(MissionState::SafeLand, 5.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::SafeLand, 5.0);
     assert_eq!(w.fsm.reason(), "descent timed out");
 }
 
@@ -587,28 +548,20 @@ fn a_touchdown_that_never_disarms_times_out() {
     cfg.land_timeout_s = 4.0;
     let mut w = World::new(cfg);
     w.answer(LinkRequestKind::Disarm, Answer::Silent);
-    assert!(w.run_until(MissionState::Land, 40.0), "{:?}", w.reasons());
-    assert!(
-        w.run_until(MissionState::SafeLand, 6.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::Land, 40.0);
+    w.expect(MissionState::SafeLand, 6.0);
     assert_eq!(w.fsm.reason(), "touchdown timed out");
 }
 
 #[test]
 fn a_pad_that_drives_off_during_the_descent_causes_a_go_around() {
     let mut w = World::new(config());
-    assert!(
-        w.run_until(MissionState::Descend, 30.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::Descend, 30.0);
     // The vehicle cannot follow (a gust holds it) while the pad drives off: the descent
     // stops and the vehicle climbs back into tracking.
     w.frozen = true;
     w.pad_vel = Vector3::new(0.5, 0.0, 0.0);
-    assert!(w.run_until(MissionState::Track, 3.0), "{:?}", w.reasons());
+    w.expect(MissionState::Track, 3.0);
     assert!(
         w.fsm.reason().starts_with("go-around 1"),
         "{}",
@@ -616,7 +569,7 @@ fn a_pad_that_drives_off_during_the_descent_causes_a_go_around() {
     );
     w.frozen = false;
     w.pad_vel = Vector3::zeros();
-    assert!(w.run_until(MissionState::Landed, 60.0), "{:?}", w.reasons());
+    w.expect(MissionState::Landed, 60.0);
 }
 
 #[test]
@@ -624,18 +577,10 @@ fn too_many_go_arounds_land_in_place() {
     let mut cfg = config();
     cfg.max_go_arounds = 0;
     let mut w = World::new(cfg);
-    assert!(
-        w.run_until(MissionState::Descend, 30.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::Descend, 30.0);
     w.frozen = true;
     w.pad_vel = Vector3::new(0.5, 0.0, 0.0);
-    assert!(
-        w.run_until(MissionState::SafeLand, 3.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::SafeLand, 3.0);
     assert!(
         w.fsm.reason().contains("0 go-arounds"),
         "{}",
@@ -647,13 +592,9 @@ fn too_many_go_arounds_land_in_place() {
 fn telemetry_that_stops_in_flight_lands_in_place() {
     let mut w = World::new(config());
     w.pad_visible = false;
-    assert!(w.run_until(MissionState::WaitForPad, 30.0));
+    w.expect(MissionState::WaitForPad, 30.0);
     w.telemetry = false;
-    assert!(
-        w.run_until(MissionState::SafeLand, 1.0),
-        "{:?}",
-        w.reasons()
-    );
+    w.expect(MissionState::SafeLand, 1.0);
     assert_eq!(w.fsm.reason(), "telemetry lost");
     let before = w.setpoints;
     w.run_for(1.0);
@@ -663,7 +604,7 @@ fn telemetry_that_stops_in_flight_lands_in_place() {
 #[test]
 fn an_operator_abort_stops_the_mission_at_once() {
     let mut w = World::new(config());
-    assert!(w.run_until(MissionState::Track, 30.0));
+    w.expect(MissionState::Track, 30.0);
     let cmd = SafetyCommand {
         action: SafetyAction::Abort as u32,
         source: Text::new("operator"),
@@ -681,7 +622,7 @@ fn an_operator_abort_stops_the_mission_at_once() {
 #[test]
 fn a_watchdog_safe_land_order_ends_the_mission_in_safe_land() {
     let mut w = World::new(config());
-    assert!(w.run_until(MissionState::GoToPreset, 30.0));
+    w.expect(MissionState::GoToPreset, 30.0);
     let cmd = SafetyCommand {
         action: SafetyAction::SafeLand as u32,
         source: Text::new("watchdog"),
@@ -698,9 +639,9 @@ fn a_watchdog_safe_land_order_ends_the_mission_in_safe_land() {
 #[test]
 fn a_pilot_taking_over_from_offboard_ends_the_mission() {
     let mut w = World::new(config());
-    assert!(w.run_until(MissionState::Track, 30.0));
+    w.expect(MissionState::Track, 30.0);
     w.mode = FlightMode::Manual;
-    assert!(w.run_until(MissionState::Abort, 2.0), "{:?}", w.reasons());
+    w.expect(MissionState::Abort, 2.0);
     assert!(
         w.fsm.reason().contains("left OFFBOARD"),
         "{}",
@@ -717,13 +658,13 @@ fn without_autostart_the_mission_waits_for_the_operator() {
     assert_eq!(w.state(), MissionState::Idle);
     assert!(w.requests.is_empty());
     w.fsm.start();
-    assert!(w.run_until(MissionState::Takeoff, 1.0));
+    w.expect(MissionState::Takeoff, 1.0);
 }
 
 #[test]
 fn a_single_jumped_observation_is_gated_out_and_a_persistent_jump_restarts_the_filter() {
     let mut w = World::new(config());
-    assert!(w.run_until(MissionState::Track, 30.0));
+    w.expect(MissionState::Track, 30.0);
     let before = w.fsm.status(w.t).pad_position;
     let far = w.pad.unwrap() + Vector3::new(5.0, 0.0, 0.0);
     let obs = w.observation_at(far, 1.5);
@@ -747,7 +688,7 @@ fn a_single_jumped_observation_is_gated_out_and_a_persistent_jump_restarts_the_f
 #[test]
 fn non_finite_and_worldless_observations_are_dropped_and_never_reach_a_setpoint() {
     let mut w = World::new(config());
-    assert!(w.run_until(MissionState::Track, 30.0));
+    w.expect(MissionState::Track, 30.0);
     let mut nan = w.observation_at(w.pad.unwrap(), 1.5);
     nan.world_from_pad.translation[0] = f64::NAN;
     assert_eq!(w.fsm.on_observation(w.t, &nan), fsm::Update::Dropped);
@@ -757,7 +698,7 @@ fn non_finite_and_worldless_observations_are_dropped_and_never_reach_a_setpoint(
     let mut stale = w.observation_at(w.pad.unwrap(), 1.5);
     stale.msg.capture_ns = w.t.saturating_sub(2_000_000_000);
     assert_eq!(w.fsm.on_observation(w.t, &stale), fsm::Update::Dropped);
-    assert!(w.run_until(MissionState::Landed, 60.0), "{:?}", w.reasons());
+    w.expect(MissionState::Landed, 60.0);
     assert_eq!(w.nan_setpoints, 0);
 }
 
@@ -768,7 +709,7 @@ fn goals_sent_while_tracking_a_distant_pad_are_rendezvous_points_ahead_of_it() {
     let mut w = World::new(cfg);
     w.pad = Some(Vector3::new(4.0, 0.0, PAD_HEIGHT));
     w.pad_vel = Vector3::new(-0.3, 0.0, 0.0);
-    assert!(w.run_until(MissionState::Track, 30.0), "{:?}", w.reasons());
+    w.expect(MissionState::Track, 30.0);
     w.run_for(0.3);
     let g = w.goal.expect("goal");
     assert_eq!(GoalMode::from_raw(g.mode), GoalMode::Rendezvous);
