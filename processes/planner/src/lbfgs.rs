@@ -107,8 +107,6 @@ pub struct Lbfgs {
     history: [f64; 8],
 }
 
-/// Dot product with four independent accumulators: a single running sum is one long
-/// chain of dependent additions, and the two-loop recursion is mostly dot products.
 /// The ring-buffer slot of the `k`-th newest correction pair (`head` is the next slot to
 /// write, `m` the memory): no division in the two-loop recursion.
 #[inline]
@@ -120,6 +118,8 @@ fn slot(head: usize, k: usize, m: usize) -> usize {
     }
 }
 
+/// Dot product with four independent accumulators: a single running sum is one long
+/// chain of dependent additions, and the two-loop recursion is mostly dot products.
 #[inline]
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len());
