@@ -19,6 +19,14 @@ fn parse<T: std::str::FromStr>(what: &str, value: &str) -> Result<T, Error> {
         .map_err(|_| format!("{what} `{value}` is not a number of the right kind").into())
 }
 
+/// Overrides `field` with the environment variable `name` when it is set.
+fn set_from_env<T: std::str::FromStr>(name: &str, field: &mut T) -> Result<(), Error> {
+    if let Ok(v) = std::env::var(name) {
+        *field = parse(name, &v)?;
+    }
+    Ok(())
+}
+
 struct Counting<'a> {
     map: &'a GridMap,
     queries: Cell<u64>,
@@ -45,27 +53,13 @@ fn main() -> Result<(), Error> {
     let seeds = if seeds.is_empty() { vec![1] } else { seeds };
     let mut cfg = PlannerConfig::default();
     let env = |name: &str| std::env::var(name).ok();
-    if let Some(v) = env("STALL") {
-        cfg.max_stalled_rounds = parse("STALL", &v)?;
-    }
-    if let Some(v) = env("BUDGET") {
-        cfg.work_budget = parse("BUDGET", &v)?;
-    }
-    if let Some(v) = env("ROUNDS") {
-        cfg.max_rebounds = parse("ROUNDS", &v)?;
-    }
-    if let Some(v) = env("GTOL") {
-        cfg.g_tolerance = parse("GTOL", &v)?;
-    }
-    if let Some(v) = env("CPS") {
-        cfg.control_point_spacing = parse("CPS", &v)?;
-    }
-    if let Some(v) = env("RGTOL") {
-        cfg.rebound_g_tolerance = parse("RGTOL", &v)?;
-    }
-    if let Some(v) = env("MEM") {
-        cfg.lbfgs_memory = parse("MEM", &v)?;
-    }
+    set_from_env("STALL", &mut cfg.max_stalled_rounds)?;
+    set_from_env("BUDGET", &mut cfg.work_budget)?;
+    set_from_env("ROUNDS", &mut cfg.max_rebounds)?;
+    set_from_env("GTOL", &mut cfg.g_tolerance)?;
+    set_from_env("CPS", &mut cfg.control_point_spacing)?;
+    set_from_env("RGTOL", &mut cfg.rebound_g_tolerance)?;
+    set_from_env("MEM", &mut cfg.lbfgs_memory)?;
     let all = env("ALL").is_some();
     // ONLY="seed:density:map,...": plan only these maps (the others are still generated).
     let only: Vec<String> = env("ONLY")
