@@ -677,6 +677,23 @@ pub enum MissionState {
 }
 
 impl MissionState {
+    /// A short name, for logs and plots.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Idle => "idle",
+            Self::Takeoff => "takeoff",
+            Self::GoToPreset => "goto-preset",
+            Self::WaitForPad => "wait-for-pad",
+            Self::Track => "track",
+            Self::Descend => "descend",
+            Self::Land => "land",
+            Self::Landed => "landed",
+            Self::Lost => "lost",
+            Self::Abort => "abort",
+            Self::SafeLand => "safe-land",
+        }
+    }
+
     /// Decodes a raw state; `None` for an unknown one.
     pub fn from_raw(raw: u32) -> Option<Self> {
         Some(match raw {

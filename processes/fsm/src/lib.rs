@@ -10,5 +10,5 @@ pub mod mission;
 pub mod pad_filter;
 
 pub use config::{FsmConfig, PadFilterConfig};
-pub use mission::{Fsm, Outputs, Transition, state_name};
+pub use mission::{Fsm, Outputs, Transition};
 pub use pad_filter::{PadEstimate, PadFilter, Update};

@@ -11,10 +11,10 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use fsm::{Fsm, FsmConfig, state_name};
+use fsm::{Fsm, FsmConfig};
 use ipc_types::msg::{
-    FsmStatus, LinkOutcome, LinkRequest, MissionState, PadObservation, PlannerGoal, SafetyCommand,
-    Setpoint, Trajectory, VehicleState,
+    FsmStatus, LinkOutcome, LinkRequest, PadObservation, PlannerGoal, SafetyCommand, Setpoint,
+    Trajectory, VehicleState,
 };
 use ipc_types::runtime::config::{IpcConfig, Validate, load_process_or_default};
 use ipc_types::runtime::ipc::{Wake, run_wait_loop};
@@ -96,7 +96,6 @@ fn run(args: &Args) -> Result<()> {
     tracing::info!(preset = ?cfg.preset_m, commit_height_m = cfg.commit_height_m, "fsm running");
     let mut fsm = Fsm::new(cfg);
     let mut last_beat = 0u64;
-    let mut last_state = MissionState::Idle;
     let mut failure: Option<anyhow::Error> = None;
     let exit = run_wait_loop(
         &[
@@ -143,14 +142,6 @@ fn run(args: &Args) -> Result<()> {
                     if let Some(st) = &out.status {
                         statuses.send(st.msg, st)?;
                     }
-                    if fsm.state() != last_state {
-                        last_state = fsm.state();
-                        tracing::info!(
-                            state = state_name(last_state),
-                            reason = fsm.reason(),
-                            "mission"
-                        );
-                    }
                 }
                 if now.saturating_sub(last_beat) >= beat_ns {
                     last_beat = now;
@@ -170,6 +161,6 @@ fn run(args: &Args) -> Result<()> {
     if let Some(e) = failure {
         return Err(e);
     }
-    tracing::info!(?exit, state = state_name(fsm.state()), "fsm stopped");
+    tracing::info!(?exit, state = fsm.state().name(), "fsm stopped");
     Ok(())
 }

@@ -4,32 +4,15 @@
 //! `landing run` call the same code.
 
 use ipc_types::msg::{
-    FlightMode, GoalMode, Header, LandedState, LinkOutcome, LinkOutcomeKind, LinkRequest,
-    LinkRequestKind, MissionState, PadObservation, PlannerGoal, SafetyAction, SafetyCommand,
-    Setpoint, Stage, Text, Trajectory, VehicleState,
+    FlightMode, FsmStatus, GoalMode, Header, LandedState, LinkOutcome, LinkOutcomeKind,
+    LinkRequest, LinkRequestKind, MissionState, PadObservation, PlannerGoal, SafetyAction,
+    SafetyCommand, Setpoint, Stage, Text, Trajectory, VehicleState,
 };
 use nalgebra::{UnitQuaternion, Vector3};
 use planner::bspline::BSpline;
 
 use crate::config::FsmConfig;
 use crate::pad_filter::{PadEstimate, PadFilter, Update};
-
-/// A name for each state, for logs and plots.
-pub fn state_name(s: MissionState) -> &'static str {
-    match s {
-        MissionState::Idle => "idle",
-        MissionState::Takeoff => "takeoff",
-        MissionState::GoToPreset => "goto-preset",
-        MissionState::WaitForPad => "wait-for-pad",
-        MissionState::Track => "track",
-        MissionState::Descend => "descend",
-        MissionState::Land => "land",
-        MissionState::Landed => "landed",
-        MissionState::Lost => "lost",
-        MissionState::Abort => "abort",
-        MissionState::SafeLand => "safe-land",
-    }
-}
 
 /// One transition, kept for the log and the tests.
 #[derive(Debug, Clone, PartialEq)]
@@ -56,8 +39,6 @@ pub struct Outputs {
     /// The status (on a transition and every `status_period_s`).
     pub status: Option<FsmStatus>,
 }
-
-pub use ipc_types::msg::FsmStatus;
 
 /// Steps inside Takeoff.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -105,9 +86,6 @@ const MODE_LOSS_NS: u64 = 1_000_000_000;
 pub struct Fsm {
     cfg: FsmConfig,
     state: MissionState,
-    previous: MissionState,
-    since_ns: u64,
-    reason: String,
     started: bool,
     filter: PadFilter,
     vehicle: Option<(u64, VehicleState)>,
@@ -136,7 +114,6 @@ pub struct Fsm {
     transitioned: bool,
     transitions: Vec<Transition>,
     safety_ordered: bool,
-    status_seq: u64,
 }
 
 impl Fsm {
@@ -147,9 +124,6 @@ impl Fsm {
         Self {
             cfg,
             state: MissionState::Idle,
-            previous: MissionState::Idle,
-            since_ns: 0,
-            reason: "initial".into(),
             started,
             filter,
             vehicle: None,
@@ -178,7 +152,6 @@ impl Fsm {
             transitioned: true,
             transitions: Vec::new(),
             safety_ordered: false,
-            status_seq: 0,
         }
     }
 
@@ -189,7 +162,14 @@ impl Fsm {
 
     /// Why the last transition happened.
     pub fn reason(&self) -> &str {
-        &self.reason
+        self.transitions
+            .last()
+            .map_or("initial", |t| t.reason.as_str())
+    }
+
+    /// When the state was entered, ns (0 for the initial Idle).
+    fn since_ns(&self) -> u64 {
+        self.transitions.last().map_or(0, |t| t.at_ns)
     }
 
     /// Every transition so far.
@@ -200,11 +180,6 @@ impl Fsm {
     /// The pad filter (counters, estimate).
     pub fn pad_filter(&self) -> &PadFilter {
         &self.filter
-    }
-
-    /// The configuration in use.
-    pub fn config(&self) -> &FsmConfig {
-        &self.cfg
     }
 
     /// An operator's start (when `autostart` is off).
@@ -331,15 +306,19 @@ impl Fsm {
     /// The status message now.
     pub fn status(&self, now_ns: u64) -> FsmStatus {
         let mut msg = Header::captured_at(now_ns);
-        msg.seq = self.status_seq;
+        // Bumped by each transition (periodic repeats carry the same number).
+        msg.seq = self.transitions.len() as u64;
         msg.push_stage(Stage::Fsm, now_ns, now_ns);
         let est = self.filter.estimate(now_ns);
         FsmStatus {
             msg,
             state: self.state as u32,
-            previous: self.previous as u32,
-            since_ns: self.since_ns,
-            reason: Text::new(&self.reason),
+            previous: self
+                .transitions
+                .last()
+                .map_or(MissionState::Idle, |t| t.from) as u32,
+            since_ns: self.since_ns(),
+            reason: Text::new(self.reason()),
             pad_valid: u32::from(est.is_some()),
             reserved: 0,
             pad_position: est.map(|e| e.position.into()).unwrap_or([0.0; 3]),
@@ -352,8 +331,8 @@ impl Fsm {
             return;
         }
         tracing::info!(
-            from = state_name(self.state),
-            to = state_name(to),
+            from = self.state.name(),
+            to = to.name(),
             reason = reason.as_str(),
             "transition"
         );
@@ -361,14 +340,10 @@ impl Fsm {
             at_ns: now_ns,
             from: self.state,
             to,
-            reason: reason.clone(),
+            reason,
         });
-        self.previous = self.state;
         self.state = to;
-        self.since_ns = now_ns;
-        self.reason = reason;
         self.transitioned = true;
-        self.status_seq += 1;
         self.align_since = None;
         match to {
             MissionState::SafeLand | MissionState::Abort | MissionState::Landed => {
@@ -384,7 +359,7 @@ impl Fsm {
     }
 
     fn elapsed_s(&self, now_ns: u64) -> f64 {
-        now_ns.saturating_sub(self.since_ns) as f64 * 1e-9
+        now_ns.saturating_sub(self.since_ns()) as f64 * 1e-9
     }
 
     fn vehicle(&self) -> Option<&VehicleState> {
@@ -417,11 +392,7 @@ impl Fsm {
         if !airborne {
             return;
         }
-        let fresh = self.vehicle.as_ref().is_some_and(|(rx, v)| {
-            v.link.connected != 0
-                && now_ns.saturating_sub(*rx) as f64 * 1e-9 <= self.cfg.telemetry_timeout_s
-        });
-        if !fresh {
+        if !self.link_fresh(now_ns) {
             self.go(now_ns, MissionState::SafeLand, "telemetry lost".into());
             return;
         }
@@ -456,18 +427,16 @@ impl Fsm {
         altitude_m: f64,
         out: &mut Outputs,
     ) -> Drive {
-        if self.pending.is_none_or(|p| p.kind != kind) {
-            self.pending = Some(Pending {
+        let mut p = match self.pending {
+            Some(p) if p.kind == kind => p,
+            _ => Pending {
                 kind,
                 id: 0,
                 attempts: 0,
                 sent_ns: None,
                 retry_at_ns: now_ns,
                 answer: None,
-            });
-        }
-        let Some(mut p) = self.pending else {
-            return Drive::Waiting;
+            },
         };
         match (p.sent_ns, p.answer) {
             (None, _) if now_ns >= p.retry_at_ns => {
@@ -520,15 +489,19 @@ impl Fsm {
         Drive::Waiting
     }
 
+    /// The autopilot link is up and its newest state is within `telemetry_timeout_s`.
+    fn link_fresh(&self, now_ns: u64) -> bool {
+        self.vehicle.as_ref().is_some_and(|(rx, v)| {
+            v.link.connected != 0
+                && now_ns.saturating_sub(*rx) as f64 * 1e-9 <= self.cfg.telemetry_timeout_s
+        })
+    }
+
     fn idle(&mut self, now_ns: u64, _out: &mut Outputs) {
         if !self.started {
             return;
         }
-        let ready = self.vehicle.as_ref().is_some_and(|(rx, v)| {
-            v.link.connected != 0
-                && now_ns.saturating_sub(*rx) as f64 * 1e-9 <= self.cfg.telemetry_timeout_s
-        });
-        if ready {
+        if self.link_fresh(now_ns) {
             self.go(now_ns, MissionState::Takeoff, "started, link up".into());
         }
     }

@@ -8,7 +8,7 @@ use anyhow::{Context, Result, bail};
 use aruco_pnp::PadEstimator;
 use clap::Args;
 use depth_map::DepthMapper;
-use fsm::{Fsm, state_name};
+use fsm::Fsm;
 use ipc_types::msg::MissionState;
 use ipc_types::runtime::config::{self as cfgload, Validate, deploy_dir};
 use optics::mount::down_camera_from_body;
@@ -75,7 +75,7 @@ fn flight_log(
             t_s: s.t_s,
             uav: s.uav,
             ugv_pad: s.pad,
-            phase: state_name(s.phase).to_string(),
+            phase: s.phase.name().to_string(),
             uav_velocity: s.uav_velocity,
             ugv_velocity: s.pad_velocity,
         })
@@ -160,7 +160,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
     );
     let progress = |t: f64, state: MissionState, d: Option<f64>| {
         let d = d.map_or("-".to_string(), |d| format!("{d:.2} m"));
-        let line = format!("[{t:6.1} s] {:<13} to pad {d}", state_name(state));
+        let line = format!("[{t:6.1} s] {:<13} to pad {d}", state.name());
         if tty {
             eprint!("\r{line}   ");
             let _ = std::io::stderr().flush();
@@ -222,8 +222,8 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         eprintln!(
             "  {:7.2} s  {:>13} -> {:<13} {}",
             t.at_ns as f64 * 1e-9,
-            state_name(t.from),
-            state_name(t.to),
+            t.from.name(),
+            t.to.name(),
             t.reason
         );
     }
@@ -234,7 +234,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             if t.on_pad { "pad" } else { "ground" },
             t.error_m,
             t.rel_speed_mps,
-            state_name(t.phase)
+            t.phase.name()
         );
     }
     for c in &eval.crashes {
