@@ -91,10 +91,11 @@ fn run(args: &Args) -> Result<()> {
     let mut requests = ipc.publisher::<LinkRequest>(services::PX4_REQUEST)?;
     let mut statuses = ipc.publisher::<FsmStatus>(services::FSM_STATUS)?;
     let mut heartbeat = ipc.heartbeat(Duration::from_millis(ipc_cfg.heartbeat_deadline_ms))?;
-    let period = Duration::from_secs_f64(1.0 / cfg.rate_hz);
+
     let beat_ns = ipc_cfg.heartbeat_period_ms * 1_000_000;
     tracing::info!(preset = ?cfg.preset_m, commit_height_m = cfg.commit_height_m, "fsm running");
     let mut fsm = Fsm::new(cfg);
+    let period = Duration::from_nanos(fsm.tick_period_ns());
     let mut last_beat = 0u64;
     let mut failure: Option<anyhow::Error> = None;
     let exit = run_wait_loop(

@@ -182,6 +182,12 @@ impl Fsm {
         &self.filter
     }
 
+    /// How often [`Fsm::tick`] is meant to be called (`rate_hz`), ns: the process's timer
+    /// and the lockstep runner both use it.
+    pub fn tick_period_ns(&self) -> u64 {
+        (1e9 / self.cfg.rate_hz) as u64
+    }
+
     /// An operator's start (when `autostart` is off).
     pub fn start(&mut self) {
         self.started = true;

@@ -235,7 +235,7 @@ fn run(args: &Args) -> Result<()> {
 
     let mut node = LinkNode::new(cfg.settings());
     let (mut buf, mut frame) = (vec![0u8; 65_536], Vec::new());
-    let (mut last_beat, mut seq) = (0u64, 0u8);
+    let mut last_beat = 0u64;
     tracing::info!(link = %cfg.link, "px4-link running");
     while !ipc.shutdown_requested() {
         transport.receive(&mut node, &mut buf)?;
@@ -249,20 +249,12 @@ fn run(args: &Args) -> Result<()> {
         while let Ok(Some(c)) = safety.receive() {
             node.on_safety(now, c.payload());
         }
-        let header = node.header(0);
-        for m in node.poll(now) {
+        node.send_due(now, |header, m| {
             frame.clear();
-            encode(
-                &mut frame,
-                MavHeader {
-                    sequence: seq,
-                    ..header
-                },
-                m,
-            )?;
-            seq = seq.wrapping_add(1);
+            encode(&mut frame, header, m)?;
             transport.send(&frame);
-        }
+            anyhow::Ok(())
+        })?;
         for o in node.take_outcomes() {
             outcomes.send(o.msg, &o)?;
         }

@@ -157,24 +157,32 @@ impl LinkNode {
         }
     }
 
-    /// Advances time: what to send to the autopilot now, in order. Each message goes out
-    /// with [`Self::next_header`] (or [`Self::header`] and the transport's own sequence).
+    /// Advances time: what to send to the autopilot now, in order (for inspection; to send,
+    /// use [`Self::send_due`], which also numbers them).
     pub fn poll(&mut self, now_ns: u64) -> &[MavMessage] {
         self.advance(now_ns);
         self.link.poll(now_ns)
     }
 
-    /// The MAVLink header our messages carry, with sequence `seq`.
-    pub fn header(&self, seq: u8) -> MavHeader {
-        self.link.header(seq)
-    }
-
-    /// The header for the next message sent: our ids and a sequence that counts up, so
-    /// the autopilot can count what it lost.
-    pub fn next_header(&mut self) -> MavHeader {
-        let h = self.link.header(self.sequence);
-        self.sequence = self.sequence.wrapping_add(1);
-        h
+    /// Advances time and hands what is due for the autopilot to `send`, in order, each with
+    /// its header: our ids and a sequence that counts up across calls, so the autopilot can
+    /// count what it lost. Stops at the first error `send` returns.
+    pub fn send_due<E>(
+        &mut self,
+        now_ns: u64,
+        mut send: impl FnMut(MavHeader, &MavMessage) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.advance(now_ns);
+        let base = self.link.header(0);
+        for m in self.link.poll(now_ns) {
+            let header = MavHeader {
+                sequence: self.sequence,
+                ..base
+            };
+            self.sequence = self.sequence.wrapping_add(1);
+            send(header, m)?;
+        }
+        Ok(())
     }
 
     /// The outcomes of requests that ended since the last call, oldest first.

@@ -62,16 +62,17 @@ impl Bench {
             self.node.on_setpoint(now, &sp);
             self.setpoint_given_ns = Some(now);
         }
-        let out = self.node.poll(now).to_vec();
-        for m in &out {
+        let (sim, commands) = (&mut self.sim, &mut self.commands);
+        let sent = self.node.send_due(now, |h, m| {
             if let MavMessage::COMMAND_LONG(c) = m
                 && c.command != MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL
             {
-                self.commands.push((now, c.command));
+                commands.push((now, c.command));
             }
-            let h = self.node.next_header();
-            self.sim.handle_mavlink(&h, m);
-        }
+            sim.handle_mavlink(&h, m);
+            Ok::<(), std::convert::Infallible>(())
+        });
+        let Ok(()) = sent;
         self.sim.step().unwrap();
         let now = self.now();
         for m in self.sim.take_mavlink() {

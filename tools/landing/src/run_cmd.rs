@@ -201,7 +201,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             mapper: DepthMapper::from_config(&cfg.depth_map)?,
             planner: PlannerNode::new(cfg.planner.clone()),
             fsm: Fsm::new(fsm_cfg),
-            link: run_lockstep::link(),
+            link: px4_link::LinkNode::new(cfg.px4_link.settings()),
         };
         let mut rec = Recording(recorder.take());
         let (end, stats) = run_lockstep::run(

@@ -25,16 +25,14 @@ use mavlink::dialects::common::MavMessage;
 use planner::PlannerNode;
 use planner::bspline::State;
 use planner::map::CellView;
+use px4_link::LinkNode;
 use px4_link::codec::{decode_datagram, encode};
-use px4_link::{LinkNode, LinkSettings};
 use sim::lockstep::Simulator;
 use state_history::StateHistory;
 
 use crate::record::{Recordable, Recorder};
 use crate::run_eval::{Evaluator, Sample};
 
-/// The fsm's tick, ns (50 Hz).
-const FSM_PERIOD_NS: u64 = 20_000_000;
 /// The planner's tick, ns (it wakes on goals, states and maps; 50 Hz bounds it).
 const PLANNER_PERIOD_NS: u64 = 20_000_000;
 /// Flight-log sample period, ns.
@@ -117,9 +115,6 @@ pub fn run(
     let mut history = StateHistory::new(100, 200_000_000);
     let mut wire = Vec::with_capacity(280);
     let mut decoded: Vec<(MavHeader, MavMessage)> = Vec::with_capacity(8);
-    // Reused every physics step: the node's output is copied out because sending needs
-    // the node again (its header sequence).
-    let mut outgoing: Vec<MavMessage> = Vec::with_capacity(8);
     let mut vehicle: Option<VehicleState> = None;
     let mut goal: Option<PlannerGoal> = None;
     let mut traj_pending: VecDeque<(u64, Trajectory)> = VecDeque::new();
@@ -142,17 +137,16 @@ pub fn run(
         }
 
         // Companion -> autopilot, through the wire format.
-        outgoing.clear();
-        outgoing.extend_from_slice(pipe.link.poll(now));
-        for m in &outgoing {
+        pipe.link.send_due(now, |header, m| {
             wire.clear();
-            encode(&mut wire, pipe.link.next_header(), m)?;
+            encode(&mut wire, header, m)?;
             decoded.clear();
             decode_datagram(&wire, &mut decoded);
             for (h, msg) in &decoded {
                 sim.handle_mavlink(h, msg);
             }
-        }
+            anyhow::Ok(())
+        })?;
 
         let report = sim.step()?;
         let now = sim.time_ns();
@@ -252,9 +246,9 @@ pub fn run(
             depth_pool.push(buf);
         }
 
-        // The fsm at 50 Hz.
+        // The fsm at its rate (`[fsm] rate_hz`).
         if now >= next_fsm {
-            next_fsm = now + FSM_PERIOD_NS;
+            next_fsm = now + pipe.fsm.tick_period_ns();
             let o = pipe.fsm.tick(now);
             if let Some(sp) = o.setpoint {
                 rec.write("/fsm/setpoint", now, &sp)?;
@@ -344,11 +338,6 @@ fn deliver_observation(pipe: &mut Pipeline, now: u64, obs: &PadObservation, stat
 
 fn is_crash(t: &TruthEvent) -> bool {
     t.kind == ipc_types::msg::TruthKind::Crash as u32
-}
-
-/// px4-link's node with the process's default settings.
-pub fn link() -> LinkNode {
-    LinkNode::new(LinkSettings::default())
 }
 
 /// An optional MCAP recording of every message the stages exchange (simulated time).
