@@ -15,6 +15,17 @@ pub struct State {
 }
 
 impl State {
+    /// The planning start from px4-link's vehicle state (acceleration taken as 0: the
+    /// autopilot does not report it); `None` when it is not finite.
+    pub fn from_vehicle(v: &ipc_types::msg::VehicleState) -> Option<Self> {
+        let s = Self {
+            p: Vector3::from(v.world_from_body.translation),
+            v: Vector3::from(v.velocity),
+            a: Vector3::zeros(),
+        };
+        s.is_finite().then_some(s)
+    }
+
     /// A state at rest at `p`.
     pub fn at_rest(p: Vector3<f64>) -> Self {
         Self {

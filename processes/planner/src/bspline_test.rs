@@ -140,3 +140,16 @@ fn the_banded_fit_equals_the_dense_least_squares_solution() {
         }
     }
 }
+
+#[test]
+fn a_vehicle_state_becomes_a_start_at_its_position_and_velocity_unless_not_finite() {
+    let mut v = ipc_types::msg::VehicleState::default();
+    v.world_from_body.translation = [1.0, 2.0, 3.0];
+    v.velocity = [0.5, 0.0, -0.1];
+    let s = State::from_vehicle(&v).unwrap();
+    assert_eq!(s.p, Vector3::new(1.0, 2.0, 3.0));
+    assert_eq!(s.v, Vector3::new(0.5, 0.0, -0.1));
+    assert_eq!(s.a, Vector3::zeros());
+    v.velocity[1] = f64::NAN;
+    assert!(State::from_vehicle(&v).is_none());
+}

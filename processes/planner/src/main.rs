@@ -18,7 +18,6 @@ use ipc_types::runtime::config::{IpcConfig, load_process_or_default};
 use ipc_types::runtime::ipc::{Wake, run_wait_loop};
 use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
-use nalgebra::Vector3;
 use planner::{CellView, PlannerConfig, PlannerNode, State};
 
 /// Plans collision-free B-spline trajectories to the goal and publishes them.
@@ -82,12 +81,7 @@ fn run(args: &Args) -> Result<()> {
             {
                 if let Ok(Some(s)) = states.latest() {
                     let v = s.payload();
-                    let st = State {
-                        p: Vector3::from(v.world_from_body.translation),
-                        v: Vector3::from(v.velocity),
-                        a: Vector3::zeros(),
-                    };
-                    if st.is_finite() {
+                    if let Some(st) = State::from_vehicle(v) {
                         vehicle = Some((st, v.msg));
                     }
                 }

@@ -283,13 +283,10 @@ pub fn run(
         // The planner; its output arrives one planner period later.
         if now >= next_planner {
             next_planner = now + PLANNER_PERIOD_NS;
-            if let Some(v) = &vehicle {
-                let p = v.world_from_body.translation;
-                let state = State {
-                    p: p.into(),
-                    v: v.velocity.into(),
-                    a: nalgebra::Vector3::zeros(),
-                };
+            if let Some((v, state)) = vehicle
+                .as_ref()
+                .and_then(|v| Some((v, State::from_vehicle(v)?)))
+            {
                 let view = map_header
                     .as_ref()
                     .and_then(|h| CellView::new(h, &map_cells));
