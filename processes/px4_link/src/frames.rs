@@ -58,11 +58,6 @@ pub fn yaw_ned_to_enu(yaw_ned: f64) -> f64 {
     wrap_pi(FRAC_PI_2 - yaw_ned)
 }
 
-/// ENU yaw as NED yaw (the name px4-link's setpoint stream uses; see [`yaw_enu_to_ned`]).
-pub fn ned_yaw(enu_yaw: f64) -> f64 {
-    yaw_enu_to_ned(enu_yaw)
-}
-
 /// The rotation between ENU and NED (a reflection-free swap: its own inverse).
 fn q_ned_from_enu() -> UnitQuaternion<f64> {
     let m = Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0);
@@ -93,9 +88,8 @@ pub fn world_from_body_enu(q_ned_frd: [f32; 4]) -> Option<UnitQuaternion<f64>> {
     if !(q.coords.iter().all(|v| v.is_finite()) && q.norm() > 0.5) {
         return None;
     }
-    let ned_from_frd = UnitQuaternion::from_quaternion(q);
-    // Both swaps are their own inverses.
-    Some(q_ned_from_enu() * ned_from_frd * q_flu_from_frd())
+    // Both swaps are their own inverses: the same product as `ned_from_frd`.
+    Some(ned_from_frd(&UnitQuaternion::from_quaternion(q)))
 }
 
 /// A quaternion as MAVLink's `[w, x, y, z]` f32, with w >= 0 (one of the two signs).

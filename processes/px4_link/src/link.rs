@@ -13,7 +13,9 @@ use mavlink::dialects::common::{
 };
 use nalgebra::{UnitQuaternion, Vector3};
 
-use crate::frames::{enu_from_ned, flu_from_frd, ned_from_enu, ned_yaw, world_from_body_enu};
+use crate::frames::{
+    enu_from_ned, flu_from_frd, ned_from_enu, world_from_body_enu, yaw_enu_to_ned,
+};
 use crate::mode::{OFFBOARD, flight_mode};
 
 /// What the stack asks of the autopilot.
@@ -435,7 +437,7 @@ impl Px4Link {
             pick(Setpoint::ACCELERATION, &sp.acceleration),
         );
         let yaw = if sp.valid & Setpoint::YAW != 0 {
-            ned_yaw(sp.yaw) as f32
+            yaw_enu_to_ned(sp.yaw) as f32
         } else {
             0.0
         };

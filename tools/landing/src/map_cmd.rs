@@ -24,7 +24,7 @@ use ipc_types::runtime::config::{self as cfgload, deploy_dir};
 use mavlink::dialects::common::{
     MavCmd, MavFrame, MavMessage, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
-use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, Vector3};
 use opencv::core::{Mat, Point, Rect, Scalar, Vector};
 use opencv::{core, imgcodecs, imgproc};
 use sim::lockstep::Simulator;
@@ -82,20 +82,21 @@ fn setpoint(sim: &mut Simulator, p: &Vector3<f64>, yaw_enu: f64) {
         | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE
         | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE;
     let time_boot_ms = (sim.time_ns() / 1_000_000) as u32;
+    let ned = px4_link::frames::ned_from_enu(p);
     sim.handle_mavlink(
         &COMPANION,
         &MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
             time_boot_ms,
-            x: p.y as f32,
-            y: p.x as f32,
-            z: -p.z as f32,
+            x: ned[0] as f32,
+            y: ned[1] as f32,
+            z: ned[2] as f32,
             vx: 0.0,
             vy: 0.0,
             vz: 0.0,
             afx: 0.0,
             afy: 0.0,
             afz: 0.0,
-            yaw: sim::px4::frames::yaw_enu_to_ned(yaw_enu) as f32,
+            yaw: px4_link::frames::yaw_enu_to_ned(yaw_enu) as f32,
             yaw_rate: 0.0,
             type_mask: ignore,
             target_system: 1,
@@ -103,27 +104,6 @@ fn setpoint(sim: &mut Simulator, p: &Vector3<f64>, yaw_enu: f64) {
             coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
         }),
     );
-}
-
-/// PX4's attitude (`ned_from_frd`, MAVLink w, x, y, z) as `world_from_body` (ENU, FLU).
-fn world_from_body_of(q_wxyz: [f32; 4]) -> Option<UnitQuaternion<f64>> {
-    let q = nalgebra::Quaternion::new(
-        f64::from(q_wxyz[0]),
-        f64::from(q_wxyz[1]),
-        f64::from(q_wxyz[2]),
-        f64::from(q_wxyz[3]),
-    );
-    if !q.coords.iter().all(|v| v.is_finite()) || q.norm() < 0.5 {
-        return None;
-    }
-    // Both frame swaps are half turns, their own inverses.
-    let enu_from_ned = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
-        Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0),
-    ));
-    let frd_from_flu = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
-        Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0),
-    ));
-    Some(enu_from_ned * UnitQuaternion::from_quaternion(q) * frd_from_flu)
 }
 
 /// What the companion knows of the vehicle, from telemetry only.
@@ -148,7 +128,8 @@ impl Telemetry {
                     self.offboard = (h.custom_mode >> 16) & 0xff == 6;
                 }
                 MavMessage::ATTITUDE_QUATERNION(a) => {
-                    if let Some(r) = world_from_body_of([a.q1, a.q2, a.q3, a.q4]) {
+                    if let Some(r) = px4_link::frames::world_from_body_enu([a.q1, a.q2, a.q3, a.q4])
+                    {
                         self.attitude.push(TimedPose {
                             time_ns: u64::from(a.time_boot_ms) * 1_000_000,
                             world_from_body: Isometry3::from_parts(Translation3::identity(), r),
