@@ -186,9 +186,10 @@ impl Px4Link {
         }
     }
 
-    /// Counts a datagram or frame that did not parse (reported in link health).
-    pub fn parse_error(&mut self) {
-        self.parse_errors = self.parse_errors.saturating_add(1);
+    /// Counts `count` datagrams or frames that did not parse (reported in link health).
+    pub fn add_parse_errors(&mut self, count: u64) {
+        let count = u32::try_from(count).unwrap_or(u32::MAX);
+        self.parse_errors = self.parse_errors.saturating_add(count);
     }
 
     /// Queues a request; requests go out one at a time, in order.

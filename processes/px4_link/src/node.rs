@@ -65,11 +65,6 @@ impl LinkNode {
         }
     }
 
-    /// The protocol underneath (status, telemetry, for tests and tools).
-    pub fn link(&self) -> &Px4Link {
-        &self.link
-    }
-
     fn advance(&mut self, now_ns: u64) {
         self.now_ns = self.now_ns.max(now_ns);
     }
@@ -152,9 +147,7 @@ impl LinkNode {
 
     /// Counts frames or datagrams that did not parse (reported in the link health).
     pub fn on_parse_errors(&mut self, count: u64) {
-        for _ in 0..count.min(u64::from(u32::MAX)) {
-            self.link.parse_error();
-        }
+        self.link.add_parse_errors(count);
     }
 
     /// Advances time: what to send to the autopilot now, in order (for inspection; to send,

@@ -425,11 +425,6 @@ impl Commander {
         &self.faults
     }
 
-    /// Whether the `telemetry_stop_s` fault has silenced the autopilot.
-    pub fn silent(&self) -> bool {
-        self.silent
-    }
-
     fn update_silence(&mut self, now_ns: u64) {
         if let Some(t) = self.faults.telemetry_stop_s
             && !self.silent
@@ -443,8 +438,12 @@ impl Commander {
     /// Takes the MAVLink messages produced since the last call, oldest first (none once
     /// the `telemetry_stop_s` fault has silenced the autopilot).
     pub fn take_outgoing(&mut self) -> Vec<MavMessage> {
-        let out = std::mem::take(&mut self.outgoing);
-        if self.silent { Vec::new() } else { out }
+        if self.silent {
+            // Silenced: what was built is dropped, the buffer kept.
+            self.outgoing.clear();
+            return Vec::new();
+        }
+        std::mem::take(&mut self.outgoing)
     }
 
     /// Takes the failsafe / auto-disarm events since the last call.
