@@ -2,20 +2,20 @@
 //! `landing map`: the scripted flight past obstacle-demo's box gives a map with the box
 //! where it is (within what the estimator's drift allows) and nothing else, and a figure.
 
-use std::process::{Command, Output};
+mod common;
+use std::process::Output;
 
 use opencv::imgcodecs;
 use opencv::prelude::*;
 
 fn landing(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_landing"))
-        .args(args)
-        .env(
+    common::landing_env(
+        args,
+        &[(
             "LANDING_DEPLOY_DIR",
             concat!(env!("CARGO_MANIFEST_DIR"), "/../../deploy"),
-        )
-        .output()
-        .expect("run landing")
+        )],
+    )
 }
 
 /// The four numbers of `x [a, b]  y [c, d]` style ranges after `axis [`.

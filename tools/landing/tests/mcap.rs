@@ -3,16 +3,10 @@
 //! topics, counts and time range as text and JSON, and a one-line error for a file that
 //! is not there.
 
+mod common;
+use common::landing;
 use std::collections::BTreeMap;
 use std::io::BufWriter;
-use std::process::{Command, Output};
-
-fn landing(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_landing"))
-        .args(args)
-        .output()
-        .expect("run landing")
-}
 
 fn write_recording(path: &std::path::Path) {
     let file = std::fs::File::create(path).unwrap();

@@ -3,21 +3,16 @@
 //! detector finds every marker where pad.toml puts it, the SVG is in millimetres, and
 //! mistakes are one line.
 
+mod common;
+use common::landing;
 use std::path::PathBuf;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use opencv::aruco;
 use opencv::core::{Mat, Point2f, Vector};
 use opencv::imgcodecs;
 use opencv::prelude::*;
 use optics::PadModel;
-
-fn landing(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_landing"))
-        .args(args)
-        .output()
-        .expect("run landing")
-}
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).to_string()

@@ -4,14 +4,9 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a panic is a failed test
 
-use std::process::{Command, Output};
-
-fn landing(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_landing"))
-        .args(args)
-        .output()
-        .expect("run landing")
-}
+mod common;
+use common::landing;
+use std::process::Output;
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).to_string()

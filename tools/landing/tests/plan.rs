@@ -2,14 +2,8 @@
 //! `landing plan` and `landing bench planner` as a user meets them: the documented JSON,
 //! a curve from the start to the goal around the paper's obstacle, one-line errors.
 
-use std::process::{Command, Output};
-
-fn landing(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_landing"))
-        .args(args)
-        .output()
-        .expect("run landing")
-}
+mod common;
+use common::landing;
 
 fn paper_map() -> String {
     concat!(

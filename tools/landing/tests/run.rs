@@ -5,16 +5,13 @@
 //! autopilot ends in a defined, logged landing in place; recordings and plots are files a
 //! user can open.
 
-use std::process::{Command, Output};
+mod common;
+use std::process::Output;
 
 use serde_json::Value;
 
 fn landing(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_landing"))
-        .args(args)
-        .env("LANDING_LOG", "warn")
-        .output()
-        .expect("run landing")
+    common::landing_env(args, &[("LANDING_LOG", "warn")])
 }
 
 fn summary(out: &Output) -> Value {
