@@ -340,6 +340,22 @@ pub struct ChannelInfo {
     pub count: u64,
 }
 
+impl ChannelInfo {
+    /// A recording channel's topic, schema and encoding, with `count` messages.
+    fn of(c: &mcap::Channel, count: u64) -> Self {
+        Self {
+            topic: c.topic.clone(),
+            schema: c
+                .schema
+                .as_ref()
+                .map(|s| s.name.clone())
+                .unwrap_or_default(),
+            message_encoding: c.message_encoding.clone(),
+            count,
+        }
+    }
+}
+
 /// What a recording holds: topics, counts and time range.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RecordingInfo {
@@ -373,19 +389,9 @@ pub fn info(path: &Path) -> Result<RecordingInfo, RecordError> {
         let mut channels: Vec<ChannelInfo> = summary
             .channels
             .values()
-            .map(|c| ChannelInfo {
-                topic: c.topic.clone(),
-                schema: c
-                    .schema
-                    .as_ref()
-                    .map(|s| s.name.clone())
-                    .unwrap_or_default(),
-                message_encoding: c.message_encoding.clone(),
-                count: stats
-                    .channel_message_counts
-                    .get(&c.id)
-                    .copied()
-                    .unwrap_or(0),
+            .map(|c| {
+                let count = stats.channel_message_counts.get(&c.id).copied();
+                ChannelInfo::of(c, count.unwrap_or(0))
             })
             .collect();
         channels.sort_by(|a, b| a.topic.cmp(&b.topic));
@@ -414,16 +420,7 @@ pub fn info(path: &Path) -> Result<RecordingInfo, RecordError> {
         let c = &m.channel;
         by_topic
             .entry(c.topic.clone())
-            .or_insert_with(|| ChannelInfo {
-                topic: c.topic.clone(),
-                schema: c
-                    .schema
-                    .as_ref()
-                    .map(|s| s.name.clone())
-                    .unwrap_or_default(),
-                message_encoding: c.message_encoding.clone(),
-                count: 0,
-            })
+            .or_insert_with(|| ChannelInfo::of(c, 0))
             .count += 1;
     }
     Ok(RecordingInfo {
