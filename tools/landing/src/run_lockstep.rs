@@ -115,6 +115,7 @@ pub fn run(
     let mut history = StateHistory::new(100, 200_000_000);
     let mut wire = Vec::with_capacity(280);
     let mut decoded: Vec<(MavHeader, MavMessage)> = Vec::with_capacity(8);
+    let mut autopilot_seq = 0u8;
     let mut vehicle: Option<VehicleState> = None;
     let mut goal: Option<PlannerGoal> = None;
     let mut traj_pending: VecDeque<(u64, Trajectory)> = VecDeque::new();
@@ -150,13 +151,15 @@ pub fn run(
 
         let report = sim.step()?;
         let now = sim.time_ns();
-        for (k, m) in sim.take_mavlink().iter().enumerate() {
+        for m in &sim.take_mavlink() {
             wire.clear();
+            // The autopilot's own count, as its UDP endpoint keeps it.
             let h = MavHeader {
                 system_id: 1,
                 component_id: 1,
-                sequence: (now / 2_000_000).wrapping_add(k as u64) as u8,
+                sequence: autopilot_seq,
             };
+            autopilot_seq = autopilot_seq.wrapping_add(1);
             encode(&mut wire, h, m)?;
             decoded.clear();
             pipe.link
