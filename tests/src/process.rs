@@ -83,15 +83,8 @@ impl Running {
     pub fn wait_exit(&mut self, timeout: Duration) -> ExitStatus {
         let end = Instant::now() + timeout;
         loop {
-            match self.child.try_wait() {
-                Ok(Some(status)) => {
-                    if let Some(r) = self.reader.take() {
-                        let _ = r.join();
-                    }
-                    return status;
-                }
-                Ok(None) => {}
-                Err(e) => panic!("waiting for {}: {e}", self.name),
+            if let Some(status) = self.exited() {
+                return status;
             }
             assert!(
                 Instant::now() < end,
@@ -103,10 +96,29 @@ impl Running {
         }
     }
 
-    /// SIGTERM (a systemd stop), then waits for the exit.
-    pub fn terminate(&mut self) -> ExitStatus {
+    /// The exit status once the process has exited, without waiting.
+    pub fn exited(&mut self) -> Option<ExitStatus> {
+        match self.child.try_wait() {
+            Ok(Some(status)) => {
+                if let Some(r) = self.reader.take() {
+                    let _ = r.join();
+                }
+                Some(status)
+            }
+            Ok(None) => None,
+            Err(e) => panic!("waiting for {}: {e}", self.name),
+        }
+    }
+
+    /// Sends SIGTERM (a systemd stop) without waiting.
+    pub fn request_stop(&self) {
         // SAFETY: signalling our own child, whose pid stays valid until it is waited for.
         unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
+    }
+
+    /// SIGTERM (a systemd stop), then waits for the exit.
+    pub fn terminate(&mut self) -> ExitStatus {
+        self.request_stop();
         self.wait_exit(Duration::from_secs(10))
     }
 }

@@ -7,7 +7,7 @@
 //! `cargo test --release --workspace` builds it.
 
 use std::net::UdpSocket;
-use std::process::{Child, Command};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use ipc_types::msg::{
@@ -16,16 +16,7 @@ use ipc_types::msg::{
 };
 use ipc_types::runtime::{Ipc, IpcPrefix};
 use ipc_types::services;
-use landing_tests::process::sim_binary;
-
-struct Kill(Child);
-
-impl Drop for Kill {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
+use landing_tests::process::{Running, sim_binary};
 
 fn free_port() -> u16 {
     UdpSocket::bind("127.0.0.1:0")
@@ -39,24 +30,22 @@ fn free_port() -> u16 {
 fn px4_link_flies_the_sim_process_on_requests_and_lands_it_on_a_safety_order() {
     let (sim_port, link_port) = (free_port(), free_port());
     let prefix = IpcPrefix::unique("px4link");
-    let _sim = Kill(
+    let _sim = Running::start(
+        "sim",
         Command::new(sim_binary())
             .args(["--scenario", "indoor-static", "--duration-s", "120"])
             .args(["--mavlink-listen", &format!("127.0.0.1:{sim_port}")])
             .args(["--mavlink-remote", &format!("127.0.0.1:{link_port}")])
             .args(["--ipc-prefix", prefix.as_str()])
-            .env("LANDING_LOG", "warn")
-            .spawn()
-            .unwrap(),
+            .env("LANDING_LOG", "warn"),
     );
-    let mut link = Kill(
+    let mut link = Running::start(
+        "px4-link",
         Command::new(env!("CARGO_BIN_EXE_px4-link"))
             .args(["--link", &format!("udp:127.0.0.1:{link_port}")])
             .args(["--remote", &format!("127.0.0.1:{sim_port}")])
             .args(["--ipc-prefix", prefix.as_str()])
-            .env("LANDING_LOG", "warn")
-            .spawn()
-            .unwrap(),
+            .env("LANDING_LOG", "warn"),
     );
     let ipc = Ipc::open("test-fsm", &prefix).unwrap();
     let states = ipc
@@ -143,15 +132,7 @@ fn px4_link_flies_the_sim_process_on_requests_and_lands_it_on_a_safety_order() {
     }
     assert_eq!(mode, FlightMode::Land);
 
-    // SAFETY: signalling our own child.
-    unsafe { libc::kill(link.0.id() as i32, libc::SIGTERM) };
-    let end = Instant::now() + Duration::from_secs(3);
-    let status = loop {
-        if let Some(s) = link.0.try_wait().unwrap() {
-            break s;
-        }
-        assert!(Instant::now() < end, "px4-link ignored SIGTERM");
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    link.request_stop();
+    let status = link.wait_exit(Duration::from_secs(3));
     assert!(status.success(), "{status}");
 }

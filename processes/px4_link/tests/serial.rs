@@ -9,7 +9,7 @@
 use std::ffi::CStr;
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use ipc_types::msg::{
@@ -17,18 +17,10 @@ use ipc_types::msg::{
 };
 use ipc_types::runtime::{Ipc, IpcPrefix};
 use ipc_types::services;
+use landing_tests::process::Running;
 use mavlink::MavHeader;
 use px4_link::codec::{StreamDecoder, encode};
 use sim::lockstep::{PHYSICS_STEP_NS, Simulator};
-
-struct Kill(Child);
-
-impl Drop for Kill {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
 
 /// A pseudo-terminal pair: (master, slave, slave path). The slave is made raw here so
 /// nothing the test writes before px4-link has configured it is echoed or translated.
@@ -154,13 +146,12 @@ impl Autopilot {
 fn px4_link_on_a_serial_line_reports_the_vehicle_and_gets_an_arm_acked() {
     let (master, _slave, path) = pty();
     let prefix = IpcPrefix::unique("px4serial");
-    let mut link = Kill(
+    let mut link = Running::start(
+        "px4-link",
         Command::new(env!("CARGO_BIN_EXE_px4-link"))
             .args(["--link", &format!("serial:{}:921600", path.display())])
             .args(["--ipc-prefix", prefix.as_str()])
-            .env("LANDING_LOG", "warn")
-            .spawn()
-            .unwrap(),
+            .env("LANDING_LOG", "warn"),
     );
     let ipc = Ipc::open("test-fsm", &prefix).unwrap();
     let states = ipc
@@ -235,11 +226,10 @@ fn px4_link_on_a_serial_line_reports_the_vehicle_and_gets_an_arm_acked() {
     assert_eq!(latest.unwrap().link.connected, 1);
     assert_eq!(latest.unwrap().armed, 1, "armed, per the 1 Hz HEARTBEAT");
 
-    // SAFETY: signalling our own child.
-    unsafe { libc::kill(link.0.id() as i32, libc::SIGTERM) };
+    link.request_stop();
     let end = Instant::now() + Duration::from_secs(3);
     let status = loop {
-        if let Some(s) = link.0.try_wait().unwrap() {
+        if let Some(s) = link.exited() {
             break s;
         }
         assert!(Instant::now() < end, "px4-link ignored SIGTERM");
