@@ -3,9 +3,11 @@
 //! time: connect, telemetry in ENU, arm, take off, OFFBOARD only after the stream, fly a
 //! setpoint, failsafe on stream loss, retries and timeouts when the autopilot is silent.
 
-use std::path::PathBuf;
+mod common;
 
-use ipc_types::msg::{FlightMode, Header, LandedState, Setpoint};
+use common::{position_setpoint, scenario as scenario_named};
+
+use ipc_types::msg::{FlightMode, LandedState, Setpoint};
 use mavlink::MavHeader;
 use px4_link::{LinkSettings, Outcome, Px4Link, Request};
 use sim::lockstep::Simulator;
@@ -20,8 +22,7 @@ struct Flight {
 
 impl Flight {
     fn new(scenario: &str) -> Self {
-        let deploy = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../deploy");
-        let scn = sim::scenario::load(scenario, &deploy).unwrap();
+        let scn = scenario_named(scenario);
         Self {
             sim: Simulator::new(&scn, 1).unwrap(),
             link: Px4Link::new(LinkSettings::default()),
@@ -71,18 +72,6 @@ impl Flight {
             got = self.link.take_outcomes();
         }
         got
-    }
-}
-
-fn position_setpoint(x: f64, y: f64, z: f64) -> Setpoint {
-    Setpoint {
-        msg: Header::default(),
-        position: [x, y, z],
-        velocity: [0.0; 3],
-        acceleration: [0.0; 3],
-        yaw: 0.0,
-        valid: Setpoint::POSITION | Setpoint::YAW,
-        reserved: 0,
     }
 }
 

@@ -6,7 +6,9 @@
 //! must handle: arming denied, arming refused for a while, OFFBOARD denied, telemetry
 //! gone silent.
 
-use std::path::PathBuf;
+mod common;
+
+use common::{position_setpoint, scenario};
 
 use ipc_types::msg::{
     FlightMode, Header, LandedState, LinkOutcome, LinkOutcomeKind, LinkRequest, LinkRequestKind,
@@ -33,8 +35,7 @@ struct Bench {
 
 impl Bench {
     fn new(faults: Faults) -> Self {
-        let deploy = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../deploy");
-        let mut scn = sim::scenario::load("indoor-static", &deploy).unwrap();
+        let mut scn = scenario("indoor-static");
         scn.scenario.faults = faults;
         Self {
             sim: Simulator::new(&scn, 1).unwrap(),
@@ -142,18 +143,6 @@ impl Bench {
     }
 }
 
-fn hover_at(x: f64, y: f64, z: f64) -> Setpoint {
-    Setpoint {
-        msg: Header::default(),
-        position: [x, y, z],
-        velocity: [0.0; 3],
-        acceleration: [0.0; 3],
-        yaw: 0.0,
-        valid: Setpoint::POSITION | Setpoint::YAW,
-        reserved: 0,
-    }
-}
-
 fn kind(o: &LinkOutcome) -> LinkOutcomeKind {
     LinkOutcomeKind::from_raw(o.outcome)
 }
@@ -178,7 +167,7 @@ fn request_ids_come_back_in_the_outcomes_through_a_whole_flight() {
     b.outcomes.extend(b.node.take_outcomes());
     b.answer(12, 3.0);
     b.run(6.0);
-    b.setpoint = Some(hover_at(1.0, 0.5, 2.0));
+    b.setpoint = Some(position_setpoint(1.0, 0.5, 2.0));
     b.ask(15, LinkRequestKind::Offboard);
     b.answer(15, 3.0);
     let got: Vec<_> = b.outcomes.iter().map(|o| (o.id, o.kind, kind(o))).collect();
@@ -226,7 +215,7 @@ fn a_safety_land_cancels_the_queued_requests_and_lands_at_once() {
     b.run(5.0);
     assert!(b.latest().world_from_body.translation[2] > 1.7);
     // OFFBOARD waits a second for the stream; HOLD waits behind it.
-    b.setpoint = Some(hover_at(0.0, 0.0, 2.0));
+    b.setpoint = Some(position_setpoint(0.0, 0.0, 2.0));
     b.ask(3, LinkRequestKind::Offboard);
     b.ask(4, LinkRequestKind::Hold);
     b.run(0.2);
@@ -344,7 +333,7 @@ fn a_denied_offboard_is_rejected_and_the_vehicle_keeps_holding() {
     b.ask(2, LinkRequestKind::Takeoff);
     b.answer(2, 3.0);
     b.run(5.0);
-    b.setpoint = Some(hover_at(1.0, 0.0, 2.0));
+    b.setpoint = Some(position_setpoint(1.0, 0.0, 2.0));
     b.ask(3, LinkRequestKind::Offboard);
     let o = b.answer(3, 3.0);
     assert_eq!(kind(&o), LinkOutcomeKind::Rejected);
