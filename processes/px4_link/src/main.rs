@@ -95,9 +95,14 @@ impl Transport {
         })
     }
 
-    /// Hands everything that arrived to `node`; the first wait may block briefly.
-    fn receive(&mut self, node: &mut LinkNode, buf: &mut [u8]) -> Result<()> {
-        let mut msgs: Vec<(MavHeader, MavMessage)> = Vec::new();
+    /// Hands everything that arrived to `node`; the first wait may block briefly. `buf`
+    /// and `msgs` are the caller's, reused from call to call.
+    fn receive(
+        &mut self,
+        node: &mut LinkNode,
+        buf: &mut [u8],
+        msgs: &mut Vec<(MavHeader, MavMessage)>,
+    ) -> Result<()> {
         match self {
             Self::Udp { socket, peer } => {
                 loop {
@@ -105,12 +110,8 @@ impl Transport {
                         Ok((n, from)) => {
                             *peer = from;
                             msgs.clear();
-                            let errors = decode_datagram(buf.get(..n).unwrap_or(&[]), &mut msgs);
-                            node.on_parse_errors(errors);
-                            let now = monotonic_ns();
-                            for (h, m) in &msgs {
-                                node.on_message(now, h, m);
-                            }
+                            let errors = decode_datagram(buf.get(..n).unwrap_or(&[]), msgs);
+                            deliver(node, errors, msgs);
                             socket.set_read_timeout(Some(Duration::from_micros(1)))?;
                         }
                         Err(e)
@@ -156,12 +157,8 @@ impl Transport {
                             Ok(0) => break None,
                             Ok(n) => {
                                 msgs.clear();
-                                let errors = decoder.push(buf.get(..n).unwrap_or(&[]), &mut msgs);
-                                node.on_parse_errors(errors);
-                                let now = monotonic_ns();
-                                for (h, m) in &msgs {
-                                    node.on_message(now, h, m);
-                                }
+                                let errors = decoder.push(buf.get(..n).unwrap_or(&[]), msgs);
+                                deliver(node, errors, msgs);
                             }
                             Err(e) if e.kind() == ErrorKind::WouldBlock => break None,
                             Err(e) if e.kind() == ErrorKind::Interrupted => {}
@@ -194,6 +191,15 @@ impl Transport {
             }
             Self::Serial { port: None, .. } => {}
         }
+    }
+}
+
+/// What one read decoded, handed to the node at the time it arrived.
+fn deliver(node: &mut LinkNode, parse_errors: u64, msgs: &[(MavHeader, MavMessage)]) {
+    node.on_parse_errors(parse_errors);
+    let now = monotonic_ns();
+    for (h, m) in msgs {
+        node.on_message(now, h, m);
     }
 }
 
@@ -234,11 +240,11 @@ fn run(args: &Args) -> Result<()> {
     let beat_ns = ipc_cfg.heartbeat_period_ms * 1_000_000;
 
     let mut node = LinkNode::new(cfg.settings());
-    let (mut buf, mut frame) = (vec![0u8; 65_536], Vec::new());
+    let (mut buf, mut frame, mut msgs) = (vec![0u8; 65_536], Vec::new(), Vec::new());
     let mut last_beat = 0u64;
     tracing::info!(link = %cfg.link, "px4-link running");
     while !ipc.shutdown_requested() {
-        transport.receive(&mut node, &mut buf)?;
+        transport.receive(&mut node, &mut buf, &mut msgs)?;
         let now = monotonic_ns();
         while let Ok(Some(s)) = setpoints.receive() {
             node.on_setpoint(now, s.payload());
