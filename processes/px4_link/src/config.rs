@@ -18,17 +18,37 @@ pub enum LinkAddress {
     Serial {
         /// The device, e.g. `/dev/ttyTHS1`.
         path: PathBuf,
-        /// Bits per second, one of [`SERIAL_BAUDS`].
+        /// Bits per second, one of [`SERIAL_SPEEDS`].
         baud: u32,
     },
 }
 
-/// Baud rates a serial link may use: the standard termios rates PX4's `SER_TELx_BAUD`
-/// also offers, plus the higher ones companion UARTs run at.
-pub const SERIAL_BAUDS: &[u32] = &[
-    9_600, 19_200, 38_400, 57_600, 115_200, 230_400, 460_800, 500_000, 921_600, 1_000_000,
-    1_500_000, 2_000_000, 3_000_000,
+/// Baud rates a serial link may use, with their termios speeds: the standard rates
+/// PX4's `SER_TELx_BAUD` also offers, plus the higher ones companion UARTs run at. One
+/// table, so the accepted rates and the rates the port can be set to cannot drift apart.
+pub const SERIAL_SPEEDS: &[(u32, libc::speed_t)] = &[
+    (9_600, libc::B9600),
+    (19_200, libc::B19200),
+    (38_400, libc::B38400),
+    (57_600, libc::B57600),
+    (115_200, libc::B115200),
+    (230_400, libc::B230400),
+    (460_800, libc::B460800),
+    (500_000, libc::B500000),
+    (921_600, libc::B921600),
+    (1_000_000, libc::B1000000),
+    (1_500_000, libc::B1500000),
+    (2_000_000, libc::B2000000),
+    (3_000_000, libc::B3000000),
 ];
+
+/// The termios speed for `baud`, when it is one of [`SERIAL_SPEEDS`].
+pub fn serial_speed(baud: u32) -> Option<libc::speed_t> {
+    SERIAL_SPEEDS
+        .iter()
+        .find(|(b, _)| *b == baud)
+        .map(|&(_, speed)| speed)
+}
 
 /// What px4-link reads from `landing.toml`.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -78,9 +98,9 @@ impl Px4LinkConfig {
             }),
             Some(("serial", rest)) => {
                 let bauds = || {
-                    SERIAL_BAUDS
+                    SERIAL_SPEEDS
                         .iter()
-                        .map(u32::to_string)
+                        .map(|(b, _)| b.to_string())
                         .collect::<Vec<_>>()
                         .join(", ")
                 };
@@ -95,7 +115,7 @@ impl Px4LinkConfig {
                     ));
                 };
                 match baud.parse::<u32>() {
-                    Ok(b) if SERIAL_BAUDS.contains(&b) => Ok(LinkAddress::Serial {
+                    Ok(b) if serial_speed(b).is_some() => Ok(LinkAddress::Serial {
                         path: PathBuf::from(path),
                         baud: b,
                     }),

@@ -32,26 +32,6 @@ pub struct SerialPort {
     file: File,
 }
 
-/// The termios speed constant for `baud`, if Linux has one.
-fn speed(baud: u32) -> Option<libc::speed_t> {
-    Some(match baud {
-        9_600 => libc::B9600,
-        19_200 => libc::B19200,
-        38_400 => libc::B38400,
-        57_600 => libc::B57600,
-        115_200 => libc::B115200,
-        230_400 => libc::B230400,
-        460_800 => libc::B460800,
-        500_000 => libc::B500000,
-        921_600 => libc::B921600,
-        1_000_000 => libc::B1000000,
-        1_500_000 => libc::B1500000,
-        2_000_000 => libc::B2000000,
-        3_000_000 => libc::B3000000,
-        _ => return None,
-    })
-}
-
 fn check(ret: libc::c_int) -> io::Result<()> {
     if ret < 0 {
         Err(io::Error::last_os_error())
@@ -64,7 +44,7 @@ impl SerialPort {
     /// Opens `path` raw at `baud`, exclusively (a second px4-link on the same port would
     /// interleave frames), discarding whatever was waiting in the buffers.
     pub fn open(path: &Path, baud: u32) -> io::Result<Self> {
-        let speed = speed(baud)
+        let speed = px4_link::config::serial_speed(baud)
             .ok_or_else(|| io::Error::new(ErrorKind::InvalidInput, format!("baud rate {baud}")))?;
         let file = OpenOptions::new()
             .read(true)
