@@ -493,23 +493,62 @@ impl TopFrame {
     }
 }
 
-/// Everything the x-y extent of a figure must include.
-fn xy_points(log: &FlightLog) -> Vec<[f64; 2]> {
-    let mut pts: Vec<[f64; 2]> = Vec::new();
+/// The points a figure of the flight must contain: the UAV's and the pad's paths, the
+/// obstacles' corners and the pad's outline at touchdown (at the pad's height).
+fn scene_points(log: &FlightLog) -> Vec<[f64; 3]> {
+    let mut pts: Vec<[f64; 3]> = Vec::new();
     for s in &log.samples {
-        pts.push([s.uav[0], s.uav[1]]);
-        if let Some(p) = s.ugv_pad {
-            pts.push([p[0], p[1]]);
-        }
+        pts.push(s.uav);
+        pts.extend(s.ugv_pad);
     }
     for (lo, hi) in &log.obstacles {
-        pts.push([lo[0], lo[1]]);
-        pts.push([hi[0], hi[1]]);
+        pts.push(*lo);
+        pts.push(*hi);
     }
     if let Some(td) = &log.touchdown {
-        pts.extend(pad_corners(log, td));
+        pts.extend(pad_corners(log, td).map(|c| [c[0], c[1], td.pad[2]]));
     }
     pts
+}
+
+/// Everything the x-y extent of a figure must include.
+fn xy_points(log: &FlightLog) -> Vec<[f64; 2]> {
+    scene_points(log).iter().map(|p| [p[0], p[1]]).collect()
+}
+
+/// The pad vehicle's path, the pad at touchdown (filled with `pad_fill`, when given) and
+/// the UAV's path, each segment in the colour of the phase it starts in, drawn through
+/// `project`: the top view and the 3-D view differ only in it.
+fn draw_paths(
+    cv: &mut Canvas,
+    log: &FlightLog,
+    phases: &[(String, Scalar)],
+    project: impl Fn([f64; 3]) -> Point,
+    pad_fill: Option<Scalar>,
+) -> opencv::Result<()> {
+    let ugv: Vec<Point> = log
+        .samples
+        .iter()
+        .filter_map(|s| s.ugv_pad.map(&project))
+        .collect();
+    if ugv.len() > 1 {
+        cv.polyline(&ugv, false, ugv_colour(), 2)?;
+    }
+    if let Some(td) = &log.touchdown {
+        let corners: Vec<Point> = pad_corners(log, td)
+            .iter()
+            .map(|c| project([c[0], c[1], td.pad[2]]))
+            .collect();
+        if let Some(fill) = pad_fill {
+            cv.fill_poly(&corners, fill)?;
+        }
+        cv.polyline(&corners, true, black(), 2)?;
+    }
+    for w in log.samples.windows(2) {
+        let c = colour_of(phases, &w[0].phase);
+        cv.line(project(w[0].uav), project(w[1].uav), c, 2)?;
+    }
+    Ok(())
 }
 
 /// The top view's plot area inside [`FIGURE_SIZE`] (room for title, axes and legend).
@@ -567,35 +606,8 @@ fn draw_top(log: &FlightLog) -> opencv::Result<Canvas> {
         cv.rect(r, grey(110.0), 1)?;
     }
 
-    // Pad vehicle path.
-    let ugv: Vec<Point> = log
-        .samples
-        .iter()
-        .filter_map(|s| s.ugv_pad.map(|p| f.to_px(p[0], p[1])))
-        .collect();
-    if ugv.len() > 1 {
-        cv.polyline(&ugv, false, ugv_colour(), 2)?;
-    }
-
-    // Pad outline at touchdown.
-    if let Some(td) = &log.touchdown {
-        let corners: Vec<Point> = pad_corners(log, td)
-            .iter()
-            .map(|c| f.to_px(c[0], c[1]))
-            .collect();
-        cv.polyline(&corners, true, black(), 2)?;
-    }
-
-    // UAV path, each segment in the colour of the phase it starts in.
-    for w in log.samples.windows(2) {
-        let c = colour_of(&phases, &w[0].phase);
-        cv.line(
-            f.to_px(w[0].uav[0], w[0].uav[1]),
-            f.to_px(w[1].uav[0], w[1].uav[1]),
-            c,
-            2,
-        )?;
-    }
+    // Pad vehicle path, pad outline at touchdown, UAV path.
+    draw_paths(&mut cv, log, &phases, |p| f.to_px(p[0], p[1]), None)?;
 
     // Markers on top.
     if let Some(p) = log.samples.iter().find_map(|s| s.ugv_pad) {
@@ -705,20 +717,8 @@ fn world_box(log: &FlightLog) -> ([f64; 3], [f64; 3], Vec<[f64; 3]>) {
             }
         }
     };
-    for s in &log.samples {
-        add(s.uav);
-        if let Some(p) = s.ugv_pad {
-            add(p);
-        }
-    }
-    for (a, b) in &log.obstacles {
-        add(*a);
-        add(*b);
-    }
-    if let Some(td) = &log.touchdown {
-        for c in pad_corners(log, td) {
-            add([c[0], c[1], td.pad[2]]);
-        }
+    for p in scene_points(log) {
+        add(p);
     }
     if lo[0] > hi[0] {
         (lo, hi) = ([-1.0, -1.0, 0.0], [1.0, 1.0, 1.0]);
@@ -873,29 +873,8 @@ fn draw_iso(log: &FlightLog) -> opencv::Result<Canvas> {
         }
     }
 
-    // Pad vehicle path (pad centre height).
-    let ugv: Vec<Point> = log
-        .samples
-        .iter()
-        .filter_map(|s| s.ugv_pad.map(|p| f.to_px(p)))
-        .collect();
-    if ugv.len() > 1 {
-        cv.polyline(&ugv, false, ugv_colour(), 2)?;
-    }
-    if let Some(td) = &log.touchdown {
-        let corners: Vec<Point> = pad_corners(log, td)
-            .iter()
-            .map(|c| f.to_px([c[0], c[1], td.pad[2]]))
-            .collect();
-        cv.fill_poly(&corners, grey(235.0))?;
-        cv.polyline(&corners, true, black(), 2)?;
-    }
-
-    // UAV path in 3-D.
-    for w in log.samples.windows(2) {
-        let c = colour_of(&phases, &w[0].phase);
-        cv.line(f.to_px(w[0].uav), f.to_px(w[1].uav), c, 2)?;
-    }
+    // Pad vehicle path (pad centre height), the pad at touchdown, the UAV path in 3-D.
+    draw_paths(&mut cv, log, &phases, |p| f.to_px(p), Some(grey(235.0)))?;
 
     if let Some(p) = log.samples.iter().find_map(|s| s.ugv_pad) {
         Marker::Square(grey(200.0)).draw(&mut cv, f.to_px(p))?;
