@@ -1,7 +1,7 @@
 //! The evaluator of `landing run`: the only part that reads the simulator's ground
 //! truth (where the vehicle and the pad really are, touchdowns, collisions, crashes).
 
-use ipc_types::msg::{MissionState, TruthEvent, TruthKind};
+use ipc_types::msg::{MissionState, TruthEvent, TruthKind, TruthState};
 use sim::lockstep::Simulator;
 
 /// The world at one instant, for the flight log and the plots.
@@ -22,21 +22,36 @@ pub struct Sample {
 }
 
 impl Sample {
-    /// The truth now.
+    /// The truth now, from the simulator in this process.
     pub fn of(sim: &Simulator, phase: MissionState) -> Self {
-        let truth = sim.world().truth();
-        let pad = sim.world().pad();
+        Self::from_truth(&sim::lockstep::truth_state(sim, sim.time_ns()), phase)
+    }
+
+    /// The truth the `sim` process published (`landing/sim/truth_state`).
+    pub fn from_truth(s: &TruthState, phase: MissionState) -> Self {
+        let pad = s.pad_valid != 0;
         Self {
-            t_s: sim.time_ns() as f64 * 1e-9,
-            uav: truth.position.into(),
-            uav_velocity: truth.velocity.into(),
-            pad: pad
-                .as_ref()
-                .map(|p| p.world_from_pad.translation.vector.into()),
-            pad_velocity: pad.as_ref().map(|p| p.linear_velocity.into()),
+            t_s: s.sim_time_ns as f64 * 1e-9,
+            uav: s.vehicle_position,
+            uav_velocity: s.vehicle_velocity,
+            pad: pad.then_some(s.pad_position),
+            pad_velocity: pad.then_some(s.pad_velocity),
             phase,
         }
     }
+}
+
+/// Horizontal distance from the vehicle to the pad, m (`None` without a pad).
+pub fn distance_to_pad(s: &TruthState) -> Option<f64> {
+    (s.pad_valid != 0).then(|| {
+        let (u, p) = (s.vehicle_position, s.pad_position);
+        (u[0] - p[0]).hypot(u[1] - p[1])
+    })
+}
+
+/// True for the simulator's crash event.
+pub fn is_crash(t: &TruthEvent) -> bool {
+    t.kind == TruthKind::Crash as u32
 }
 
 /// A touchdown as the simulator saw it.
@@ -91,14 +106,6 @@ impl Evaluator {
     /// Keeps one sample.
     pub fn sample(&mut self, s: Sample) {
         self.samples.push(s);
-    }
-
-    /// Horizontal distance from the vehicle to the pad now, m.
-    pub fn distance_to_pad(&self, sim: &Simulator) -> Option<f64> {
-        let p = sim.world().pad()?;
-        let u = sim.world().truth().position;
-        let c = p.world_from_pad.translation.vector;
-        Some((u - c).xy().norm())
     }
 
     /// The touchdown that ended the mission: the last one on the pad, else the last one

@@ -18,7 +18,7 @@ use depth_map::{DepthMapper, DepthPixels, DepthView};
 use fsm::Fsm;
 use ipc_types::msg::{
     Header, Intrinsics, MissionState, OccupancyMapHeader, PadObservation, PixelEncoding,
-    PlannerGoal, Stage, Trajectory, TruthEvent, VehicleState,
+    PlannerGoal, Stage, Trajectory, VehicleState,
 };
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
@@ -31,7 +31,7 @@ use sim::lockstep::Simulator;
 use state_history::StateHistory;
 
 use crate::record::{Recordable, Recorder};
-use crate::run_eval::{Evaluator, Sample};
+use crate::run_eval::{Evaluator, Sample, distance_to_pad, is_crash};
 
 /// The planner's tick, ns (it wakes on goals, states and maps; 50 Hz bounds it).
 const PLANNER_PERIOD_NS: u64 = 20_000_000;
@@ -63,6 +63,18 @@ pub enum End {
     Crashed,
     /// The scenario's time ran out.
     Timeout,
+}
+
+impl End {
+    /// The end a mission state means: Landed, or SafeLand / Abort once the vehicle is
+    /// `down` (on the ground, disarmed); `None` while the mission goes on.
+    pub fn reached(phase: MissionState, down: bool) -> Option<End> {
+        match phase {
+            MissionState::Landed => Some(End::Landed),
+            MissionState::SafeLand | MissionState::Abort if down => Some(End::SafeLanded),
+            _ => None,
+        }
+    }
 }
 
 /// What the run measured besides the flight log.
@@ -267,18 +279,10 @@ pub fn run(
             }
             if let Some(st) = o.status {
                 rec.write("/fsm/status", now, &st)?;
-                let s = MissionState::from_raw(st.state).unwrap_or(MissionState::Idle);
                 if ended.is_none() {
-                    match s {
-                        MissionState::Landed => ended = Some((End::Landed, now)),
-                        MissionState::SafeLand | MissionState::Abort
-                            if sim.world().contact() != sim::quadrotor::ContactState::Airborne
-                                && !sim.world().armed() =>
-                        {
-                            ended = Some((End::SafeLanded, now));
-                        }
-                        _ => {}
-                    }
+                    let down = sim.world().contact() != sim::quadrotor::ContactState::Airborne
+                        && !sim.world().armed();
+                    ended = End::reached(pipe.fsm.state(), down).map(|e| (e, now));
                 }
             }
         }
@@ -325,7 +329,7 @@ pub fn run(
         }
         if now >= next_progress {
             next_progress = now + 1_000_000_000;
-            let d = eval.distance_to_pad(sim);
+            let d = distance_to_pad(&sim::lockstep::truth_state(sim, now));
             progress(now as f64 * 1e-9, pipe.fsm.state(), d);
         }
     }
@@ -334,10 +338,6 @@ pub fn run(
 fn deliver_observation(pipe: &mut Pipeline, now: u64, obs: &PadObservation, stats: &mut RunStats) {
     stats.observations += 1;
     pipe.fsm.on_observation(now, obs);
-}
-
-fn is_crash(t: &TruthEvent) -> bool {
-    t.kind == ipc_types::msg::TruthKind::Crash as u32
 }
 
 /// An optional MCAP recording of every message the stages exchange (simulated time).

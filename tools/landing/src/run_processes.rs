@@ -14,7 +14,7 @@ use fsm::Transition;
 use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::msg::{
     FsmStatus, LinkOutcome, LinkRequest, MissionState, PadObservation, PlannerGoal, PlannerStats,
-    Setpoint, Trajectory, TruthEvent, TruthKind, TruthState, VehicleState,
+    Setpoint, Trajectory, TruthEvent, TruthState, VehicleState,
 };
 use ipc_types::runtime::ipc::Subscriber;
 use ipc_types::runtime::ipc::{Wake, run_wait_loop};
@@ -24,7 +24,7 @@ use sim::scenario::LoadedScenario;
 
 use crate::procs::{Children, binary, free_udp_port};
 use crate::record::{Recordable, Recorder};
-use crate::run_eval::{Evaluator, Sample};
+use crate::run_eval::{Evaluator, Sample, distance_to_pad, is_crash};
 use crate::run_lockstep::{End, RunStats};
 
 /// What `--processes` needs to start the stack.
@@ -223,20 +223,13 @@ pub fn run(
                         r.write_message("/sim/truth", monotonic_ns(), &t)?;
                     }
                     eval.on_truth(&t, phase);
-                    if t.kind == TruthKind::Crash as u32 && ended.is_none() {
+                    if is_crash(&t) && ended.is_none() {
                         ended = Some((End::Crashed, Instant::now()));
                     }
                 }
                 while let Some(s) = truth_state.receive()? {
                     let s = *s.payload();
-                    eval.sample(Sample {
-                        t_s: s.sim_time_ns as f64 * 1e-9,
-                        uav: s.vehicle_position,
-                        uav_velocity: s.vehicle_velocity,
-                        pad: (s.pad_valid != 0).then_some(s.pad_position),
-                        pad_velocity: (s.pad_valid != 0).then_some(s.pad_velocity),
-                        phase,
-                    });
+                    eval.sample(Sample::from_truth(&s, phase));
                     last_state = Some(s);
                 }
                 Ok(())
@@ -248,21 +241,12 @@ pub fn run(
             let t_s = last_state.map_or(0.0, |s| s.sim_time_ns as f64 * 1e-9);
             if t_s >= next_progress {
                 next_progress = t_s.floor() + 1.0;
-                let d = last_state.filter(|s| s.pad_valid != 0).map(|s| {
-                    let (u, p) = (s.vehicle_position, s.pad_position);
-                    (u[0] - p[0]).hypot(u[1] - p[1])
-                });
+                let d = last_state.as_ref().and_then(distance_to_pad);
                 progress(t_s, phase, d);
             }
             if ended.is_none() {
                 let down = last_state.is_some_and(|s| s.armed == 0);
-                match phase {
-                    MissionState::Landed => ended = Some((End::Landed, Instant::now())),
-                    MissionState::SafeLand | MissionState::Abort if down => {
-                        ended = Some((End::SafeLanded, Instant::now()));
-                    }
-                    _ => {}
-                }
+                ended = End::reached(phase, down).map(|e| (e, Instant::now()));
             }
             if let Some((end, at)) = ended
                 && at.elapsed() >= Duration::from_secs(1)
