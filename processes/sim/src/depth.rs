@@ -14,6 +14,9 @@ use parry3d::query::{Ray, RayCast};
 use parry3d::shape::Cuboid;
 use serde::Deserialize;
 
+/// Metres per unit of a depth frame's pixels (u16 millimetres), for readers of the frames.
+pub const DEPTH_SCALE_M: f64 = 0.001;
+
 use crate::noise::{MAX_SLICE, PixelNoise};
 use crate::params::{self, ParamError};
 use crate::world::Aabb;

@@ -25,6 +25,10 @@ use crate::world::{Event, TimedEvent, World, WorldError};
 /// Physics step: 2 ms (500 Hz).
 pub const PHYSICS_STEP_NS: u64 = 2_000_000;
 
+/// How often the `sim` process publishes the evaluator's truth state (20 Hz: enough for
+/// the plots and the speed figures).
+pub const TRUTH_STATE_PERIOD_NS: u64 = 50_000_000;
+
 /// What one step produced.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct StepReport {

@@ -21,7 +21,7 @@ use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::runtime::{MessageHeader, SlicePublisher};
 use ipc_types::services;
 use sim::camera::PixelFormat;
-use sim::lockstep::Simulator;
+use sim::lockstep::{PHYSICS_STEP_NS, Simulator, TRUTH_STATE_PERIOD_NS};
 use sim::px4::endpoint::{EndpointConfig, SimVehicle};
 
 /// The landing stack's simulator: quadrotor, PX4-like autopilot over MAVLink, moving pad.
@@ -184,7 +184,7 @@ fn run(args: &Args) -> Result<()> {
                                 msg: Header::captured_at(now),
                                 width,
                                 height,
-                                depth_scale_m: 0.001,
+                                depth_scale_m: sim::depth::DEPTH_SCALE_M,
                                 intrinsics,
                                 camera_id: 0,
                                 reserved: 0,
@@ -197,8 +197,7 @@ fn run(args: &Args) -> Result<()> {
                 }
             }
             steps += 1;
-            // 20 Hz at the 500 Hz physics step: for the evaluator's plots and speeds.
-            if steps.is_multiple_of(25) {
+            if steps.is_multiple_of(TRUTH_STATE_PERIOD_NS / PHYSICS_STEP_NS) {
                 let s = sim::lockstep::truth_state(sim, now);
                 if let Err(e) = truth_state.send(s.msg, &s) {
                     failure = Some(e);

@@ -123,7 +123,7 @@ pub fn run(args: &DepthArgs) -> Result<()> {
             k,
             DepthPixels::U16 {
                 data: &depth,
-                scale_m: 0.001,
+                scale_m: sim::depth::DEPTH_SCALE_M as f32,
             },
         )?;
         let world_from_camera = body * body_from_camera;

@@ -323,7 +323,7 @@ pub fn run(args: &MapArgs) -> Result<()> {
                 intrinsics,
                 DepthPixels::U16 {
                     data: &buf,
-                    scale_m: 0.001,
+                    scale_m: sim::depth::DEPTH_SCALE_M as f32,
                 },
             )?;
             if let Err(e) = mapper.process(&view, capture_ns) {

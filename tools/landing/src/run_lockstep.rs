@@ -250,7 +250,7 @@ pub fn run(
                 intrinsics,
                 DepthPixels::U16 {
                     data: &buf,
-                    scale_m: 0.001,
+                    scale_m: sim::depth::DEPTH_SCALE_M as f32,
                 },
             )?;
             if pipe.mapper.process(&view, capture_ns).is_ok()
