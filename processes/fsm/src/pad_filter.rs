@@ -154,13 +154,6 @@ impl PadFilter {
         }
     }
 
-    /// Forgets everything (a new mission, or a pad given up on).
-    pub fn reset(&mut self) {
-        self.axes = None;
-        self.updates = 0;
-        self.rejects_in_row = 0;
-    }
-
     /// What the filter did so far.
     pub fn counters(&self) -> FilterCounters {
         self.counters
