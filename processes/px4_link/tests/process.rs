@@ -6,6 +6,8 @@
 //! The `sim` binary is found next to this test's executable (`target/release/sim`);
 //! `cargo test --release --workspace` builds it.
 
+mod common;
+
 use std::net::UdpSocket;
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -14,7 +16,7 @@ use ipc_types::msg::{
     FlightMode, Header, LinkOutcome, LinkOutcomeKind, LinkRequest, LinkRequestKind, SafetyAction,
     SafetyCommand, Text, VehicleState,
 };
-use ipc_types::runtime::{Ipc, IpcPrefix};
+use ipc_types::runtime::IpcPrefix;
 use ipc_types::services;
 use landing_tests::process::{Running, sim_binary};
 
@@ -47,14 +49,12 @@ fn px4_link_flies_the_sim_process_on_requests_and_lands_it_on_a_safety_order() {
             .args(["--ipc-prefix", prefix.as_str()])
             .env("LANDING_LOG", "warn"),
     );
-    let ipc = Ipc::open("test-fsm", &prefix).unwrap();
-    let states = ipc
-        .subscriber::<VehicleState>(services::VEHICLE_STATE)
-        .unwrap();
-    let outcomes = ipc
-        .subscriber::<LinkOutcome>(services::PX4_OUTCOME)
-        .unwrap();
-    let mut requests = ipc.publisher::<LinkRequest>(services::PX4_REQUEST).unwrap();
+    let common::FsmSide {
+        ipc,
+        states,
+        outcomes,
+        mut requests,
+    } = common::fsm_side(&prefix);
     let mut safety = ipc
         .publisher::<SafetyCommand>(services::SAFETY_COMMAND)
         .unwrap();

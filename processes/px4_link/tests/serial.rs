@@ -6,17 +6,16 @@
 //! fsm would: vehicle states arrive, garbage on the line is counted and skipped, an arm
 //! request is acked. And a wrong baud rate or a missing device is one line, exit 2.
 
+mod common;
+
 use std::ffi::CStr;
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use ipc_types::msg::{
-    Header, LinkOutcome, LinkOutcomeKind, LinkRequest, LinkRequestKind, VehicleState,
-};
-use ipc_types::runtime::{Ipc, IpcPrefix};
-use ipc_types::services;
+use ipc_types::msg::{Header, LinkOutcomeKind, LinkRequest, LinkRequestKind, VehicleState};
+use ipc_types::runtime::IpcPrefix;
 use landing_tests::process::Running;
 use mavlink::MavHeader;
 use px4_link::codec::{StreamDecoder, encode};
@@ -153,14 +152,12 @@ fn px4_link_on_a_serial_line_reports_the_vehicle_and_gets_an_arm_acked() {
             .args(["--ipc-prefix", prefix.as_str()])
             .env("LANDING_LOG", "warn"),
     );
-    let ipc = Ipc::open("test-fsm", &prefix).unwrap();
-    let states = ipc
-        .subscriber::<VehicleState>(services::VEHICLE_STATE)
-        .unwrap();
-    let outcomes = ipc
-        .subscriber::<LinkOutcome>(services::PX4_OUTCOME)
-        .unwrap();
-    let mut requests = ipc.publisher::<LinkRequest>(services::PX4_REQUEST).unwrap();
+    let common::FsmSide {
+        ipc: _ipc,
+        states,
+        outcomes,
+        mut requests,
+    } = common::fsm_side(&prefix);
     let mut ap = Autopilot::new(master);
 
     let mut latest: Option<VehicleState> = None;

@@ -3,7 +3,9 @@
 
 use std::path::PathBuf;
 
-use ipc_types::msg::{Header, Setpoint};
+use ipc_types::msg::{Header, LinkOutcome, LinkRequest, Setpoint, VehicleState};
+use ipc_types::runtime::{Ipc, IpcPrefix, Publisher, Subscriber};
+use ipc_types::services;
 use sim::scenario::LoadedScenario;
 
 /// A shipped scenario from `deploy/`.
@@ -22,5 +24,28 @@ pub fn position_setpoint(x: f64, y: f64, z: f64) -> Setpoint {
         yaw: 0.0,
         valid: Setpoint::POSITION | Setpoint::YAW,
         reserved: 0,
+    }
+}
+
+/// The fsm's side of px4-link's topics, as a test plays it.
+pub struct FsmSide {
+    /// The test's node (for further ports).
+    pub ipc: Ipc,
+    /// `vehicle/state` from px4-link.
+    pub states: Subscriber<VehicleState>,
+    /// `px4/outcome` from px4-link.
+    pub outcomes: Subscriber<LinkOutcome>,
+    /// `px4/request` to px4-link.
+    pub requests: Publisher<LinkRequest>,
+}
+
+/// Opens the fsm's side under `prefix`.
+pub fn fsm_side(prefix: &IpcPrefix) -> FsmSide {
+    let ipc = Ipc::open("test-fsm", prefix).unwrap();
+    FsmSide {
+        states: ipc.subscriber(services::VEHICLE_STATE).unwrap(),
+        outcomes: ipc.subscriber(services::PX4_OUTCOME).unwrap(),
+        requests: ipc.publisher(services::PX4_REQUEST).unwrap(),
+        ipc,
     }
 }
