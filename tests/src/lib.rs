@@ -1,7 +1,11 @@
-//! Helpers for the workspace-level tests: where a pointer lives in this process's memory
-//! map, so a test can prove that a payload is read in place from shared memory.
+//! Helpers for the workspace-level tests: stack binaries as child processes (`process`),
+//! the whole stack started as `landing run --processes` starts it (`stack`), stop tests
+//! under load (`stop`), and where a pointer lives in this process's memory map, so a test
+//! can prove that a payload is read in place from shared memory.
 
 pub mod process;
+pub mod stack;
+pub mod stop;
 
 use std::path::PathBuf;
 

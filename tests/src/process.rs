@@ -2,7 +2,7 @@
 //! when the test ends however it ends, stopped with SIGTERM as systemd does.
 
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
@@ -148,20 +148,8 @@ pub fn strip_ansi(s: &str) -> String {
     out
 }
 
-/// The `sim` binary next to the running test executable (`target/<profile>/sim`, the
-/// test being `target/<profile>/deps/<test>`). Cargo builds it for `cargo test --release
-/// --workspace` (and `make test`), not for one package alone; panics with how to build it.
+/// The `sim` binary next to the running test executable (see
+/// [`crate::stack::stack_binary`]).
 pub fn sim_binary() -> PathBuf {
-    let profile_dir = std::env::current_exe()
-        .ok()
-        .and_then(|exe| exe.parent().and_then(Path::parent).map(Path::to_path_buf))
-        .unwrap_or_default();
-    let sim = profile_dir.join("sim");
-    assert!(
-        sim.is_file(),
-        "{} is missing: build it with `cargo build --release -p sim` \
-         (`cargo test --release --workspace` builds it)",
-        sim.display()
-    );
-    sim
+    crate::stack::stack_binary("sim")
 }

@@ -208,13 +208,16 @@ impl Ipc {
         })?;
         let node = NodeBuilder::new()
             .name(&name)
+            // Signals are ours (runtime::shutdown): iceoryx2's handler would keep only
+            // the last signal and could lose a stop.
+            .signal_handling_mode(SignalHandlingMode::Disabled)
             .config(&config)
             .create::<Svc>()
             .map_err(|e| IpcError::Node {
                 name: process.to_string(),
                 reason: format!("{e:?}"),
             })?;
-        // After the node: iceoryx2 installs its own handlers when it creates one.
+        // For processes that do not start through `process_main` (tools, probes).
         crate::runtime::shutdown::install();
         let cleaned = node.try_cleanup_dead_nodes();
         if cleaned.cleanups > 0 {
@@ -829,13 +832,9 @@ pub fn run_wait_loop(
     mut on_wake: impl FnMut(Wake) -> bool,
 ) -> Result<LoopExit, IpcError> {
     let waitset = WaitSetBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<Svc>()
         .map_err(|e| IpcError::WaitSet(format!("{e:?}")))?;
-    // Again after the wait set: whatever iceoryx2 installed, ours handles the stop.
-    crate::runtime::shutdown::install();
-    if crate::runtime::shutdown::requested() {
-        return Ok(LoopExit::Signal);
-    }
     let mut data_guards = Vec::with_capacity(listeners.len());
     for l in listeners {
         data_guards.push(
@@ -888,17 +887,29 @@ pub fn run_wait_loop(
             CallbackProgression::Stop
         }
     };
+    // One round at a time, our flag looked at between rounds: with iceoryx2's signal
+    // handling disabled, `wait_and_process` would only notice a signal that interrupts
+    // the wait itself, and one that arrives while a callback runs would be lost (a busy
+    // stage, always in its callback, then never stopped). A signal that lands between
+    // the look and the wait is seen when the wait ends, at the latest at the next tick.
     loop {
-        match waitset.wait_and_process(&mut on_event) {
-            Ok(WaitSetRunResult::TerminationRequest) => return Ok(LoopExit::Signal),
-            // Any signal interrupts the wait; the next call returns TerminationRequest if it
-            // was SIGINT or SIGTERM, and waits on otherwise (SIGCHLD must not end a process).
-            Ok(WaitSetRunResult::Interrupt) | Ok(WaitSetRunResult::AllEventsHandled) => {
+        if crate::runtime::shutdown::requested() {
+            return Ok(LoopExit::Signal);
+        }
+        match waitset.wait_and_process_once(&mut on_event) {
+            Ok(WaitSetRunResult::StopRequest) => {
                 if crate::runtime::shutdown::requested() {
                     return Ok(LoopExit::Signal);
                 }
+                return Ok(LoopExit::Stopped);
             }
-            Ok(WaitSetRunResult::StopRequest) => return Ok(LoopExit::Stopped),
+            // Any signal interrupts the wait; SIGCHLD and the like must not end a process,
+            // so only the flag decides.
+            Ok(
+                WaitSetRunResult::TerminationRequest
+                | WaitSetRunResult::Interrupt
+                | WaitSetRunResult::AllEventsHandled,
+            ) => {}
             Err(e) => return Err(IpcError::WaitSet(format!("{e:?}"))),
         }
     }

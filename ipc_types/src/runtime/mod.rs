@@ -10,6 +10,7 @@ pub mod ipc;
 pub mod logging;
 pub mod process_main;
 pub mod shutdown;
+pub mod threads;
 
 pub use clock::{Clock, MonotonicClock, SimClock, monotonic_ns};
 pub use config::{ConfigError, Invalid, IpcConfig, Validate};
@@ -18,3 +19,4 @@ pub use ipc::{
     SlicePublisher, SliceSubscriber, Subscriber, Wake, run_wait_loop,
 };
 pub use process_main::process_main;
+pub use threads::{JOIN_TIMEOUT, JoinError, StopFlag, ThreadRole, Worker};

@@ -1,18 +1,26 @@
-//! The `main` every stack process shares: flags, logging, and one line on failure.
+//! The `main` every stack process shares: flags, logging, signals, and one line on failure.
 
 use std::fmt::Display;
+use std::io::Write;
 use std::process::ExitCode;
 
 use clap::Parser;
 use clap::error::ErrorKind;
 
-/// Parses the flags (a usage error is one line and exit code 2; `--help` and `--version`
-/// print and exit 0), starts logging at `default_level`, runs `run`, and turns its error
-/// into one line on stderr and exit code 2, as every process of the stack does.
-pub fn process_main<A: Parser, E: Display>(
-    default_level: &str,
-    run: impl FnOnce(&A) -> Result<(), E>,
-) -> ExitCode {
+/// Installs the SIGTERM/SIGINT handler before anything else (a stop that arrives while
+/// the process starts is kept, never fatal), parses the flags (a usage error is one line
+/// and exit code 2; `--help` and `--version` print and exit 0), starts logging at
+/// `default_level` and runs `run`. An error is one line on stderr and exit code 2, except
+/// a thread that could not be joined ([`crate::runtime::threads::JoinError`]): the
+/// process then ends at once with that thread's exit code, through `_exit`, so no C++
+/// exit handler runs under the thread still inside a library. `run` must have dropped
+/// its iceoryx2 resources by then (it has, by returning).
+pub fn process_main<A, E>(default_level: &str, run: impl FnOnce(&A) -> Result<(), E>) -> ExitCode
+where
+    A: Parser,
+    E: Display + AsRef<dyn std::error::Error + Send + Sync + 'static>,
+{
+    crate::runtime::shutdown::install();
     let args = match A::try_parse() {
         Ok(a) => a,
         Err(e) if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) => {
@@ -32,6 +40,12 @@ pub fn process_main<A: Parser, E: Display>(
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
+            if let Some(code) = crate::runtime::threads::exit_code_of(e.as_ref()) {
+                let _ = std::io::stderr().flush();
+                // SAFETY: `_exit` ends the process without running exit handlers; it has
+                // no preconditions. Nothing is left to flush (stderr is unbuffered).
+                unsafe { libc::_exit(i32::from(code)) };
+            }
             ExitCode::from(2)
         }
     }

@@ -2,9 +2,10 @@
 //!
 //! iceoryx2 0.10 keeps only the last signal it caught and also catches SIGCONT; systemd
 //! and `timeout` send SIGTERM followed by SIGCONT, so a stop request could be overwritten
-//! before a process looked (4 of 10 stops lost in a test of camera-ingest). This handler
-//! replaces iceoryx2's for SIGTERM and SIGINT (installed after the node exists) and sets
-//! a flag nothing else clears. It is installed without SA_RESTART so that a blocking wait
+//! before a process looked (4 of 10 stops lost in a test of camera-ingest). So iceoryx2's
+//! signal handling is disabled (node and wait set) and this handler, installed first
+//! thing in `process_main`, sets a flag nothing else clears: a stop that arrives while a
+//! process is still starting is kept, and honoured once its loop runs. It is installed without SA_RESTART so that a blocking wait
 //! returns (EINTR) and the loop can look at the flag.
 
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -162,20 +162,7 @@ fn run(args: &Args) -> Result<()> {
                     let now = monotonic_ns();
                     if now.saturating_sub(last_report) > 5_000_000_000 {
                         last_report = now;
-                        let c = estimator.counters();
-                        tracing::info!(
-                            frames = c.frames,
-                            poses = c.poses,
-                            region_searches = c.region_searches,
-                            fallbacks = c.fallbacks,
-                            no_pad = counters.no_pad,
-                            skipped = counters.skipped,
-                            bad_frames = counters.bad_frames,
-                            no_state = counters.no_state,
-                            bad_states = counters.bad_states,
-                            missed_frames = frames.gaps(),
-                            "aruco-pnp"
-                        );
+                        report(&estimator, &counters, frames.gaps(), "aruco-pnp");
                     }
                 }
             }
@@ -185,8 +172,28 @@ fn run(args: &Args) -> Result<()> {
     if let Some(e) = failure {
         return Err(e);
     }
-    tracing::info!(?exit, "aruco-pnp stopped");
+    report(&estimator, &counters, frames.gaps(), "aruco-pnp stopped");
+    tracing::info!(?exit, "aruco-pnp exiting");
     Ok(())
+}
+
+/// Logs every counter under `what` (periodically, and once at the end).
+fn report(estimator: &PadEstimator, counters: &Counts, missed_frames: u64, what: &'static str) {
+    let c = estimator.counters();
+    tracing::info!(
+        frames = c.frames,
+        poses = c.poses,
+        region_searches = c.region_searches,
+        fallbacks = c.fallbacks,
+        no_pad = counters.no_pad,
+        skipped = counters.skipped,
+        bad_frames = counters.bad_frames,
+        no_state = counters.no_state,
+        bad_states = counters.bad_states,
+        non_finite = counters.non_finite,
+        missed_frames,
+        "{what}"
+    );
 }
 
 /// What the process counts besides the estimator's own counters.

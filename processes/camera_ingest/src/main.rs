@@ -9,7 +9,6 @@
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::Duration;
 
@@ -23,7 +22,8 @@ use clap::Parser;
 use ipc_types::msg::{CameraFrameHeader, Stage};
 use ipc_types::runtime::config::{self, deploy_dir};
 use ipc_types::runtime::{
-    Heartbeat, Ipc, IpcError, IpcPrefix, PeriodicWait, SlicePublisher, monotonic_ns,
+    Heartbeat, Ipc, IpcError, IpcPrefix, JOIN_TIMEOUT, PeriodicWait, SlicePublisher, StopFlag,
+    ThreadRole, Worker, monotonic_ns,
 };
 use ipc_types::services;
 use opencv::core::Mat;
@@ -376,7 +376,6 @@ struct Slot {
 struct Shared {
     slot: Mutex<Slot>,
     ready: Condvar,
-    stop: AtomicBool,
 }
 
 impl Shared {
@@ -451,10 +450,9 @@ fn run_capture(ipc: &Ipc, s: &Settings, out: &mut Output) -> Result<()> {
     let shared = Arc::new(Shared::default());
     let worker_shared = Arc::clone(&shared);
     let looping = s.looping;
-    let worker = std::thread::Builder::new()
-        .name("capture".into())
-        .spawn(move || capture_loop(source, pacer, looping, &worker_shared))
-        .context("starting the capture thread")?;
+    let worker = Worker::spawn(ThreadRole::CameraCapture, move |stop| {
+        capture_loop(source, pacer, looping, &worker_shared, stop);
+    })?;
 
     let mut checked_size = false;
     let result = loop {
@@ -496,14 +494,15 @@ fn run_capture(ipc: &Ipc, s: &Settings, out: &mut Output) -> Result<()> {
                 break Ok(());
             }
             Some(Err(e)) => break Err(anyhow::anyhow!(e)),
+            // It said nothing and is gone: it panicked (the join below names it).
+            None if worker.is_finished() => break Ok(()),
             None => {}
         }
     };
-    shared.stop.store(true, Ordering::Relaxed);
-    // A camera read can block for seconds; the thread is joined only when it has finished.
-    if worker.is_finished() {
-        let _ = worker.join();
-    }
+    // Joined before `main` returns: OpenCV's exit handlers must not run under a read. A
+    // read blocked for longer (a camera stuck in its driver) ends the process with the
+    // thread's exit code instead (runtime::threads).
+    worker.stop_and_join(JOIN_TIMEOUT)?;
     result
 }
 
@@ -522,13 +521,20 @@ enum Step {
 /// The capture thread: reads, paces recorded sources, reopens cameras with backoff, and
 /// hands each frame to the publishing loop. Never publishes itself (iceoryx2 ports stay on
 /// one thread).
-fn capture_loop(mut source: FrameSource, mut pacer: Option<Pacer>, looping: bool, shared: &Shared) {
+fn capture_loop(
+    mut source: FrameSource,
+    mut pacer: Option<Pacer>,
+    looping: bool,
+    shared: &Shared,
+    stop: &StopFlag,
+) {
     let mut backoff = Backoff::new(Duration::from_millis(100), Duration::from_secs(5));
-    while !shared.stop.load(Ordering::Relaxed) {
+    while !stop.is_stopped() {
         if let Some(p) = &pacer {
             let delay = p.delay_ns(monotonic_ns());
-            if delay > 0 {
-                std::thread::sleep(Duration::from_nanos(delay));
+            // A slow rate (0.1 Hz) must not hold a stop for seconds.
+            if delay > 0 && !stop.sleep(Duration::from_nanos(delay)) {
+                break;
             }
         }
         let step = match &mut source {
@@ -549,10 +555,7 @@ fn capture_loop(mut source: FrameSource, mut pacer: Option<Pacer>, looping: bool
                 }
             }
             Step::Retry(delay) => {
-                let until = monotonic_ns() + delay.as_nanos() as u64;
-                while !shared.stop.load(Ordering::Relaxed) && monotonic_ns() < until {
-                    std::thread::sleep(Duration::from_millis(50));
-                }
+                stop.sleep(delay);
             }
             Step::End(result) => {
                 shared.update(|s| s.end = Some(result));

@@ -97,6 +97,7 @@ fn run(args: &Args) -> Result<()> {
     let mut fsm = Fsm::new(cfg);
     let period = Duration::from_nanos(fsm.tick_period_ns());
     let mut last_beat = 0u64;
+    let mut counts = Counts::default();
     let mut failure: Option<anyhow::Error> = None;
     let exit = run_wait_loop(
         &[
@@ -112,33 +113,42 @@ fn run(args: &Args) -> Result<()> {
             let now = monotonic_ns();
             let result = (|| -> Result<()> {
                 while let Some(s) = states.receive()? {
+                    counts.states += 1;
                     fsm.on_vehicle_state(now, s.payload());
                 }
                 while let Some(o) = observations.receive()? {
+                    counts.observations += 1;
                     fsm.on_observation(now, o.payload());
                 }
                 while let Some(t) = trajectories.receive()? {
+                    counts.trajectories += 1;
                     fsm.on_trajectory(t.payload());
                 }
                 while let Some(o) = outcomes.receive()? {
+                    counts.outcomes += 1;
                     fsm.on_outcome(o.payload());
                 }
                 let mut ordered = false;
                 while let Some(c) = safety.receive()? {
+                    counts.safety += 1;
                     fsm.on_safety(now, c.payload());
                     ordered = true;
                 }
                 // The mission steps on its own clock; a safety order acts at once.
                 if matches!(wake, Wake::Tick) || ordered {
                     let out = fsm.tick(now);
+                    counts.ticks += 1;
                     for r in &out.requests {
                         requests.send(r.msg, r)?;
+                        counts.requests += 1;
                     }
                     if let Some(g) = &out.goal {
                         goals.send(g.msg, g)?;
+                        counts.goals += 1;
                     }
                     if let Some(sp) = &out.setpoint {
                         setpoints.send(sp.msg, sp)?;
+                        counts.setpoints += 1;
                     }
                     if let Some(st) = &out.status {
                         statuses.send(st.msg, st)?;
@@ -162,6 +172,37 @@ fn run(args: &Args) -> Result<()> {
     if let Some(e) = failure {
         return Err(e);
     }
-    tracing::info!(?exit, state = fsm.state().name(), "fsm stopped");
+    tracing::info!(
+        state = fsm.state().name(),
+        ticks = counts.ticks,
+        states = counts.states,
+        observations = counts.observations,
+        trajectories = counts.trajectories,
+        outcomes = counts.outcomes,
+        safety = counts.safety,
+        requests = counts.requests,
+        goals = counts.goals,
+        setpoints = counts.setpoints,
+        "fsm stopped"
+    );
+    tracing::info!(?exit, "fsm exiting");
     Ok(())
+}
+
+/// Messages taken in and published, logged when the process stops.
+#[derive(Debug, Default)]
+struct Counts {
+    /// Mission steps (one per tick or safety order).
+    ticks: u64,
+    /// Inputs: vehicle states, pad observations, trajectories, link outcomes, safety
+    /// orders.
+    states: u64,
+    observations: u64,
+    trajectories: u64,
+    outcomes: u64,
+    safety: u64,
+    /// Outputs: link requests, planner goals, setpoints.
+    requests: u64,
+    goals: u64,
+    setpoints: u64,
 }

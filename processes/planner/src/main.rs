@@ -67,7 +67,7 @@ fn run(args: &Args) -> Result<()> {
     // The newest map, copied out of shared memory so the publisher's slot is released.
     let mut map_header: Option<OccupancyMapHeader> = None;
     let mut cells: Vec<u8> = Vec::new();
-    let mut bad_maps = 0u64;
+    let mut counts = Counts::default();
     let mut last_beat = monotonic_ns();
     let beat_ns = ipc_cfg.heartbeat_period_ms * 1_000_000;
     tracing::info!("planner running");
@@ -81,21 +81,24 @@ fn run(args: &Args) -> Result<()> {
             {
                 if let Ok(Some(s)) = states.latest() {
                     let v = s.payload();
+                    counts.states += 1;
                     if let Some(st) = State::from_vehicle(v) {
                         vehicle = Some((st, v.msg));
                     }
                 }
                 if let Ok(Some(g)) = goals.latest() {
+                    counts.goals += 1;
                     goal = Some(*g.payload());
                 }
                 if let Ok(Some(m)) = maps.latest() {
                     let h = *m.user_header();
+                    counts.maps += 1;
                     if CellView::new(&h, m.payload()).is_some() {
                         cells.clear();
                         cells.extend_from_slice(m.payload());
                         map_header = Some(h);
                     } else {
-                        bad_maps += 1;
+                        counts.bad_maps += 1;
                     }
                 }
             }
@@ -114,8 +117,10 @@ fn run(args: &Args) -> Result<()> {
             // The library reads no clock: the step (in practice the plan) is timed here.
             let before = monotonic_ns();
             let out = node.step(now, state, goal.as_ref(), view.as_ref(), input);
+            counts.steps += 1;
             let step_ms = monotonic_ns().saturating_sub(before) as f64 * 1e-6;
             if let Some(t) = out.trajectory {
+                counts.trajectories += 1;
                 if let Err(e) = trajectories.send(t.msg, &t) {
                     failure = Some(anyhow::Error::from(e));
                     return false;
@@ -126,8 +131,10 @@ fn run(args: &Args) -> Result<()> {
             }
             if let Some(mut s) = out.stats {
                 s.planning_ms = step_ms;
+                counts.plans += 1;
                 if s.success == 0 {
-                    tracing::debug!(bad_maps, "plan failed");
+                    counts.failed += 1;
+                    tracing::debug!(bad_maps = counts.bad_maps, "plan failed");
                 }
                 if let Err(e) = stats_out.send(s.msg, &s) {
                     failure = Some(anyhow::Error::from(e));
@@ -140,6 +147,35 @@ fn run(args: &Args) -> Result<()> {
     if let Some(e) = failure {
         return Err(e);
     }
-    tracing::info!(?exit, "planner stopped");
+    tracing::info!(
+        steps = counts.steps,
+        states = counts.states,
+        goals = counts.goals,
+        maps = counts.maps,
+        bad_maps = counts.bad_maps,
+        plans = counts.plans,
+        failed = counts.failed,
+        trajectories = counts.trajectories,
+        "planner stopped"
+    );
+    tracing::info!(?exit, "planner exiting");
     Ok(())
+}
+
+/// What the process counts, logged when it stops.
+#[derive(Debug, Default)]
+struct Counts {
+    /// Decisions taken (one per wake with a vehicle state).
+    steps: u64,
+    /// Newest vehicle states, goals and maps taken in.
+    states: u64,
+    goals: u64,
+    maps: u64,
+    /// Maps whose header disagreed with their cells.
+    bad_maps: u64,
+    /// Planning calls, and those that failed.
+    plans: u64,
+    failed: u64,
+    /// Trajectories published (plans, stops, emergency stops).
+    trajectories: u64,
 }

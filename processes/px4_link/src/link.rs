@@ -489,7 +489,8 @@ impl Px4Link {
             match self.stream_since_ns {
                 Some(t) if now_ns.saturating_sub(t) >= s.offboard_stream_ns => {}
                 Some(_) => return, // wait for the stream to have run long enough
-                None if self.setpoint.is_some() => return,
+                // No fresh setpoint (none yet, or its sender stopped): PX4 would refuse
+                // OFFBOARD; say so now rather than hold every later request behind it.
                 None => {
                     self.queue.pop_front();
                     self.outcomes.push((next, Outcome::NoSetpointStream));

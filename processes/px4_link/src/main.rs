@@ -95,14 +95,16 @@ impl Transport {
         })
     }
 
-    /// Hands everything that arrived to `node`; the first wait may block briefly. `buf`
-    /// and `msgs` are the caller's, reused from call to call.
+    /// Hands everything that arrived to `node` and says how many messages that was; the
+    /// first wait may block briefly. `buf` and `msgs` are the caller's, reused from call
+    /// to call.
     fn receive(
         &mut self,
         node: &mut LinkNode,
         buf: &mut [u8],
         msgs: &mut Vec<(MavHeader, MavMessage)>,
-    ) -> Result<()> {
+    ) -> Result<u64> {
+        let mut delivered = 0u64;
         match self {
             Self::Udp { socket, peer } => {
                 loop {
@@ -112,6 +114,7 @@ impl Transport {
                             msgs.clear();
                             let errors = decode_datagram(buf.get(..n).unwrap_or(&[]), msgs);
                             deliver(node, errors, msgs);
+                            delivered += msgs.len() as u64;
                             socket.set_read_timeout(Some(Duration::from_micros(1)))?;
                         }
                         Err(e)
@@ -147,10 +150,10 @@ impl Transport {
                             Err(e) => tracing::debug!(error = %e, "serial port still unavailable"),
                         }
                     }
-                    return Ok(());
+                    return Ok(0);
                 };
                 let failure = match p.wait_readable(RECV_TIMEOUT) {
-                    Ok(Readiness::Nothing) => return Ok(()),
+                    Ok(Readiness::Nothing) => return Ok(0),
                     Ok(Readiness::HungUp) => Some("hung up".to_string()),
                     Ok(Readiness::Readable) => loop {
                         match p.read(buf) {
@@ -159,6 +162,7 @@ impl Transport {
                                 msgs.clear();
                                 let errors = decoder.push(buf.get(..n).unwrap_or(&[]), msgs);
                                 deliver(node, errors, msgs);
+                                delivered += msgs.len() as u64;
                             }
                             Err(e) if e.kind() == ErrorKind::WouldBlock => break None,
                             Err(e) if e.kind() == ErrorKind::Interrupted => {}
@@ -174,7 +178,7 @@ impl Transport {
                 }
             }
         }
-        Ok(())
+        Ok(delivered)
     }
 
     fn send(&mut self, frame: &[u8]) {
@@ -242,36 +246,72 @@ fn run(args: &Args) -> Result<()> {
     let mut node = LinkNode::new(cfg.settings());
     let (mut buf, mut frame, mut msgs) = (vec![0u8; 65_536], Vec::new(), Vec::new());
     let mut last_beat = 0u64;
+    let mut counts = Counts::default();
+    let mut last_link = None;
     tracing::info!(link = %cfg.link, "px4-link running");
     while !ipc.shutdown_requested() {
-        transport.receive(&mut node, &mut buf, &mut msgs)?;
+        counts.received += transport.receive(&mut node, &mut buf, &mut msgs)?;
         let now = monotonic_ns();
         while let Ok(Some(s)) = setpoints.receive() {
+            counts.setpoints += 1;
             node.on_setpoint(now, s.payload());
         }
         while let Ok(Some(r)) = requests.receive() {
+            counts.requests += 1;
             node.on_request(now, r.payload());
         }
         while let Ok(Some(c)) = safety.receive() {
+            counts.safety += 1;
             node.on_safety(now, c.payload());
         }
         node.send_due(now, |header, m| {
             frame.clear();
             encode(&mut frame, header, m)?;
             transport.send(&frame);
+            counts.sent += 1;
             anyhow::Ok(())
         })?;
         for o in node.take_outcomes() {
             outcomes.send(o.msg, &o)?;
+            counts.outcomes += 1;
         }
         if let Some(state) = node.vehicle_state(now) {
             states.send(state.msg, &state)?;
+            counts.states += 1;
+            last_link = Some(state.link);
         }
         if now.saturating_sub(last_beat) >= beat_ns {
             last_beat = now;
             heartbeat.beat()?;
         }
     }
-    tracing::info!("px4-link stopped");
+    let link = last_link.unwrap_or_default();
+    tracing::info!(
+        received = counts.received,
+        sent = counts.sent,
+        parse_errors = link.parse_errors,
+        messages_lost = link.messages_lost,
+        states = counts.states,
+        outcomes = counts.outcomes,
+        setpoints = counts.setpoints,
+        requests = counts.requests,
+        safety = counts.safety,
+        "px4-link stopped"
+    );
     Ok(())
+}
+
+/// What went through the process, logged when it stops.
+#[derive(Debug, Default)]
+struct Counts {
+    /// MAVLink messages decoded from the autopilot, and sent to it.
+    received: u64,
+    sent: u64,
+    /// Published: vehicle states, request outcomes.
+    states: u64,
+    outcomes: u64,
+    /// Taken in: setpoints, requests, safety orders.
+    setpoints: u64,
+    requests: u64,
+    safety: u64,
 }

@@ -133,6 +133,35 @@ fn outcomes_carry_the_ids_of_their_requests_in_order() {
 }
 
 #[test]
+fn an_offboard_request_behind_a_stale_setpoint_is_answered_and_does_not_block_the_queue() {
+    // The fsm that asked was stopped (or restarted) mid-request: its last setpoint ages
+    // out, and the next fsm's requests must still be served.
+    let settings = LinkSettings::default();
+    let mut node = LinkNode::new(settings);
+    node.on_message(0, &PX4, &heartbeat());
+    node.on_setpoint(0, &Setpoint::default());
+    node.on_request(0, &request(1, LinkRequestKind::Offboard as u32));
+    let later = settings.setpoint_max_age_ns + 1;
+    node.on_message(later, &PX4, &heartbeat());
+    node.on_request(later, &request(2, LinkRequestKind::Arm as u32));
+    let sent: Vec<MavCmd> = [later, later + 1]
+        .iter()
+        .flat_map(|t| commands(node.poll(*t)))
+        .collect();
+    assert_eq!(
+        sent,
+        vec![MavCmd::MAV_CMD_COMPONENT_ARM_DISARM],
+        "the arm request goes out"
+    );
+    let got = node.take_outcomes();
+    assert_eq!(got.len(), 1);
+    assert_eq!(
+        (got[0].id, got[0].outcome),
+        (1, LinkOutcomeKind::NoSetpointStream as u32)
+    );
+}
+
+#[test]
 fn a_safety_land_cancels_every_queued_request_and_sends_nav_land_on_the_next_poll() {
     let mut node = LinkNode::new(LinkSettings::default());
     node.on_message(0, &PX4, &heartbeat());

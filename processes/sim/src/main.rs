@@ -117,6 +117,7 @@ fn run(args: &Args) -> Result<()> {
     let mut pending_camera: Option<(SliceSample<u8, CameraFrameHeader>, u64)> = None;
     let mut pending_depth: Option<(SliceSample<u16, DepthFrameHeader>, u64)> = None;
     let mut dropped: u64 = 0;
+    let (mut camera_sent, mut depth_sent, mut truth_events) = (0u64, 0u64, 0u64);
     tracing::info!(
         scenario = %scenario.scenario.name,
         seed,
@@ -138,12 +139,13 @@ fn run(args: &Args) -> Result<()> {
                     failure = Some(e);
                     return false;
                 }
+                truth_events += 1;
             }
             let now = monotonic_ns();
             // Frames whose latency has passed go out first; one still pending when the next
             // is due goes out now, in order, rather than being overwritten.
-            release(&mut pending_camera, &mut camera, now, report.camera_due);
-            release(&mut pending_depth, &mut depth, now, report.depth_due);
+            camera_sent += u64::from(release(&mut pending_camera, &mut camera, now, report.camera_due));
+            depth_sent += u64::from(release(&mut pending_depth, &mut depth, now, report.depth_due));
             if report.camera_due
                 && let Some((width, height, format, exposure_ns)) = cam_geometry
             {
@@ -224,6 +226,15 @@ fn run(args: &Args) -> Result<()> {
             "frames dropped because consumers held every sample"
         );
     }
+    tracing::info!(
+        steps,
+        sim_time_s = vehicle.simulator().time_ns() as f64 * 1e-9,
+        camera_frames = camera_sent,
+        depth_frames = depth_sent,
+        dropped,
+        truth_events,
+        "sim stopped"
+    );
     if let Some(e) = failure {
         return Err(e).context("publishing");
     }
@@ -232,24 +243,30 @@ fn run(args: &Args) -> Result<()> {
 
 /// Sends a held frame once its sensor latency has passed, or at once when `force` (the
 /// next frame is due: frames go out in order, never overwritten). The sensor stage spans
-/// capture to publication.
+/// capture to publication. Returns whether a frame went out.
 fn release<T, H>(
     pending: &mut Option<(SliceSample<T, H>, u64)>,
     publisher: &mut SlicePublisher<T, H>,
     now: u64,
     force: bool,
-) where
+) -> bool
+where
     T: std::fmt::Debug + ipc_types::iceoryx2::prelude::ZeroCopySend + Copy + 'static,
     H: MessageHeader,
 {
     if !pending.as_ref().is_some_and(|(_, at)| now >= *at || force) {
-        return;
+        return false;
     }
-    if let Some((mut sample, _)) = pending.take() {
-        let msg = sample.user_header_mut().msg_mut();
-        msg.push_stage(Stage::Sensor, msg.capture_ns, monotonic_ns());
-        if let Err(e) = publisher.send(sample) {
+    let Some((mut sample, _)) = pending.take() else {
+        return false;
+    };
+    let msg = sample.user_header_mut().msg_mut();
+    msg.push_stage(Stage::Sensor, msg.capture_ns, monotonic_ns());
+    match publisher.send(sample) {
+        Ok(_) => true,
+        Err(e) => {
             tracing::warn!(error = %e, service = publisher.service(), "frame not sent");
+            false
         }
     }
 }
