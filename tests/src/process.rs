@@ -110,6 +110,11 @@ impl Running {
         }
     }
 
+    /// The process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
     /// Sends SIGTERM (a systemd stop) without waiting.
     pub fn request_stop(&self) {
         // SAFETY: signalling our own child, whose pid stays valid until it is waited for.
@@ -152,4 +157,23 @@ pub fn strip_ansi(s: &str) -> String {
 /// [`crate::stack::stack_binary`]).
 pub fn sim_binary() -> PathBuf {
     crate::stack::stack_binary("sim")
+}
+
+/// How many iceoryx2 nodes under `ipc`'s prefix are alive and how many died without
+/// cleaning up (a process that crashed, or exited without dropping its node).
+pub fn node_census(ipc: &ipc_types::runtime::Ipc) -> (usize, usize) {
+    use iceoryx2::prelude::{CallbackProgression, Node, NodeState};
+    let (mut alive, mut dead) = (0, 0);
+    let listed = Node::<ipc_types::runtime::ipc::Svc>::list(ipc.node().config(), |state| {
+        match state {
+            NodeState::Alive(_) => alive += 1,
+            NodeState::Dead(_) => dead += 1,
+            _ => {}
+        }
+        CallbackProgression::Continue
+    });
+    if let Err(e) = listed {
+        panic!("listing iceoryx2 nodes: {e:?}");
+    }
+    (alive, dead)
 }

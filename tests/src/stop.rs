@@ -121,3 +121,16 @@ pub fn stop(mut process: Running) -> Stopped {
         took: asked.elapsed(),
     }
 }
+
+/// True once process `pid` catches SIGTERM (its handler is installed: the process has
+/// reached `main`), from the `SigCgt` mask in /proc/PID/status.
+pub fn catches_sigterm(pid: u32) -> bool {
+    let Ok(status) = std::fs::read_to_string(format!("/proc/{pid}/status")) else {
+        return false;
+    };
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("SigCgt:"))
+        .and_then(|mask| u64::from_str_radix(mask.trim(), 16).ok())
+        .is_some_and(|mask| mask & (1 << (libc::SIGTERM - 1)) != 0)
+}

@@ -17,8 +17,8 @@ use ipc_types::msg::{CameraFrameHeader, DepthFrameHeader, OccupancyMapHeader, Ve
 use ipc_types::runtime::{Ipc, IpcPrefix};
 use ipc_types::services;
 use landing_tests::process::Running;
-use landing_tests::stack::{Stack, deploy_dir, stack_binary};
-use landing_tests::stop::{BusyLoops, Moments, count_in, last_line_with, stop};
+use landing_tests::stack::{STAGES, Stack, deploy_dir, stack_binary};
+use landing_tests::stop::{BusyLoops, Moments, catches_sigterm, count_in, last_line_with, stop};
 
 /// Stops per binary.
 const TRIALS: usize = 30;
@@ -400,4 +400,48 @@ fn px4_link_talking_to_the_simulator_exits_0_at_every_stop_under_load() {
     });
     assert!(received > 0, "px4-link decoded no MAVLink in {TRIALS} runs");
     stop_the_rest(stack);
+}
+
+#[test]
+fn every_process_stopped_while_it_starts_exits_0() {
+    // A stop that arrives once `main` runs (its handler is in place) but before the
+    // process is set up is kept and honoured when its loop starts, never fatal.
+    let _turn = TURN.lock().unwrap_or_else(PoisonError::into_inner);
+    let stack = Stack::new(SCENARIO, SIM_DURATION_S);
+    let mut moments = Moments::new();
+    eprintln!("start-up stops from seed {}", moments.seed());
+    for name in STAGES {
+        let summary = if name == "sim" {
+            "sim stopped".to_string()
+        } else {
+            format!("{name} stopped")
+        };
+        for round in 1..=5 {
+            let process = Running::start(name, &mut stack.command(name));
+            let waiting = Instant::now();
+            while !catches_sigterm(process.pid()) {
+                assert!(
+                    waiting.elapsed() < Duration::from_secs(20),
+                    "{name} never installed its SIGTERM handler:\n{}",
+                    process.log()
+                );
+                std::thread::sleep(Duration::from_micros(200));
+            }
+            let delay = moments.up_to(Duration::from_millis(50));
+            std::thread::sleep(delay);
+            let s = stop(process);
+            assert!(
+                s.status.success(),
+                "{name}, round {round}, SIGTERM {} us after its handler: {}:\n{}",
+                delay.as_micros(),
+                s.status,
+                s.log
+            );
+            assert!(
+                last_line_with(&s.log, &summary).is_some(),
+                "{name}: no `{summary}` line:\n{}",
+                s.log
+            );
+        }
+    }
 }

@@ -543,3 +543,72 @@ fn a_camera_that_stops_delivering_is_reopened_and_the_process_keeps_heartbeating
     assert!(log.contains("camera lost; reopening"), "{log}");
     assert!(summary_count(&log, "source_errors") >= 2, "{log}");
 }
+
+#[test]
+fn a_capture_thread_blocked_in_a_read_ends_the_process_with_its_exit_code_not_a_crash() {
+    // One image of the directory becomes a FIFO nobody writes: cv::imread blocks in it,
+    // inside OpenCV, as a camera read blocked in its driver would.
+    let dir = TempDir::new("stuck");
+    for k in 0..2 {
+        write_pgm(&dir.0.join(format!("frame_{k}.pgm")), WIDTH, HEIGHT, k * 10);
+    }
+    let prefix = IpcPrefix::unique("ingeststuck");
+    let ipc = Ipc::open("ingest-test", &prefix).unwrap();
+    let source = format!("file:{}", dir.0.display());
+    let mut ingest = start_ingest(&prefix, &["--source", &source, "--rate-hz", "20", "--loop"]);
+    ingest.wait_for("camera-ingest running", Duration::from_secs(30));
+    let (seen, _) = collect(&ipc, Duration::from_millis(200), false, &ingest);
+    assert!(!seen.is_empty());
+    let fifo = dir.0.join("fifo");
+    let c_path = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    // SAFETY: a valid NUL-terminated path; mkfifo has no other preconditions.
+    assert_eq!(unsafe { libc::mkfifo(c_path.as_ptr(), 0o600) }, 0);
+    std::fs::rename(&fifo, dir.0.join("frame_1.pgm")).unwrap();
+    // Wait for the thread to reach it: frames stop coming.
+    let frames = ipc
+        .slice_subscriber::<u8, CameraFrameHeader>(services::CAMERA_FRAME)
+        .unwrap();
+    let start = Instant::now();
+    loop {
+        std::thread::sleep(Duration::from_millis(300));
+        let mut arrived = 0;
+        while frames.receive().unwrap().is_some() {
+            arrived += 1;
+        }
+        if arrived == 0 {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "the capture thread never blocked"
+        );
+    }
+
+    let asked = Instant::now();
+    let status = ingest.terminate();
+    let took = asked.elapsed();
+    let log = ingest.log();
+    assert_eq!(
+        status.code(),
+        Some(80),
+        "exit code of the capture thread:\n{log}"
+    );
+    assert!(
+        took < Duration::from_secs(5),
+        "a bounded wait, not a hang: {took:?}"
+    );
+    assert!(
+        log.contains("error: the capture thread did not stop within 2000 ms; exiting with code 80"),
+        "{log}"
+    );
+    assert!(
+        summary_count(&log, "published") >= seen.len() as u64,
+        "final counters logged"
+    );
+    let (alive, dead) = landing_tests::process::node_census(&ipc);
+    assert_eq!(
+        (alive, dead),
+        (1, 0),
+        "only the test's node is left, none dead"
+    );
+}
