@@ -49,10 +49,13 @@ fn states<'a>(ipc: &Ipc, airborne_only: bool) -> Watch<'a> {
     })
 }
 
-fn frames<'a>(ipc: &Ipc, service: &str) -> Watch<'a> {
-    let sub = ipc
-        .slice_subscriber::<u8, CameraFrameHeader>(service)
-        .unwrap();
+/// Any sample of the slice service `service` (frames, depth frames, maps).
+fn slices<'a, T, H>(ipc: &Ipc, service: &str) -> Watch<'a>
+where
+    T: std::fmt::Debug + ipc_types::iceoryx2::prelude::ZeroCopySend + Copy + 'static,
+    H: ipc_types::runtime::MessageHeader,
+{
+    let sub = ipc.slice_subscriber::<T, H>(service).unwrap();
     Box::new(move || {
         let mut hit = false;
         while sub.receive().unwrap().is_some() {
@@ -60,32 +63,18 @@ fn frames<'a>(ipc: &Ipc, service: &str) -> Watch<'a> {
         }
         hit
     })
+}
+
+fn frames<'a>(ipc: &Ipc, service: &str) -> Watch<'a> {
+    slices::<u8, CameraFrameHeader>(ipc, service)
 }
 
 fn depth_frames<'a>(ipc: &Ipc) -> Watch<'a> {
-    let sub = ipc
-        .slice_subscriber::<u16, DepthFrameHeader>(services::SIM_DEPTH)
-        .unwrap();
-    Box::new(move || {
-        let mut hit = false;
-        while sub.receive().unwrap().is_some() {
-            hit = true;
-        }
-        hit
-    })
+    slices::<u16, DepthFrameHeader>(ipc, services::SIM_DEPTH)
 }
 
 fn maps<'a>(ipc: &Ipc) -> Watch<'a> {
-    let sub = ipc
-        .slice_subscriber::<u8, OccupancyMapHeader>(services::MAP_OCCUPANCY)
-        .unwrap();
-    Box::new(move || {
-        let mut hit = false;
-        while sub.receive().unwrap().is_some() {
-            hit = true;
-        }
-        hit
-    })
+    slices::<u8, OccupancyMapHeader>(ipc, services::MAP_OCCUPANCY)
 }
 
 /// The binary under test: its summary line and the counter in it that shows it worked.
