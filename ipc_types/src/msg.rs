@@ -872,6 +872,10 @@ pub enum LinkOutcomeKind {
     NoSetpointStream = 4,
     /// px4-link could not read the request.
     Invalid = 5,
+    /// A take-off was asked but the autopilot has reported no altitude above mean sea
+    /// level (no HOME_POSITION nor GLOBAL_POSITION_INT: no global position), so no
+    /// NAV_TAKEOFF altitude PX4 reads correctly can be given; nothing was sent.
+    NoAltitudeReference = 6,
 }
 
 impl LinkOutcomeKind {
@@ -883,6 +887,7 @@ impl LinkOutcomeKind {
             2 => Self::Rejected,
             3 => Self::TimedOut,
             4 => Self::NoSetpointStream,
+            6 => Self::NoAltitudeReference,
             _ => Self::Invalid,
         }
     }

@@ -91,9 +91,15 @@ def fly(port):
         fail(what)
 
     stream = None
+    # NAV_TAKEOFF's param7 is an altitude above mean sea level (PX4's takeoff.cpp):
+    # the home altitude plus 2 m, as a ground station computes it.
+    home = m.recv_match(type="HOME_POSITION", blocking=True, timeout=5)
+    if home is None:
+        fail("no HOME_POSITION")
+    home_amsl = home.altitude / 1000.0
     if command(mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) != 0:
         fail("arming refused")
-    if command(mavutil.mavlink.MAV_CMD_NAV_TAKEOFF, p7=2.0) != 0:
+    if command(mavutil.mavlink.MAV_CMD_NAV_TAKEOFF, p7=home_amsl + 2.0) != 0:
         fail("takeoff refused")
     wait_mode("TAKEOFF", 5)
     wait_position(lambda p: p.z < -1.8, 15, "did not climb to 2 m")

@@ -21,8 +21,10 @@ pub struct FsmConfig {
     pub search_after_s: f64,
     /// WaitForPad: climb at most this much above the preset point, m.
     pub search_climb_m: f64,
-    /// Highest take-off altitude asked of AUTO.TAKEOFF; the planner flies the rest, m.
+    /// Highest take-off altitude, climbed to in OFFBOARD; the planner flies the rest, m.
     pub takeoff_altitude_m: f64,
+    /// Take-off climb speed of the setpoint ramp, m/s (PX4's MPC_TKO_SPEED is 1.5).
+    pub takeoff_climb_m_s: f64,
     /// Highest tracking height above the pad, m.
     pub track_height_max_m: f64,
     /// Closer than this (horizontally) the vehicle flies pad-relative setpoints instead
@@ -105,6 +107,7 @@ impl Default for FsmConfig {
             search_after_s: 2.0,
             search_climb_m: 1.5,
             takeoff_altitude_m: 2.0,
+            takeoff_climb_m_s: 1.0,
             track_height_max_m: 3.0,
             direct_range_m: 1.5,
             approach_speed_m_s: 2.0,
@@ -229,6 +232,7 @@ impl Validate for FsmConfig {
             ("search_after_s", self.search_after_s, 0.0, 600.0),
             ("search_climb_m", self.search_climb_m, 0.0, 50.0),
             ("takeoff_altitude_m", self.takeoff_altitude_m, 0.3, 50.0),
+            ("takeoff_climb_m_s", self.takeoff_climb_m_s, 0.1, 5.0),
             ("track_height_max_m", self.track_height_max_m, 0.3, 50.0),
             ("direct_range_m", self.direct_range_m, 0.2, 20.0),
             ("approach_speed_m_s", self.approach_speed_m_s, 0.1, 30.0),

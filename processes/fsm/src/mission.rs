@@ -40,13 +40,17 @@ pub struct Outputs {
     pub status: Option<FsmStatus>,
 }
 
-/// Steps inside Takeoff.
+/// Steps inside Takeoff: a climb in OFFBOARD, which needs no global position (a GPS-less
+/// PX4 cannot fly AUTO.TAKEOFF safely; docs/fsm.md, "Take-off").
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum TakeoffStep {
-    Arming,
-    TakingOff,
-    Climbing,
+    /// Stream a hold at the ground position and ask for OFFBOARD (PX4 accepts it
+    /// disarmed).
     EnteringOffboard,
+    /// Arm in OFFBOARD.
+    Arming,
+    /// The setpoint climbs from the ground at `takeoff_climb_m_s`, from `since_ns`.
+    Climbing { since_ns: u64 },
 }
 
 /// One autopilot request in flight, with its retries.
@@ -128,7 +132,7 @@ impl Fsm {
             filter,
             vehicle: None,
             trajectory: None,
-            takeoff: TakeoffStep::Arming,
+            takeoff: TakeoffStep::EnteringOffboard,
             pending: None,
             next_request_id: 1,
             streaming: false,
@@ -357,8 +361,9 @@ impl Fsm {
                 self.pending = None;
             }
             MissionState::Takeoff => {
-                self.takeoff = TakeoffStep::Arming;
+                self.takeoff = TakeoffStep::EnteringOffboard;
                 self.pending = None;
+                self.streaming = false;
             }
             _ => {}
         }
@@ -404,7 +409,8 @@ impl Fsm {
         }
         // Once in OFFBOARD, another mode shown for a while means the pilot or a PX4
         // failsafe took over: the mission yields instead of fighting it.
-        let in_offboard_phase = self.state != MissionState::Takeoff;
+        let in_offboard_phase =
+            self.state != MissionState::Takeoff || self.takeoff != TakeoffStep::EnteringOffboard;
         if in_offboard_phase {
             let mode = self
                 .vehicle()
@@ -525,41 +531,55 @@ impl Fsm {
             );
             return;
         }
+        if !self.streaming {
+            // The ground position: held while OFFBOARD is asked for and the motors arm.
+            let (Some(p), Some(v)) = (self.position(), self.vehicle().copied()) else {
+                return;
+            };
+            self.hold = p;
+            self.yaw_sp = yaw_of(&v.world_from_body.rotation_xyzw);
+            self.streaming = true;
+        }
         let alt = self.takeoff_altitude();
         match self.takeoff {
-            TakeoffStep::Arming => match self.drive(now_ns, LinkRequestKind::Arm, 0.0, out) {
-                Drive::Accepted => self.takeoff = TakeoffStep::TakingOff,
-                Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),
-                Drive::Waiting => {}
-            },
-            TakeoffStep::TakingOff => {
-                match self.drive(now_ns, LinkRequestKind::Takeoff, alt, out) {
-                    Drive::Accepted => self.takeoff = TakeoffStep::Climbing,
-                    Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),
-                    Drive::Waiting => {}
-                }
-            }
-            TakeoffStep::Climbing => {
-                let (Some(p), Some(v)) = (self.position(), self.vehicle().copied()) else {
-                    return;
-                };
-                let up = LandedState::from_raw(v.landed_state) == LandedState::InAir;
-                if p.z >= alt - 0.15 && up {
-                    self.hold = Vector3::new(p.x, p.y, alt);
-                    self.yaw_sp = yaw_of(&v.world_from_body.rotation_xyzw);
-                    self.streaming = true;
-                    self.takeoff = TakeoffStep::EnteringOffboard;
-                }
-            }
             TakeoffStep::EnteringOffboard => {
                 out.setpoint = Some(self.hold_setpoint(now_ns, self.hold));
                 match self.drive(now_ns, LinkRequestKind::Offboard, 0.0, out) {
                     Drive::Accepted => {
                         self.mode_lost_since = None;
-                        self.enter_preset(now_ns, "OFFBOARD entered".into());
+                        self.takeoff = TakeoffStep::Arming;
                     }
                     Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),
                     Drive::Waiting => {}
+                }
+            }
+            TakeoffStep::Arming => {
+                out.setpoint = Some(self.hold_setpoint(now_ns, self.hold));
+                match self.drive(now_ns, LinkRequestKind::Arm, 0.0, out) {
+                    Drive::Accepted => self.takeoff = TakeoffStep::Climbing { since_ns: now_ns },
+                    Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),
+                    Drive::Waiting => {}
+                }
+            }
+            TakeoffStep::Climbing { since_ns } => {
+                let t = now_ns.saturating_sub(since_ns) as f64 * 1e-9;
+                let rate = self.cfg.takeoff_climb_m_s;
+                let z = (self.hold.z + rate * t).min(alt.max(self.hold.z));
+                let vz = if z < alt { rate } else { 0.0 };
+                let target = Vector3::new(self.hold.x, self.hold.y, z);
+                out.setpoint = Some(self.setpoint(
+                    now_ns,
+                    target,
+                    Vector3::new(0.0, 0.0, vz),
+                    Vector3::zeros(),
+                ));
+                let (Some(p), Some(v)) = (self.position(), self.vehicle().copied()) else {
+                    return;
+                };
+                let up = LandedState::from_raw(v.landed_state) == LandedState::InAir;
+                if p.z >= alt - 0.15 && up {
+                    self.hold = Vector3::new(self.hold.x, self.hold.y, alt);
+                    self.enter_preset(now_ns, "takeoff altitude reached".into());
                 }
             }
         }

@@ -431,14 +431,32 @@ fn arming_rejected_once_is_retried_and_the_mission_goes_on() {
 }
 
 #[test]
-fn offboard_rejected_lands_in_place() {
+fn offboard_rejected_on_the_ground_ends_the_mission_without_arming() {
+    // The take-off climbs in OFFBOARD, asked for on the ground before arming.
     let mut w = World::new(config());
     w.answer(LinkRequestKind::Offboard, Answer::Reject);
     w.expect(MissionState::SafeLand, 30.0);
     assert_eq!(w.count(LinkRequestKind::Offboard), 3);
     w.run_for(10.0);
-    assert_eq!(w.count(LinkRequestKind::Land), 1, "{:?}", w.requests);
-    assert!(!w.armed && w.on_ground(), "landed in place: {:?}", w.pos);
+    assert_eq!(w.count(LinkRequestKind::Arm), 0, "{:?}", w.requests);
+    assert_eq!(w.count(LinkRequestKind::Land), 0, "{:?}", w.requests);
+    assert!(
+        !w.armed && w.on_ground(),
+        "still on the ground: {:?}",
+        w.pos
+    );
+}
+
+#[test]
+fn the_take_off_streams_a_ground_hold_asks_offboard_then_arms_and_climbs() {
+    let mut w = World::new(config());
+    w.expect(MissionState::GoToPreset, 20.0);
+    assert_eq!(
+        w.requests,
+        vec![LinkRequestKind::Offboard, LinkRequestKind::Arm],
+        "no AUTO.TAKEOFF: it needs a global position a GPS-less PX4 lacks"
+    );
+    assert!(w.pos.z > 1.5, "climbed: {:?}", w.pos);
 }
 
 #[test]

@@ -25,7 +25,8 @@ pub enum Request {
     Arm,
     /// Disarm (refused by PX4 in flight).
     Disarm,
-    /// AUTO.TAKEOFF to this height above the take-off point, m.
+    /// AUTO.TAKEOFF to this world height (local frame, z up), m; sent as an altitude
+    /// above mean sea level (PX4's reading of NAV_TAKEOFF param7).
     Takeoff {
         /// Height, m.
         altitude_m: f32,
@@ -50,6 +51,8 @@ pub enum Outcome {
     TimedOut,
     /// OFFBOARD asked but the setpoint stream stopped before it could be sent.
     NoSetpointStream,
+    /// A take-off without an altitude reference (no global position): not sent.
+    NoAltitudeReference,
 }
 
 /// Timing and identity of the link.
@@ -68,8 +71,9 @@ pub struct LinkSettings {
     /// A setpoint older than this is not streamed (the mission stopped): PX4's
     /// offboard-loss failsafe must then act, not a stale setpoint, ns.
     pub setpoint_max_age_ns: u64,
-    /// OFFBOARD is asked only after the stream has run this long, ns (PX4 refuses it
-    /// without a prior stream).
+    /// OFFBOARD is asked only after the stream has run this long, ns. PX4 needs one
+    /// setpoint younger than COM_OF_LOSS_T (offboardCheck.cpp); a few in a row make
+    /// sure one arrived on a lossy link.
     pub offboard_stream_ns: u64,
     /// Wait for a COMMAND_ACK this long before resending, ns.
     pub command_timeout_ns: u64,
@@ -92,7 +96,7 @@ impl Default for LinkSettings {
             heartbeat_period_ns: 1_000_000_000,
             setpoint_period_ns: 40_000_000,
             setpoint_max_age_ns: 300_000_000,
-            offboard_stream_ns: 1_000_000_000,
+            offboard_stream_ns: 300_000_000,
             command_timeout_ns: 500_000_000,
             command_attempts: 4,
             heartbeat_timeout_ns: 1_500_000_000,
@@ -122,6 +126,11 @@ struct Telemetry {
     last_telemetry_ns: u64,
     last_seq: Option<u8>,
     lost: u64,
+    /// AMSL altitude of the local frame's origin from HOME_POSITION (home altitude
+    /// plus its NED z), m.
+    origin_amsl_from_home: Option<f64>,
+    /// The latest GLOBAL_POSITION_INT altitude above mean sea level, m.
+    global_alt_amsl: Option<f64>,
 }
 
 /// What the link knows of the autopilot.
@@ -274,6 +283,15 @@ impl Px4Link {
                 }
             }
             MavMessage::EXTENDED_SYS_STATE(s) => self.telemetry.landed = Some(s.landed_state),
+            MavMessage::HOME_POSITION(h) => {
+                let origin = f64::from(h.altitude) * 1e-3 + f64::from(h.z);
+                if origin.is_finite() {
+                    self.telemetry.origin_amsl_from_home = Some(origin);
+                }
+            }
+            MavMessage::GLOBAL_POSITION_INT(g) => {
+                self.telemetry.global_alt_amsl = Some(f64::from(g.alt) * 1e-3);
+            }
             MavMessage::COMMAND_ACK(ack) => self.on_ack(ack.command, ack.result),
             _ => {}
         }
@@ -299,6 +317,17 @@ impl Px4Link {
         };
         self.outcomes.push((p.request, outcome));
         self.pending = None;
+    }
+
+    /// The altitude above mean sea level of the local frame's origin (world z = 0), m:
+    /// from HOME_POSITION (exact: altitude and local z of one point), else from the
+    /// latest GLOBAL_POSITION_INT and local position; None without a global position.
+    pub fn origin_amsl(&self) -> Option<f64> {
+        self.telemetry.origin_amsl_from_home.or_else(|| {
+            let alt = self.telemetry.global_alt_amsl?;
+            let (p, _) = self.telemetry.position?;
+            Some(alt - p.z)
+        })
     }
 
     /// What the link knows now.
@@ -485,6 +514,14 @@ impl Px4Link {
         let Some(&next) = self.queue.front() else {
             return;
         };
+        let origin = self.origin_amsl();
+        if matches!(next, Request::Takeoff { .. }) && origin.is_none() {
+            // PX4 reads param7 as AMSL; without a global position a GPS-less PX4 flies
+            // NAV_TAKEOFF towards its local origin, so nothing is sent.
+            self.queue.pop_front();
+            self.outcomes.push((next, Outcome::NoAltitudeReference));
+            return;
+        }
         if next == Request::Offboard {
             match self.stream_since_ns {
                 Some(t) if now_ns.saturating_sub(t) >= s.offboard_stream_ns => {}
@@ -505,9 +542,19 @@ impl Px4Link {
                 [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
             ),
             Request::Disarm => (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]),
+            // param7 is the target altitude above mean sea level (takeoff.cpp); the
+            // request's altitude is a world (local) height.
             Request::Takeoff { altitude_m } => (
                 MavCmd::MAV_CMD_NAV_TAKEOFF,
-                [f32::NAN, 0.0, 0.0, f32::NAN, f32::NAN, f32::NAN, altitude_m],
+                [
+                    f32::NAN,
+                    0.0,
+                    0.0,
+                    f32::NAN,
+                    f32::NAN,
+                    f32::NAN,
+                    (origin.unwrap_or(f64::NAN) + f64::from(altitude_m)) as f32,
+                ],
             ),
             Request::Offboard => (
                 MavCmd::MAV_CMD_DO_SET_MODE,

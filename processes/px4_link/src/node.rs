@@ -200,6 +200,7 @@ impl LinkNode {
                 Outcome::Rejected(r) => (LinkOutcomeKind::Rejected, r as u32),
                 Outcome::TimedOut => (LinkOutcomeKind::TimedOut, 0),
                 Outcome::NoSetpointStream => (LinkOutcomeKind::NoSetpointStream, 0),
+                Outcome::NoAltitudeReference => (LinkOutcomeKind::NoAltitudeReference, 0),
             };
             if code != LinkOutcomeKind::Accepted {
                 tracing::info!(id, ?request, ?o, "request not accepted");

@@ -2,8 +2,9 @@
 
 use ipc_types::msg::{LinkOutcomeKind, Text};
 use mavlink::dialects::common::{
-    ATTITUDE_QUATERNION_DATA, COMMAND_ACK_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA,
-    MavAutopilot, MavCmd, MavModeFlag, MavState, MavType,
+    ATTITUDE_QUATERNION_DATA, COMMAND_ACK_DATA, GLOBAL_POSITION_INT_DATA, HEARTBEAT_DATA,
+    HOME_POSITION_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavCmd, MavModeFlag, MavState,
+    MavType,
 };
 
 use super::*;
@@ -56,6 +57,23 @@ fn heartbeat() -> MavMessage {
     })
 }
 
+/// HOME_POSITION: home at `alt_amsl` m, `up` m above the local origin.
+fn home(alt_amsl: f64, up: f64) -> MavMessage {
+    MavMessage::HOME_POSITION(HOME_POSITION_DATA {
+        altitude: (alt_amsl * 1e3).round() as i32,
+        z: -up as f32,
+        ..Default::default()
+    })
+}
+
+/// The param7 of the NAV_TAKEOFF among `msgs`.
+fn takeoff_param7(msgs: &[MavMessage]) -> Option<f32> {
+    msgs.iter().find_map(|m| match m {
+        MavMessage::COMMAND_LONG(c) if c.command == MavCmd::MAV_CMD_NAV_TAKEOFF => Some(c.param7),
+        _ => None,
+    })
+}
+
 fn telemetry(node: &mut LinkNode, now_ns: u64) {
     node.on_message(
         now_ns,
@@ -92,6 +110,7 @@ fn an_unreadable_request_is_answered_invalid_with_its_id_at_once() {
 fn outcomes_carry_the_ids_of_their_requests_in_order() {
     let mut node = LinkNode::new(LinkSettings::default());
     node.on_message(0, &PX4, &heartbeat());
+    node.on_message(0, &PX4, &home(489.4, 0.0));
     node.on_request(0, &request(41, LinkRequestKind::Arm as u32));
     node.on_request(0, &request(42, LinkRequestKind::Takeoff as u32));
     assert_eq!(
@@ -129,6 +148,53 @@ fn outcomes_carry_the_ids_of_their_requests_in_order() {
             LinkOutcomeKind::Rejected as u32,
             MavResult::MAV_RESULT_DENIED as u32
         )
+    );
+}
+
+#[test]
+fn the_takeoff_altitude_is_sent_above_mean_sea_level_from_the_home_position() {
+    // PX4 reads NAV_TAKEOFF param7 as AMSL; the request's 2 m are a world height.
+    for (h0, up) in [(488.0, 0.0), (0.0, 0.0), (-10.0, 0.0), (488.0, 0.6)] {
+        let mut node = LinkNode::new(LinkSettings::default());
+        node.on_message(0, &PX4, &heartbeat());
+        node.on_message(0, &PX4, &home(h0 + up, up));
+        node.on_request(0, &request(1, LinkRequestKind::Takeoff as u32));
+        let p7 = takeoff_param7(node.poll(1)).expect("NAV_TAKEOFF sent");
+        assert!((f64::from(p7) - (h0 + 2.0)).abs() < 1e-3, "home {h0}: {p7}");
+    }
+}
+
+#[test]
+fn without_home_the_global_position_gives_the_takeoff_altitude() {
+    let mut node = LinkNode::new(LinkSettings::default());
+    node.on_message(0, &PX4, &heartbeat());
+    telemetry(&mut node, 0); // local z 0
+    node.on_message(
+        0,
+        &PX4,
+        &MavMessage::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+            alt: 488_300,
+            ..Default::default()
+        }),
+    );
+    node.on_request(0, &request(1, LinkRequestKind::Takeoff as u32));
+    let p7 = takeoff_param7(node.poll(1)).expect("NAV_TAKEOFF sent");
+    assert!((p7 - 490.3).abs() < 1e-3, "{p7}");
+}
+
+#[test]
+fn a_takeoff_without_any_altitude_reference_is_not_sent() {
+    // GPS-less PX4 sends neither HOME_POSITION nor GLOBAL_POSITION_INT and would fly
+    // NAV_TAKEOFF towards its local origin.
+    let mut node = LinkNode::new(LinkSettings::default());
+    node.on_message(0, &PX4, &heartbeat());
+    telemetry(&mut node, 0);
+    node.on_request(0, &request(3, LinkRequestKind::Takeoff as u32));
+    assert!(takeoff_param7(node.poll(1)).is_none());
+    let got = node.take_outcomes();
+    assert_eq!(
+        (got[0].id, got[0].outcome),
+        (3, LinkOutcomeKind::NoAltitudeReference as u32)
     );
 }
 

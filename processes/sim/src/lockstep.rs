@@ -18,7 +18,7 @@ use crate::camera::{BodyMotion, CameraError, DownCamera};
 use crate::depth::DepthCamera;
 use crate::ground_vehicle::PadState;
 use crate::params::ParamError;
-use crate::px4::commander::{Commander, Px4Params, VehicleStatus};
+use crate::px4::commander::{Commander, VehicleStatus};
 use crate::scenario::LoadedScenario;
 use crate::world::{Event, TimedEvent, World, WorldError};
 
@@ -128,7 +128,7 @@ impl Simulator {
     /// A simulator for `scenario` with every random process seeded from `seed`.
     pub fn new(scenario: &LoadedScenario, seed: u64) -> Result<Self, SimError> {
         let world = World::new(scenario.world_params(seed))?;
-        let mut commander = Commander::new(Px4Params::default())?;
+        let mut commander = Commander::new(scenario.px4.clone())?;
         commander.set_faults(scenario.scenario.faults.clone())?;
         let calibration = CameraCalibration::load(scenario.calibration_path())?;
         let pad = PadModel::load(scenario.pad_path())?;
@@ -182,6 +182,11 @@ impl Simulator {
         let status = self.status();
         self.commander
             .handle_message(self.world.time_ns(), header, msg, &status);
+    }
+
+    /// True once the autopilot's `telemetry_stop_s` fault has silenced it.
+    pub fn autopilot_silent(&self) -> bool {
+        self.commander.is_silent()
     }
 
     /// MAVLink messages the autopilot has produced since the last call.

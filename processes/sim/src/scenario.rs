@@ -18,6 +18,7 @@ use crate::estimator_noise::EstimatorNoiseParams;
 use crate::ground_vehicle::GroundVehicleParams;
 use crate::params::ParamError;
 use crate::px4::commander::Faults;
+use crate::px4::commander::Px4Params;
 use crate::quadrotor::AirframeParams;
 use crate::wind::WindParams;
 use crate::world::{Aabb, CrashThresholds, WorldParams};
@@ -228,14 +229,18 @@ pub enum ScenarioError {
     },
 }
 
-/// An airframe profile file: the physical `[airframe]` and the PX4 `[limits]` its
-/// autopilot flies with (the other gains are PX4's defaults tuned for the airframe).
+/// An airframe profile file: the physical `[airframe]`, the PX4 `[limits]` its
+/// autopilot flies with (the other gains are PX4's defaults tuned for the airframe), and
+/// the `[px4]` parameters set on its autopilot (commander, failsafes, SIH home); absent
+/// ones keep PX4 v1.16's defaults.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct AirframeFile {
     airframe: AirframeParams,
     #[serde(default)]
     limits: Limits,
+    #[serde(default)]
+    px4: Px4Params,
 }
 
 /// PX4 speed, acceleration and tilt limits; absent ones keep PX4's defaults.
@@ -282,7 +287,8 @@ impl Validate for AirframeFile {
             .map_err(|e| from_param("airframe", e))?;
         let mut a = AutopilotParams::tuned_for(&self.airframe);
         self.limits.apply(&mut a);
-        a.validate().map_err(|e| from_param("limits", e))
+        a.validate().map_err(|e| from_param("limits", e))?;
+        self.px4.validate().map_err(|e| from_param("px4", e))
     }
 }
 
@@ -297,6 +303,8 @@ pub struct LoadedScenario {
     pub airframe: AirframeParams,
     /// The autopilot for this airframe (PX4 defaults tuned for it, with its limits).
     pub autopilot: AutopilotParams,
+    /// The PX4 parameters of its commander (`[px4]`).
+    pub px4: Px4Params,
     /// `deploy/config/` (calibration files are resolved against it).
     pub config_dir: PathBuf,
 }
@@ -382,6 +390,7 @@ pub fn load(name_or_path: &str, deploy_dir: &Path) -> Result<LoadedScenario, Sce
         scenario,
         path,
         autopilot,
+        px4: airframe.px4,
         airframe: airframe.airframe,
         config_dir,
     })

@@ -1,5 +1,6 @@
 //! The simulator's MAVLink endpoint seen from a companion computer: a plain
-//! UDP socket, raw MAVLink 2 bytes, and the PX4 behaviours px4-link relies on.
+//! UDP socket, raw MAVLink 2 bytes, and the PX4 v1.16 behaviours a companion can
+//! tell apart, one test each (docs/px4-conformance.md maps each to PX4's source).
 //! Each test runs a SimVehicle on the wall clock in its own thread on an
 //! ephemeral port. Timing tolerances are generous (shared 2-core machine).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -18,10 +19,12 @@ use mavlink::dialects::common::{
 use mavlink::{MavHeader, MavlinkVersion};
 use sim::px4::commander::Px4Params;
 use sim::px4::endpoint::{EndpointConfig, SimVehicle, decode_datagram};
+use sim::px4::raw::crc_accumulate;
 use sim::world::{World, WorldParams};
 
 const OFFBOARD: u32 = 6 << 16;
 const POSCTL: u32 = 3 << 16;
+const AUTO_TAKEOFF: u32 = (2 << 24) | (4 << 16);
 const AUTO_LOITER: u32 = (3 << 24) | (4 << 16);
 const AUTO_LAND: u32 = (6 << 24) | (4 << 16);
 
@@ -32,14 +35,19 @@ struct Sim {
 }
 
 impl Sim {
+    /// PX4 v1.16's defaults (SIH home at 489.4 m, COM_OBL_RC_ACT 0).
     fn start() -> Self {
+        Self::start_with(Px4Params::default())
+    }
+
+    fn start_with(params: Px4Params) -> Self {
         let world = World::new(WorldParams::default()).unwrap();
         let config = EndpointConfig {
             listen: "127.0.0.1:0".parse().unwrap(),
             remote: None,
             ..EndpointConfig::default()
         };
-        let mut vehicle = SimVehicle::new(world, Px4Params::default(), config).unwrap();
+        let mut vehicle = SimVehicle::new(world, params, config).unwrap();
         let addr = vehicle.endpoint().local_addr();
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
@@ -117,6 +125,66 @@ impl Companion {
 
     fn send_raw(&self, bytes: &[u8]) {
         self.sock.send_to(bytes, self.sim).unwrap();
+    }
+
+    /// Sends a COMMAND_LONG with a command number the dialect lacks and returns the
+    /// result of the COMMAND_ACK for that number (read from the raw frames).
+    fn raw_command(&mut self, number: u16, timeout: Duration) -> Option<u8> {
+        let mut frame = Vec::new();
+        mavlink::write_v2_msg(
+            &mut frame,
+            MavHeader {
+                system_id: 1,
+                component_id: 191,
+                sequence: 0,
+            },
+            &MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+                param1: 1.0,
+                command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                target_system: 1,
+                target_component: 1,
+                ..Default::default()
+            }),
+        )
+        .unwrap();
+        frame[10 + 28..10 + 30].copy_from_slice(&number.to_le_bytes());
+        let n = frame.len();
+        let crc = crc_accumulate(crc_accumulate(0xffff, &frame[1..n - 2]), &[152]);
+        frame[n - 2..].copy_from_slice(&crc.to_le_bytes());
+        self.send_raw(&frame);
+        let end = Instant::now() + timeout;
+        let mut buf = [0u8; 2048];
+        while Instant::now() < end {
+            let Ok((len, _)) = self.sock.recv_from(&mut buf) else {
+                continue;
+            };
+            // One frame per datagram: COMMAND_ACK is message 77.
+            let d = &buf[..len];
+            if len >= 13 && d[0] == 0xFD && d[7] == 77 && d[8] == 0 && d[9] == 0 {
+                let mut p = [0u8; 10];
+                let plen = usize::from(d[1]).min(10);
+                p[..plen].copy_from_slice(&d[10..10 + plen]);
+                if u16::from_le_bytes([p[0], p[1]]) == number {
+                    assert_eq!((p[8], p[9]), (1, 191), "addressed to us");
+                    return Some(p[2]);
+                }
+            }
+        }
+        None
+    }
+
+    /// The AMSL altitude of the local origin, from the autopilot's HOME_POSITION
+    /// (altitude and local z of the same point), as px4-link computes it.
+    fn origin_amsl(&mut self) -> f64 {
+        self.wait_for(
+            Duration::from_secs(4),
+            |_| {},
+            |m| match m {
+                MavMessage::HOME_POSITION(h) => Some(f64::from(h.altitude) * 1e-3 + f64::from(h.z)),
+                _ => None,
+            },
+        )
+        .expect("no HOME_POSITION")
     }
 
     /// Everything received within `d`, with receive times.
@@ -281,14 +349,30 @@ impl Companion {
         );
     }
 
-    fn takeoff(&mut self, alt: f32) {
+    /// NAV_TAKEOFF with `param7` as PX4 reads it: an altitude above mean sea level
+    /// (NaN: MIS_TAKEOFF_ALT above the current altitude).
+    fn takeoff_amsl(&mut self, param7: f32) {
         assert_eq!(
             self.command(
                 MavCmd::MAV_CMD_NAV_TAKEOFF,
-                [0.0, 0.0, 0.0, f32::NAN, f32::NAN, f32::NAN, alt]
+                [0.0, 0.0, 0.0, f32::NAN, f32::NAN, f32::NAN, param7]
             ),
             MavResult::MAV_RESULT_ACCEPTED
         );
+    }
+
+    /// NAV_TAKEOFF to `height` m above the local origin.
+    fn takeoff(&mut self, height: f64) {
+        let origin = self.origin_amsl();
+        self.takeoff_amsl((origin + height) as f32);
+    }
+
+    /// DO_SET_MODE to PX4 custom mode (main, sub).
+    fn set_mode(&mut self, main: f32, sub: f32) -> MavResult {
+        self.command(
+            MavCmd::MAV_CMD_DO_SET_MODE,
+            [1.0, main, sub, 0.0, 0.0, 0.0, 0.0],
+        )
     }
 }
 
@@ -341,7 +425,9 @@ fn heartbeat_reports_px4_custom_mode_at_1_hz() {
             .contains(MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
     );
     assert!(!armed(h));
-    assert_eq!(h.custom_mode, POSCTL);
+    // PX4 v1.16 boots into Hold (AUTO.LOITER); base_mode CUSTOM|STAB|GUIDED|AUTO.
+    assert_eq!(h.custom_mode, AUTO_LOITER);
+    assert_eq!(h.base_mode.bits(), 29);
     assert_eq!(h.system_status, MavState::MAV_STATE_STANDBY);
     // Default telemetry is flowing too.
     let count = |id: u32| {
@@ -352,22 +438,56 @@ fn heartbeat_reports_px4_custom_mode_at_1_hz() {
     assert!(count(32) > 60, "LOCAL_POSITION_NED {}", count(32));
     assert!(count(31) > 100, "ATTITUDE_QUATERNION {}", count(31));
     assert!(count(245) > 8, "EXTENDED_SYS_STATE {}", count(245));
+    assert!(count(33) > 8, "GLOBAL_POSITION_INT {}", count(33));
+    assert!(
+        (1..=3).contains(&count(242)),
+        "HOME_POSITION {}",
+        count(242)
+    );
     sim.finish();
 }
 
 #[test]
-fn arm_is_acked_and_heartbeat_shows_armed_unknown_command_unsupported() {
+fn unknown_commands_are_answered_unsupported_and_broadcast_ones_ignored() {
     let sim = Sim::start();
     let mut c = Companion::connect(&sim);
-    c.arm();
-    assert!(c.heartbeat(
-        |h| armed(h) && h.system_status == MavState::MAV_STATE_ACTIVE,
-        secs(3)
-    ));
+    // A command PX4's commander does not handle.
     assert_eq!(
         c.command(MavCmd::MAV_CMD_DO_REPOSITION, [0.0; 7]),
         MavResult::MAV_RESULT_UNSUPPORTED
     );
+    // A command number no dialect has: still a COMMAND_ACK, UNSUPPORTED (3).
+    assert_eq!(c.raw_command(31_999, secs(3)), Some(3));
+    // Sent to every system (target_system 0): PX4's receiver drops it, no ACK.
+    c.send(&MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+        param1: 1.0,
+        command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+        target_system: 0,
+        target_component: 1,
+        ..Default::default()
+    }));
+    let got = c.collect(Duration::from_millis(1200));
+    assert!(
+        !got.iter()
+            .any(|(_, m)| matches!(m, MavMessage::COMMAND_ACK(_))),
+        "no ACK for a broadcast command"
+    );
+    assert!(
+        got.iter()
+            .all(|(_, m)| !matches!(m, MavMessage::HEARTBEAT(h) if armed(h)))
+    );
+    sim.finish();
+}
+
+#[test]
+fn arm_is_acked_and_heartbeat_shows_armed() {
+    let sim = Sim::start();
+    let mut c = Companion::connect(&sim);
+    c.arm();
+    assert!(c.heartbeat(
+        |h| armed(h) && h.system_status == MavState::MAV_STATE_ACTIVE && h.base_mode.bits() == 157,
+        secs(3)
+    ));
     assert_eq!(
         c.command(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]),
         MavResult::MAV_RESULT_ACCEPTED
@@ -377,11 +497,101 @@ fn arm_is_acked_and_heartbeat_shows_armed_unknown_command_unsupported() {
 }
 
 #[test]
+fn home_is_at_the_configured_altitude_above_mean_sea_level() {
+    let sim = Sim::start_with(Px4Params {
+        sih_loc_h0: 488.0,
+        ..Px4Params::default()
+    });
+    let mut c = Companion::connect(&sim);
+    let home = c
+        .wait_for(
+            secs(4),
+            |_| {},
+            |m| match m {
+                MavMessage::HOME_POSITION(h) => Some(h.clone()),
+                _ => None,
+            },
+        )
+        .expect("HOME_POSITION");
+    // On the ground at the origin (estimator noise: centimetres).
+    assert!((home.altitude - 488_000).abs() < 100, "{}", home.altitude);
+    assert!(home.z.abs() < 0.1);
+    let g = c
+        .wait_for(
+            secs(2),
+            |_| {},
+            |m| match m {
+                MavMessage::GLOBAL_POSITION_INT(g) => Some(g.clone()),
+                _ => None,
+            },
+        )
+        .expect("GLOBAL_POSITION_INT");
+    assert!((g.alt - 488_000).abs() < 100, "alt {} mm", g.alt);
+    assert!(
+        g.relative_alt.abs() < 100,
+        "relative_alt {} mm",
+        g.relative_alt
+    );
+    assert!((g.lat - 473_977_420).abs() < 10 && (g.lon - 85_455_940).abs() < 10);
+    sim.finish();
+}
+
+#[test]
+fn nav_takeoff_param7_is_read_above_mean_sea_level() {
+    // Home at 488 m: 490.0 m AMSL is 2 m up.
+    let sim = Sim::start_with(Px4Params {
+        sih_loc_h0: 488.0,
+        ..Px4Params::default()
+    });
+    let mut c = Companion::connect(&sim);
+    c.arm();
+    c.takeoff_amsl(490.0);
+    let p = c.position_until(secs(10), |_| {}, |p| p[2] < -1.7);
+    assert!(p.is_some(), "did not climb to 2 m");
+    assert!(c.heartbeat(|h| h.custom_mode == AUTO_LOITER && armed(h), secs(5)));
+    let msgs = c.collect(Duration::from_millis(1500));
+    for (_, m) in &msgs {
+        if let MavMessage::LOCAL_POSITION_NED(p) = m {
+            assert!((p.z + 2.0).abs() < 0.5, "holds 2 m: z {}", p.z);
+        }
+    }
+    sim.finish();
+}
+
+#[test]
+fn nav_takeoff_below_the_current_altitude_is_accepted_but_never_climbs_and_disarms() {
+    // The bug real PX4 showed: param7 = 2.5 with home at 489.4 m AMSL. ACCEPTED
+    // ("Already higher than takeoff altitude" in PX4's log), no climb, and the
+    // pre-flight auto-disarm COM_SPOOLUP_TIME + COM_DISARM_PRFLT = 11 s after arming.
+    let sim = Sim::start();
+    let mut c = Companion::connect(&sim);
+    c.arm();
+    let armed_at = Instant::now();
+    c.takeoff_amsl(2.5);
+    assert!(c.heartbeat(|h| h.custom_mode == AUTO_TAKEOFF && armed(h), secs(3)));
+    let msgs = c.collect(secs(4));
+    for (_, m) in &msgs {
+        if let MavMessage::LOCAL_POSITION_NED(p) = m {
+            assert!(p.z > -0.2, "it climbed: z {}", p.z);
+        }
+    }
+    assert!(c.heartbeat(|h| !armed(h), secs(10)), "no auto-disarm");
+    let after = armed_at.elapsed().as_secs_f64();
+    assert!(
+        (10.0..13.0).contains(&after),
+        "disarmed {after:.1} s after arming"
+    );
+    // Take-off does not prevent arming: it is still the mode.
+    assert!(c.heartbeat(|h| h.custom_mode == AUTO_TAKEOFF, secs(2)));
+    sim.finish();
+}
+
+#[test]
 fn takeoff_climbs_to_takeoff_altitude_then_loiters() {
     let sim = Sim::start();
     let mut c = Companion::connect(&sim);
     c.arm();
-    c.takeoff(f32::NAN); // MIS_TAKEOFF_ALT = 2.5 m
+    c.takeoff_amsl(f32::NAN); // MIS_TAKEOFF_ALT = 2.5 m above the current altitude
     assert!(c.landed_state(MavLandedState::MAV_LANDED_STATE_TAKEOFF, secs(3)));
     let p = c.position_until(secs(10), |_| {}, |p| p[2] < -2.3);
     assert!(p.is_some(), "did not climb to 2.5 m");
@@ -399,50 +609,133 @@ fn takeoff_climbs_to_takeoff_altitude_then_loiters() {
 }
 
 #[test]
-fn offboard_refused_without_setpoint_stream() {
+fn offboard_needs_only_one_setpoint_younger_than_com_of_loss_t() {
     let sim = Sim::start();
     let mut c = Companion::connect(&sim);
-    let r = c.command(
-        MavCmd::MAV_CMD_DO_SET_MODE,
-        [1.0, 6.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-    );
-    assert!(
-        matches!(
-            r,
-            MavResult::MAV_RESULT_TEMPORARILY_REJECTED | MavResult::MAV_RESULT_DENIED
+    // Disarmed, the switch is accepted even without setpoints ...
+    assert_eq!(c.set_mode(6.0, 0.0), MavResult::MAV_RESULT_ACCEPTED);
+    assert!(c.heartbeat(
+        |h| h.custom_mode == OFFBOARD && h.base_mode.bits() == 17,
+        secs(3)
+    ));
+    // ... but arming in OFFBOARD needs the signal.
+    assert_eq!(
+        c.command(
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
         ),
-        "{r:?}"
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
     );
-    // Half a second of setpoints is not enough either.
+    // One setpoint is enough: no minimum stream length.
+    c.position_setpoint([0.0, 0.0, 0.0]);
+    c.arm();
+    // Armed in Hold, with the last setpoint older than COM_OF_LOSS_T: refused; one
+    // fresh setpoint: accepted.
+    assert_eq!(c.set_mode(4.0, 3.0), MavResult::MAV_RESULT_ACCEPTED);
+    c.collect(Duration::from_millis(1200));
+    assert_eq!(
+        c.set_mode(6.0, 0.0),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+    );
+    c.position_setpoint([0.0, 0.0, 0.0]);
+    assert_eq!(c.set_mode(6.0, 0.0), MavResult::MAV_RESULT_ACCEPTED);
+    sim.finish();
+}
+
+#[test]
+fn temporarily_rejected_where_px4_answers_it() {
+    let sim = Sim::start();
+    let mut c = Companion::connect(&sim);
+    // An AUTO sub mode PX4 does not have ("Unsupported auto mode").
+    assert_eq!(
+        c.set_mode(4.0, 10.0),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+    );
+    // LAND is forced even disarmed, and then arming is refused.
+    assert_eq!(
+        c.command(
+            MavCmd::MAV_CMD_NAV_LAND,
+            [0.0, 0.0, 0.0, f32::NAN, f32::NAN, f32::NAN, f32::NAN]
+        ),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    let arm = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    assert_eq!(
+        c.command(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, arm),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+    );
+    // In the air, a disarm that is not forced is refused.
+    assert_eq!(c.set_mode(4.0, 3.0), MavResult::MAV_RESULT_ACCEPTED);
+    c.arm();
+    c.takeoff(2.0);
+    assert!(c.position_until(secs(8), |_| {}, |p| p[2] < -1.5).is_some());
+    assert_eq!(
+        c.command(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+    );
+    // An ARM param1 neither 0 nor 1: PX4 sends no ACK at all.
+    c.send(&MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+        param1: 3.0,
+        command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+        target_system: 1,
+        target_component: 1,
+        ..Default::default()
+    }));
+    let got = c.collect(Duration::from_millis(800));
+    assert!(
+        !got.iter()
+            .any(|(_, m)| matches!(m, MavMessage::COMMAND_ACK(_)))
+    );
+    sim.finish();
+}
+
+#[test]
+fn offboard_loss_switches_to_position_by_default_and_back_when_setpoints_resume() {
+    // COM_OBL_RC_ACT = 0 (PX4's default): Position mode at once after COM_OF_LOSS_T,
+    // RC or not; the failsafe clears when the setpoints come back.
+    let sim = Sim::start();
+    let mut c = Companion::connect(&sim);
+    c.arm();
+    c.takeoff(2.0);
+    assert!(c.heartbeat(|h| h.custom_mode == AUTO_LOITER, secs(10)));
     let mut tick = streamer([0.0, 0.0, -2.0]);
-    let end = Instant::now() + Duration::from_millis(400);
-    while Instant::now() < end {
-        tick(&mut c);
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    let r = c.command_with(
-        MavCmd::MAV_CMD_DO_SET_MODE,
-        [1.0, 6.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-        &mut tick,
+    tick(&mut c);
+    assert_eq!(
+        c.command_with(
+            MavCmd::MAV_CMD_DO_SET_MODE,
+            [1.0, 6.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            &mut tick,
+        ),
+        MavResult::MAV_RESULT_ACCEPTED
     );
-    assert_eq!(r, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
-    // The mode stays POSCTL.
-    let msgs = c.collect(Duration::from_millis(1200));
-    let modes: Vec<u32> = msgs
-        .iter()
-        .filter_map(|(_, m)| match m {
-            MavMessage::HEARTBEAT(h) => Some(h.custom_mode),
-            _ => None,
-        })
-        .collect();
-    assert!(!modes.is_empty());
-    assert!(modes.iter().all(|&m| m == POSCTL), "{modes:?}");
+    assert!(c.heartbeat_with(|h| h.custom_mode == OFFBOARD, secs(3), &mut tick));
+    let stopped = Instant::now();
+    assert!(
+        c.heartbeat(
+            |h| h.custom_mode == POSCTL && h.system_status == MavState::MAV_STATE_CRITICAL,
+            secs(4)
+        ),
+        "no Position mode after the loss"
+    );
+    assert!(stopped.elapsed() >= Duration::from_millis(900));
+    assert!(
+        c.heartbeat_with(
+            |h| h.custom_mode == OFFBOARD && h.system_status == MavState::MAV_STATE_ACTIVE,
+            secs(4),
+            &mut tick
+        ),
+        "not back in OFFBOARD"
+    );
     sim.finish();
 }
 
 #[test]
 fn offboard_move_then_stream_loss_lands_and_disarms() {
-    let sim = Sim::start();
+    // COM_OBL_RC_ACT = 4 (Land), as the stack's deployment sets it.
+    let sim = Sim::start_with(Px4Params {
+        com_obl_rc_act: 4,
+        ..Px4Params::default()
+    });
     let mut c = Companion::connect(&sim);
     c.arm();
     c.takeoff(2.0);
@@ -491,8 +784,10 @@ fn offboard_move_then_stream_loss_lands_and_disarms() {
         c.landed_state(MavLandedState::MAV_LANDED_STATE_ON_GROUND, secs(10)),
         "did not land"
     );
+    // Disarmed after landing, it shows the mode asked for last again: OFFBOARD (a
+    // failsafe does not change PX4's user intention).
     assert!(
-        c.heartbeat(|h| !armed(h) && h.custom_mode == AUTO_LAND, secs(5)),
+        c.heartbeat(|h| !armed(h) && h.custom_mode == OFFBOARD, secs(5)),
         "did not disarm"
     );
     // It landed where it was, not back home.
@@ -529,9 +824,19 @@ fn land_command_lands_and_disarms() {
         .expect("not descending");
     assert!((0.4..1.0).contains(&v), "vz {v}");
     assert!(c.landed_state(MavLandedState::MAV_LANDED_STATE_ON_GROUND, secs(8)));
+    let down = Instant::now();
+    // Still AUTO.LAND while armed on the ground ...
+    assert!(c.heartbeat(|h| armed(h) && h.custom_mode == AUTO_LAND, secs(2)));
+    // ... disarmed COM_DISARM_LAND (2 s) after the land detector, then the last mode
+    // asked for that does not prevent arming: Hold, here.
     assert!(
-        c.heartbeat(|h| !armed(h), secs(5)),
+        c.heartbeat(|h| !armed(h) && h.custom_mode == AUTO_LOITER, secs(5)),
         "did not disarm after landing"
+    );
+    let after = down.elapsed().as_secs_f64();
+    assert!(
+        (1.0..5.0).contains(&after),
+        "disarmed {after:.1} s after touchdown"
     );
     sim.finish();
 }

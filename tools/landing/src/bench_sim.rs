@@ -50,7 +50,14 @@ struct Flight {
 fn fly(scenario: &str, seconds: f64, deploy: &std::path::Path, pipelined: bool) -> Result<Flight> {
     let scn = sim::scenario::load(scenario, deploy)?;
     let mut sim = Simulator::new(&scn, 1).context("building the simulator")?;
-    crate::companion::arm_and_take_off(&mut sim, 2.0);
+    // Home is reported from the first step on; the take-off altitude is AMSL.
+    sim.step()?;
+    let origin = sim
+        .take_mavlink()
+        .iter()
+        .find_map(crate::companion::origin_amsl)
+        .context("the simulated autopilot sent no HOME_POSITION")?;
+    crate::companion::arm_and_take_off(&mut sim, origin, 2.0);
     let mut camera = if pipelined {
         CameraPipeline::from_simulator(&mut sim)?
     } else {

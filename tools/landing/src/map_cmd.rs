@@ -111,6 +111,8 @@ struct Telemetry {
     attitude: StateHistory,
     offboard: bool,
     latest: Option<TimedPose>,
+    /// AMSL altitude of the local origin, from HOME_POSITION.
+    origin_amsl: Option<f64>,
 }
 
 impl Telemetry {
@@ -126,6 +128,9 @@ impl Telemetry {
             match m {
                 MavMessage::HEARTBEAT(h) => {
                     self.offboard = (h.custom_mode >> 16) & 0xff == 6;
+                }
+                MavMessage::HOME_POSITION(_) => {
+                    self.origin_amsl = crate::companion::origin_amsl(m);
                 }
                 MavMessage::ATTITUDE_QUATERNION(a) => {
                     if let Some(r) = px4_link::frames::world_from_body_enu([a.q1, a.q2, a.q3, a.q4])
@@ -275,6 +280,7 @@ pub fn run(args: &MapArgs) -> Result<()> {
         attitude: StateHistory::new(100, 50_000_000),
         offboard: false,
         latest: None,
+        origin_amsl: None,
     };
     let mut path: Vec<Vector3<f64>> = Vec::new();
     let mut truth_path: Vec<Vector3<f64>> = Vec::new();
@@ -333,20 +339,13 @@ pub fn run(args: &MapArgs) -> Result<()> {
             pool.push(buf);
         }
         phase = match phase {
-            Phase::Ground if now >= 500_000_000 => {
-                command(
-                    &mut sim,
-                    MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-                    [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-                );
-                let nan = f32::NAN;
-                command(
-                    &mut sim,
-                    MavCmd::MAV_CMD_NAV_TAKEOFF,
-                    [0.0, 0.0, 0.0, nan, nan, nan, HEIGHT_M as f32],
-                );
-                Phase::Climb
-            }
+            Phase::Ground if now >= 500_000_000 => match tele.origin_amsl {
+                Some(origin) => {
+                    crate::companion::arm_and_take_off(&mut sim, origin, HEIGHT_M);
+                    Phase::Climb
+                }
+                None => phase,
+            },
             Phase::Climb
                 if now >= 6_000_000_000
                     && tele.position().is_some_and(|p| p.z > HEIGHT_M - 0.1) =>

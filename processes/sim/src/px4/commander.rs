@@ -1,5 +1,6 @@
-//! A PX4-like commander: what PX4 does with the MAVLink messages a companion
-//! computer sends, and what it sends back.
+//! A PX4-like commander: what PX4 v1.16 does with the MAVLink messages a companion
+//! computer sends, and what it sends back. Each rule is read from PX4's source; the
+//! table in docs/px4-conformance.md names the file, the behaviour here and the test.
 //!
 //! Pure: decoded messages and `now_ns` in, MAVLink messages, the armed flag
 //! and the autopilot [`Setpoint`] out. No sockets, clocks or sleeps, so the
@@ -13,15 +14,17 @@ use mavlink::MavHeader;
 #[allow(deprecated)]
 use mavlink::dialects::common::{
     ATTITUDE_QUATERNION_DATA, COMMAND_ACK_DATA, COMMAND_LONG_DATA, EXTENDED_SYS_STATE_DATA,
-    HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavCmd, MavEstimatorType, MavFrame,
-    MavLandedState, MavMessage, MavModeFlag, MavResult, MavState, MavType, MavVtolState,
-    ODOMETRY_DATA, PositionTargetTypemask, SET_MODE_DATA, SET_POSITION_TARGET_LOCAL_NED_DATA,
+    GLOBAL_POSITION_INT_DATA, HEARTBEAT_DATA, HOME_POSITION_DATA, LOCAL_POSITION_NED_DATA,
+    MavAutopilot, MavCmd, MavEstimatorType, MavFrame, MavLandedState, MavMessage, MavModeFlag,
+    MavResult, MavState, MavType, MavVtolState, ODOMETRY_DATA, PositionTargetTypemask,
+    SET_MODE_DATA, SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
-use nalgebra::Vector3;
+use nalgebra::{UnitQuaternion, Vector3};
 use serde::Deserialize;
 
 use super::frames::{
-    enu_to_ned, flu_to_frd, ned_from_frd, ned_to_enu, quaternion_wxyz, yaw_ned_to_enu,
+    enu_to_ned, flu_to_frd, ned_from_frd, ned_to_enu, quaternion_wxyz, yaw_enu_to_ned,
+    yaw_ned_to_enu,
 };
 use crate::autopilot::{EstimatedState, Setpoint};
 use crate::params::{self, ParamError};
@@ -29,16 +32,22 @@ use crate::params::{self, ParamError};
 /// PX4's magic `param2` of ARM_DISARM that forces a disarm in the air.
 pub const FORCE_DISARM_MAGIC: f32 = 21196.0;
 
-/// How long a setpoint stream must have been arriving before OFFBOARD is
-/// accepted (the rule companions follow: stream for > 1 s, then switch).
-pub const OFFBOARD_STREAM_MIN_NS: u64 = 1_000_000_000;
-
 /// How long the estimator must report ground contact before the vehicle
 /// counts as landed (PX4's land detector needs a moment too).
 pub const LAND_DETECT_NS: u64 = 500_000_000;
 
-/// How close (m) below the takeoff altitude AUTO.TAKEOFF counts as done.
-pub const TAKEOFF_ACCEPTANCE_M: f64 = 0.2;
+/// Mean Earth radius PX4's map projection uses, m.
+const EARTH_RADIUS_M: f64 = 6_371_000.0;
+
+/// Commands PX4 answers even when sent to every system (target_system 0):
+/// REQUEST_PROTOCOL_VERSION and REQUEST_AUTOPILOT_CAPABILITIES
+/// (mavlink_receiver.cpp, `evaluate_target_ok`); both deprecated in MAVLink,
+/// still honoured by PX4.
+#[allow(deprecated)]
+const BROADCAST_COMMANDS: [MavCmd; 2] = [
+    MavCmd::MAV_CMD_REQUEST_PROTOCOL_VERSION,
+    MavCmd::MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+];
 
 /// Message ids of the telemetry streams the commander can send.
 pub mod msg_id {
@@ -48,6 +57,10 @@ pub mod msg_id {
     pub const ATTITUDE_QUATERNION: u32 = 31;
     /// LOCAL_POSITION_NED.
     pub const LOCAL_POSITION_NED: u32 = 32;
+    /// GLOBAL_POSITION_INT.
+    pub const GLOBAL_POSITION_INT: u32 = 33;
+    /// HOME_POSITION.
+    pub const HOME_POSITION: u32 = 242;
     /// EXTENDED_SYS_STATE.
     pub const EXTENDED_SYS_STATE: u32 = 245;
     /// ODOMETRY.
@@ -55,58 +68,81 @@ pub mod msg_id {
 }
 
 /// PX4 parameters the commander uses, under their PX4 names (TOML accepts
-/// `COM_OF_LOSS_T = 1.0`), so a scenario reads like a PX4 parameter file.
+/// `COM_OF_LOSS_T = 1.0`), so an airframe's `[px4]` table reads like a PX4
+/// parameter file. Defaults are PX4 v1.16's.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default, rename_all = "SCREAMING_SNAKE_CASE")]
 pub struct Px4Params {
     /// Offboard setpoint timeout before the failsafe, s (PX4 default 1).
     pub com_of_loss_t: f64,
-    /// Offboard-loss action: 4 = Land (PX4 default), 5 = Hold (AUTO.LOITER).
+    /// Offboard-loss action: 0 = Position (PX4 default), 4 = Land, 5 = Hold.
     pub com_obl_rc_act: u8,
-    /// Takeoff altitude above home when NAV_TAKEOFF gives none, m (PX4 default 2.5).
+    /// Takeoff height above the current altitude when NAV_TAKEOFF gives no
+    /// altitude (NaN), m (PX4 default 2.5).
     pub mis_takeoff_alt: f64,
     /// Takeoff climb speed, m/s (PX4 default 1.5).
     pub mpc_tko_speed: f64,
     /// Landing descent speed, m/s (PX4 default 0.7).
     pub mpc_land_speed: f64,
-    /// Disarm this long after landing is detected, s (PX4 default 2; negative disables).
+    /// Altitude acceptance radius of a multicopter takeoff, m (PX4 default 0.8).
+    pub nav_mc_alt_rad: f64,
+    /// Disarm this long after landing is detected, s (PX4 default 2; <= 0 disables).
     pub com_disarm_land: f64,
-    /// Disarm this long after arming if the vehicle never took off, s
-    /// (PX4 default 10; negative disables).
+    /// Disarm this long (plus COM_SPOOLUP_TIME) after arming if the vehicle never
+    /// took off, s (PX4 default 10; <= 0 disables).
     pub com_disarm_prflt: f64,
+    /// Motor spool-up time after arming, s (PX4 default 1).
+    pub com_spoolup_time: f64,
+    /// Altitude of the local origin (the take-off point's ground) above mean sea
+    /// level, m (PX4 SIH default 489.4; `PX4_HOME_ALT` in SITL).
+    pub sih_loc_h0: f64,
+    /// Latitude of the local origin, deg (PX4 SIH default 47.397742).
+    pub sih_loc_lat0: f64,
+    /// Longitude of the local origin, deg (PX4 SIH default 8.545594).
+    pub sih_loc_lon0: f64,
 }
 
 impl Default for Px4Params {
-    /// PX4 v1.14 defaults.
+    /// PX4 v1.16 defaults (commander_params.c, mission_params.c, sih_params.c).
     fn default() -> Self {
         Self {
             com_of_loss_t: 1.0,
-            com_obl_rc_act: 4,
+            com_obl_rc_act: 0,
             mis_takeoff_alt: 2.5,
             mpc_tko_speed: 1.5,
             mpc_land_speed: 0.7,
+            nav_mc_alt_rad: 0.8,
             com_disarm_land: 2.0,
             com_disarm_prflt: 10.0,
+            com_spoolup_time: 1.0,
+            sih_loc_h0: 489.4,
+            sih_loc_lat0: 47.397742,
+            sih_loc_lon0: 8.545594,
         }
     }
 }
 
 impl Px4Params {
-    /// Checks every parameter, so a bad scenario fails before it flies.
+    /// Checks every parameter, so a bad airframe fails before it flies.
     pub fn validate(&self) -> Result<(), ParamError> {
         params::in_range("COM_OF_LOSS_T", self.com_of_loss_t, 1e-3, 60.0)?;
-        if !matches!(self.com_obl_rc_act, 4 | 5) {
+        if OffboardLossAction::from_param(self.com_obl_rc_act).is_none() {
             return Err(ParamError::new(
                 "COM_OBL_RC_ACT",
                 self.com_obl_rc_act,
-                "must be 4 (Land) or 5 (Hold); other PX4 actions are not simulated",
+                "must be 0 (Position), 4 (Land) or 5 (Hold); PX4's other actions are not simulated",
             ));
         }
         params::in_range("MIS_TAKEOFF_ALT", self.mis_takeoff_alt, 0.1, 1000.0)?;
         params::positive("MPC_TKO_SPEED", self.mpc_tko_speed)?;
         params::positive("MPC_LAND_SPEED", self.mpc_land_speed)?;
+        params::in_range("NAV_MC_ALT_RAD", self.nav_mc_alt_rad, 0.05, 10.0)?;
         params::finite("COM_DISARM_LAND", self.com_disarm_land)?;
         params::finite("COM_DISARM_PRFLT", self.com_disarm_prflt)?;
+        params::in_range("COM_SPOOLUP_TIME", self.com_spoolup_time, 0.0, 30.0)?;
+        params::in_range("SIH_LOC_H0", self.sih_loc_h0, -420.0, 8848.0)?;
+        params::in_range("SIH_LOC_LAT0", self.sih_loc_lat0, -85.0, 85.0)?;
+        params::in_range("SIH_LOC_LON0", self.sih_loc_lon0, -180.0, 180.0)?;
         Ok(())
     }
 
@@ -115,17 +151,46 @@ impl Px4Params {
     }
 }
 
+/// What PX4 does when the offboard setpoints stop (COM_OBL_RC_ACT).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum OffboardLossAction {
+    Position,
+    Land,
+    Hold,
+}
+
+impl OffboardLossAction {
+    fn from_param(value: u8) -> Option<Self> {
+        match value {
+            0 => Some(Self::Position),
+            4 => Some(Self::Land),
+            5 => Some(Self::Hold),
+            _ => None,
+        }
+    }
+
+    fn mode(self) -> FlightMode {
+        match self {
+            Self::Position => FlightMode::Posctl,
+            Self::Land => FlightMode::AutoLand,
+            Self::Hold => FlightMode::AutoLoiter,
+        }
+    }
+}
+
 /// Faults the simulated autopilot injects, from a scenario's `[faults]` table, so the
 /// stack's handling of a refusing or silent autopilot can be tested. None by default.
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Faults {
-    /// Every arm command is answered DENIED (PX4: arming refused for good).
+    /// Every arm command is refused, answered TEMPORARILY_REJECTED as PX4 answers
+    /// every arming refusal (a health check that never passes).
     pub reject_arming: bool,
     /// The first N arm commands are answered TEMPORARILY_REJECTED (PX4: preflight
     /// checks not passing yet), later ones as usual.
     pub reject_arming_times: u32,
-    /// Every switch to OFFBOARD (DO_SET_MODE or SET_MODE) is answered DENIED.
+    /// Every switch to OFFBOARD (DO_SET_MODE or SET_MODE) is refused,
+    /// TEMPORARILY_REJECTED (PX4: the offboard signal is not accepted).
     pub reject_offboard: bool,
     /// From this simulated time, s, the autopilot sends nothing at all (no heartbeat,
     /// telemetry or ACK: a cut TX wire) while it keeps obeying what it receives and
@@ -157,11 +222,12 @@ fn secs_to_ns(s: f64) -> u64 {
 /// The PX4 flight modes the simulator flies (PX4's navigation states).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FlightMode {
-    /// POSCTL: without RC sticks, holds position (the mode PX4 boots into here).
+    /// POSCTL: without RC sticks, holds position. There is no RC here, so PX4
+    /// refuses to arm in it.
     Posctl,
     /// AUTO.TAKEOFF: climbs to the takeoff altitude, then AUTO.LOITER.
     AutoTakeoff,
-    /// AUTO.LOITER (Hold): holds position.
+    /// AUTO.LOITER (Hold): holds position; the mode PX4 v1.16 boots into.
     AutoLoiter,
     /// AUTO.LAND: descends at MPC_LAND_SPEED and disarms after landing.
     AutoLand,
@@ -189,6 +255,12 @@ impl FlightMode {
         let (main, sub) = self.main_sub();
         ((sub as u32) << 24) | ((main as u32) << 16)
     }
+
+    /// Modes PX4 will not arm in and does not return to after a disarm
+    /// (mode_requirements.cpp: LAND, RTL, DESCEND, ...).
+    const fn prevents_arming(self) -> bool {
+        matches!(self, Self::AutoLand)
+    }
 }
 
 /// What a requested (main, sub) mode means to the simulator.
@@ -198,20 +270,25 @@ pub enum ModeRequest {
     Simulated(FlightMode),
     /// A real PX4 mode the simulator does not fly (MANUAL, MISSION, RTL, ...).
     NotSimulated,
-    /// Not a PX4 mode: PX4 ACKs it and does nothing.
+    /// An AUTO sub mode PX4 does not have: "Unsupported auto mode",
+    /// TEMPORARILY_REJECTED.
+    UnsupportedAuto,
+    /// Not a PX4 main mode: PX4 ACKs it and changes nothing.
     Unknown,
 }
 
 impl ModeRequest {
-    /// Decodes PX4's main/sub mode numbers.
+    /// Decodes PX4's main/sub mode numbers as Commander::handle_command does.
     pub fn from_main_sub(main: u8, sub: u8) -> Self {
         match (main, sub) {
+            (3, 2) => Self::NotSimulated, // POSCTL slow
             (3, _) => Self::Simulated(FlightMode::Posctl),
             (6, _) => Self::Simulated(FlightMode::Offboard),
             (MAIN_AUTO, 2) => Self::Simulated(FlightMode::AutoTakeoff),
             (MAIN_AUTO, 3) => Self::Simulated(FlightMode::AutoLoiter),
             (MAIN_AUTO, 6) => Self::Simulated(FlightMode::AutoLand),
-            (MAIN_AUTO, 1 | 4 | 5 | 7 | 8 | 9 | 10) | (1 | 2 | 5 | 7 | 8, _) => Self::NotSimulated,
+            (MAIN_AUTO, 0 | 4 | 5 | 8 | 9 | 11..=18) | (1 | 2 | 5 | 7, _) => Self::NotSimulated,
+            (MAIN_AUTO, _) => Self::UnsupportedAuto,
             _ => Self::Unknown,
         }
     }
@@ -251,15 +328,21 @@ pub struct VehicleStatus {
     pub crashed: bool,
 }
 
-/// Why the commander left OFFBOARD or disarmed on its own, for logs and tests.
+/// Why the commander changed mode or disarmed on its own, for logs and tests.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CommanderEvent {
     /// The offboard setpoint stream stopped for COM_OF_LOSS_T; the mode is
     /// now the COM_OBL_RC_ACT one.
     OffboardLost(FlightMode),
+    /// Setpoints came back while the offboard-loss action ran: OFFBOARD again
+    /// (PX4 clears the failsafe when its condition clears).
+    OffboardRegained,
+    /// NAV_TAKEOFF asked for an altitude below the current one: PX4's navigator
+    /// clamps it ("Already higher than takeoff altitude") and does not climb.
+    AlreadyHigher,
     /// Disarmed COM_DISARM_LAND after landing.
     AutoDisarmLanded,
-    /// Disarmed COM_DISARM_PRFLT after arming without taking off.
+    /// Disarmed COM_SPOOLUP_TIME + COM_DISARM_PRFLT after arming without taking off.
     AutoDisarmPreflight,
     /// Disarmed because the vehicle crashed.
     DisarmCrash,
@@ -274,11 +357,7 @@ struct Stream {
 }
 
 impl Stream {
-    const fn new(id: u32, default_hz: Option<u64>) -> Self {
-        let default_interval_ns = match default_hz {
-            Some(hz) => Some(1_000_000_000 / hz),
-            None => None,
-        };
+    const fn new(id: u32, default_interval_ns: Option<u64>) -> Self {
         Self {
             id,
             default_interval_ns,
@@ -297,26 +376,45 @@ struct Takeoff {
     yaw: f64,
 }
 
+/// PX4's home: where and at which altitude the vehicle was armed (or booted).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Home {
+    /// Position in the local frame, ENU, m.
+    pub position: Vector3<f64>,
+    /// Heading, ENU, rad.
+    pub yaw: f64,
+    /// Altitude above mean sea level, m.
+    pub alt_amsl: f64,
+}
+
 /// The PX4-like commander (see the module docs).
 #[derive(Debug, Clone)]
 pub struct Commander {
     params: Px4Params,
-    mode: FlightMode,
+    /// The mode the user (companion) asked for last: PX4's user intention.
+    intended: FlightMode,
+    /// The mode restored on disarm: the last one asked for that does not prevent
+    /// arming (UserModeIntention::onDisarm).
+    after_disarm: FlightMode,
+    /// The offboard-loss action while it runs (it overrides `intended`).
+    failsafe: Option<FlightMode>,
     armed: bool,
     crashed: bool,
     armed_at_ns: u64,
     has_flown: bool,
     landed: bool,
     contact_since_ns: Option<u64>,
-    stream_start_ns: Option<u64>,
     last_setpoint_ns: Option<u64>,
     offboard_setpoint: Setpoint,
     hold_position: Vector3<f64>,
     hold_yaw: f64,
-    takeoff_alt_m: f64,
+    /// param7 of the last NAV_TAKEOFF (an AMSL altitude, or NaN), used when the
+    /// takeoff starts; None when AUTO.TAKEOFF was entered without the command.
+    takeoff_param7: Option<f32>,
     takeoff: Option<Takeoff>,
+    home: Option<Home>,
     setpoint: Setpoint,
-    streams: [Stream; 5],
+    streams: [Stream; 7],
     outgoing: Vec<MavMessage>,
     events: Vec<CommanderEvent>,
     faults: Faults,
@@ -324,37 +422,50 @@ pub struct Commander {
     silent: bool,
 }
 
+/// PX4's default rates on an onboard link: HEARTBEAT 1 Hz, ATTITUDE_QUATERNION
+/// 50 Hz, LOCAL_POSITION_NED 30 Hz, EXTENDED_SYS_STATE 5 Hz, HOME_POSITION
+/// 0.5 Hz; GLOBAL_POSITION_INT 5 Hz (PX4's normal-link rate: the stack reads it
+/// only for the take-off altitude); ODOMETRY off until requested.
+fn default_streams() -> [Stream; 7] {
+    const fn every(hz_milli: u64) -> Option<u64> {
+        Some(1_000_000_000_000 / hz_milli)
+    }
+    [
+        Stream::new(msg_id::HEARTBEAT, every(1_000)),
+        Stream::new(msg_id::ATTITUDE_QUATERNION, every(50_000)),
+        Stream::new(msg_id::LOCAL_POSITION_NED, every(30_000)),
+        Stream::new(msg_id::GLOBAL_POSITION_INT, every(5_000)),
+        Stream::new(msg_id::HOME_POSITION, every(500)),
+        Stream::new(msg_id::EXTENDED_SYS_STATE, every(5_000)),
+        Stream::new(msg_id::ODOMETRY, None),
+    ]
+}
+
 impl Commander {
-    /// A disarmed commander in POSCTL, on the ground, with PX4's stream rates
-    /// (HEARTBEAT 1 Hz, ATTITUDE_QUATERNION 50 Hz, LOCAL_POSITION_NED 30 Hz,
-    /// EXTENDED_SYS_STATE 5 Hz, ODOMETRY off until requested).
+    /// A disarmed commander in AUTO.LOITER (PX4 v1.16's boot mode), on the ground,
+    /// with PX4's stream rates (see [`default_streams`]).
     pub fn new(params: Px4Params) -> Result<Self, ParamError> {
         params.validate()?;
-        let takeoff_alt_m = params.mis_takeoff_alt;
         Ok(Self {
             params,
-            mode: FlightMode::Posctl,
+            intended: FlightMode::AutoLoiter,
+            after_disarm: FlightMode::AutoLoiter,
+            failsafe: None,
             armed: false,
             crashed: false,
             armed_at_ns: 0,
             has_flown: false,
             landed: true,
             contact_since_ns: Some(0),
-            stream_start_ns: None,
             last_setpoint_ns: None,
             offboard_setpoint: Setpoint::default(),
             hold_position: Vector3::zeros(),
             hold_yaw: 0.0,
-            takeoff_alt_m,
+            takeoff_param7: None,
             takeoff: None,
+            home: None,
             setpoint: Setpoint::default(),
-            streams: [
-                Stream::new(msg_id::HEARTBEAT, Some(1)),
-                Stream::new(msg_id::ATTITUDE_QUATERNION, Some(50)),
-                Stream::new(msg_id::LOCAL_POSITION_NED, Some(30)),
-                Stream::new(msg_id::EXTENDED_SYS_STATE, Some(5)),
-                Stream::new(msg_id::ODOMETRY, None),
-            ],
+            streams: default_streams(),
             outgoing: Vec::new(),
             events: Vec::new(),
             faults: Faults::default(),
@@ -368,9 +479,10 @@ impl Commander {
         &self.params
     }
 
-    /// The current flight mode, as HEARTBEAT reports it.
+    /// The current flight mode (PX4's nav_state), as HEARTBEAT reports it: the
+    /// offboard-loss action while it runs, else the mode asked for.
     pub fn mode(&self) -> FlightMode {
-        self.mode
+        self.failsafe.unwrap_or(self.intended)
     }
 
     /// Whether the motors should be armed (apply to the world every step).
@@ -383,34 +495,35 @@ impl Commander {
         self.setpoint
     }
 
-    /// PX4's landed state now.
+    /// Home, once set (at the first update, then at each arming).
+    pub fn home(&self) -> Option<Home> {
+        self.home
+    }
+
+    /// The altitude above mean sea level of a local (ENU) height, m.
+    pub fn amsl_of(&self, z: f64) -> f64 {
+        self.params.sih_loc_h0 + z
+    }
+
+    /// PX4's landed state now: TAKEOFF and LANDING only in the AUTO modes, as
+    /// EXTENDED_SYS_STATE reports them.
     pub fn landed_state(&self) -> LandedState {
         if !self.armed || self.landed {
             LandedState::OnGround
-        } else if self.mode == FlightMode::AutoTakeoff {
+        } else if self.mode() == FlightMode::AutoTakeoff {
             LandedState::Takeoff
-        } else if self.mode == FlightMode::AutoLand {
+        } else if self.mode() == FlightMode::AutoLand {
             LandedState::Landing
         } else {
             LandedState::InAir
         }
     }
 
-    /// Whether an OFFBOARD switch would be accepted now: a setpoint stream
-    /// has been arriving, without a gap of COM_OF_LOSS_T, for at least
-    /// [`OFFBOARD_STREAM_MIN_NS`].
+    /// Whether OFFBOARD can run now (offboardCheck.cpp): a setpoint younger than
+    /// COM_OF_LOSS_T has arrived. No minimum stream length.
     pub fn offboard_available(&self, now_ns: u64) -> bool {
-        match (self.stream_start_ns, self.last_setpoint_ns) {
-            (Some(start), Some(last)) => {
-                self.stream_alive(now_ns, last)
-                    && now_ns.saturating_sub(start) >= OFFBOARD_STREAM_MIN_NS
-            }
-            _ => false,
-        }
-    }
-
-    fn stream_alive(&self, now_ns: u64, last_ns: u64) -> bool {
-        now_ns.saturating_sub(last_ns) <= self.params.loss_ns()
+        self.last_setpoint_ns
+            .is_some_and(|last| now_ns.saturating_sub(last) < self.params.loss_ns())
     }
 
     /// Injects `faults` from now on (they are checked first).
@@ -423,6 +536,11 @@ impl Commander {
     /// The faults in effect.
     pub fn faults(&self) -> &Faults {
         &self.faults
+    }
+
+    /// True once the `telemetry_stop_s` fault has silenced the autopilot.
+    pub fn is_silent(&self) -> bool {
+        self.silent
     }
 
     fn update_silence(&mut self, now_ns: u64) {
@@ -451,8 +569,10 @@ impl Commander {
         std::mem::take(&mut self.events)
     }
 
-    /// Handles one message from the companion (anything not addressed to
-    /// system 1 / component 1 or broadcast is ignored, like PX4 does).
+    /// Handles one message from the companion. Commands reach the commander only
+    /// when sent to system 1 and component 1 or 0 (target_system 0 only for the
+    /// two broadcast requests), as PX4's receiver filters them; setpoints and
+    /// SET_MODE also for system 0.
     #[allow(deprecated)] // SET_MODE, see the import.
     pub fn handle_message(
         &mut self,
@@ -464,10 +584,10 @@ impl Commander {
         self.crashed |= vehicle.crashed;
         self.update_silence(now_ns);
         match msg {
-            MavMessage::COMMAND_LONG(cmd)
-                if addressed_to_us(cmd.target_system, cmd.target_component) =>
-            {
-                let result = self.handle_command(now_ns, cmd, vehicle);
+            MavMessage::COMMAND_LONG(cmd) if command_addressed_to_us(cmd) => {
+                let Some(result) = self.handle_command(now_ns, cmd, vehicle) else {
+                    return;
+                };
                 self.outgoing.push(ack(
                     cmd.command,
                     result,
@@ -496,15 +616,9 @@ impl Commander {
                 if addressed_to_us(sp.target_system, sp.target_component)
                     && let Some(setpoint) = setpoint_from_local_ned(sp)
                 {
-                    let continuous = self
-                        .last_setpoint_ns
-                        .is_some_and(|last| self.stream_alive(now_ns, last));
-                    if !continuous {
-                        self.stream_start_ns = Some(now_ns);
-                    }
                     self.last_setpoint_ns = Some(now_ns);
                     self.offboard_setpoint = setpoint;
-                    if self.mode == FlightMode::Offboard {
+                    if self.mode() == FlightMode::Offboard {
                         self.setpoint = setpoint;
                     }
                 }
@@ -513,43 +627,40 @@ impl Commander {
         }
     }
 
+    /// The result to ACK, or None where PX4 sends no ACK at all.
     fn handle_command(
         &mut self,
         now_ns: u64,
         cmd: &COMMAND_LONG_DATA,
         vehicle: &VehicleStatus,
-    ) -> MavResult {
-        match cmd.command {
-            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => self.arm_disarm(now_ns, cmd, vehicle),
+    ) -> Option<MavResult> {
+        Some(match cmd.command {
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => return self.arm_disarm(now_ns, cmd, vehicle),
             MavCmd::MAV_CMD_NAV_TAKEOFF => {
-                if self.crashed {
-                    return MavResult::MAV_RESULT_DENIED;
+                // Commander ACKs the mode change; the navigator reads param7 (AMSL)
+                // when the takeoff starts, and never ACKs.
+                let result = self.change_mode(now_ns, FlightMode::AutoTakeoff, false, vehicle);
+                if result == MavResult::MAV_RESULT_ACCEPTED {
+                    self.takeoff_param7 = Some(cmd.param7);
+                    self.takeoff = None;
                 }
-                // PX4 reads param7 as AMSL; here home is at 0 m, so it is the
-                // altitude above home. NaN (or <= 0) means MIS_TAKEOFF_ALT.
-                self.takeoff_alt_m = if cmd.param7.is_finite() && cmd.param7 > 0.0 {
-                    f64::from(cmd.param7)
-                } else {
-                    self.params.mis_takeoff_alt
-                };
-                self.enter_mode(FlightMode::AutoTakeoff, now_ns, vehicle);
-                MavResult::MAV_RESULT_ACCEPTED
+                result
             }
+            // Forced: accepted in every state, even disarmed (arming is then blocked).
             MavCmd::MAV_CMD_NAV_LAND => {
-                self.enter_mode(FlightMode::AutoLand, now_ns, vehicle);
-                MavResult::MAV_RESULT_ACCEPTED
+                self.change_mode(now_ns, FlightMode::AutoLand, true, vehicle)
             }
             MavCmd::MAV_CMD_DO_SET_MODE => {
-                if !cmd.param1.is_finite() || !cmd.param2.is_finite() || !cmd.param3.is_finite() {
-                    return MavResult::MAV_RESULT_DENIED;
+                let base = cmd.param1.round() as i64 as u32;
+                if base & MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits() as u32 == 0 {
+                    // Only custom modes are simulated; the rest changes nothing here.
+                    return Some(MavResult::MAV_RESULT_ACCEPTED);
                 }
-                let base = cmd.param1 as u32;
-                let custom = base & MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits() as u32;
-                if custom == 0 {
-                    // PX4 only honours custom modes; the rest is ACKed and ignored.
-                    return MavResult::MAV_RESULT_ACCEPTED;
+                let (main, sub) = (cmd.param2.round(), cmd.param3.round());
+                if !(0.0..=255.0).contains(&main) || !(0.0..=255.0).contains(&sub) {
+                    return Some(MavResult::MAV_RESULT_ACCEPTED);
                 }
-                self.set_mode(now_ns, cmd.param2 as u8, cmd.param3 as u8, vehicle)
+                self.set_mode(now_ns, main as u8, sub as u8, vehicle)
             }
             MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => {
                 self.set_message_interval(now_ns, cmd.param1, cmd.param2)
@@ -561,52 +672,77 @@ impl Commander {
                     MavResult::MAV_RESULT_FAILED
                 }
             }
+            // Commander's `default:` branch: every command it does not handle.
             _ => MavResult::MAV_RESULT_UNSUPPORTED,
-        }
+        })
     }
 
+    /// Commander::handle_command's ARM_DISARM case: param1 rounded (1 arm, 0
+    /// disarm, anything else: no ACK at all); every refusal TEMPORARILY_REJECTED.
     fn arm_disarm(
         &mut self,
         now_ns: u64,
         cmd: &COMMAND_LONG_DATA,
         vehicle: &VehicleStatus,
-    ) -> MavResult {
-        let arm = if cmd.param1 == 1.0 {
-            true
-        } else if cmd.param1 == 0.0 {
-            false
-        } else {
-            return MavResult::MAV_RESULT_DENIED;
+    ) -> Option<MavResult> {
+        let arm = match cmd.param1.round() {
+            1.0 => true,
+            0.0 => false,
+            _ => return None,
         };
+        let rejected = Some(MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
         if arm == self.armed {
-            return MavResult::MAV_RESULT_ACCEPTED;
+            return Some(MavResult::MAV_RESULT_ACCEPTED);
         }
-        if arm {
-            if self.crashed || self.faults.reject_arming {
-                return MavResult::MAV_RESULT_DENIED;
-            }
-            if self.arm_rejections < self.faults.reject_arming_times {
-                self.arm_rejections += 1;
-                return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
-            }
-            if self.mode == FlightMode::Offboard && !self.offboard_available(now_ns) {
-                // PX4's mode requirements: OFFBOARD without a stream cannot arm.
-                return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
-            }
-            self.armed = true;
-            self.armed_at_ns = now_ns;
-            self.has_flown = false;
-            // Re-enter the mode so holds and takeoffs start from here.
-            self.enter_mode(self.mode, now_ns, vehicle);
-            MavResult::MAV_RESULT_ACCEPTED
-        } else {
+        if !arm {
             let on_ground = self.landed || vehicle.estimate.landed;
             if !on_ground && cmd.param2 != FORCE_DISARM_MAGIC {
-                return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
+                return rejected; // "Disarming denied: not landed"
             }
-            self.armed = false;
-            MavResult::MAV_RESULT_ACCEPTED
+            self.disarm();
+            return Some(MavResult::MAV_RESULT_ACCEPTED);
         }
+        if self.crashed || self.faults.reject_arming {
+            return rejected;
+        }
+        if self.arm_rejections < self.faults.reject_arming_times {
+            self.arm_rejections += 1;
+            return rejected;
+        }
+        // "Arming denied: Resolve system health failures first": the mode's
+        // requirements (modeCheck.cpp) - not in LAND, no RC for POSCTL here, a
+        // fresh offboard signal for OFFBOARD.
+        let mode = self.mode();
+        if mode.prevents_arming()
+            || mode == FlightMode::Posctl
+            || (mode == FlightMode::Offboard && !self.offboard_available(now_ns))
+        {
+            return rejected;
+        }
+        self.armed = true;
+        self.armed_at_ns = now_ns;
+        self.has_flown = false;
+        self.set_home(vehicle);
+        // Re-enter the mode so holds and takeoffs start from here.
+        self.enter_mode(mode, vehicle);
+        Some(MavResult::MAV_RESULT_ACCEPTED)
+    }
+
+    fn disarm(&mut self) {
+        self.armed = false;
+        self.failsafe = None;
+        self.takeoff = None;
+        // UserModeIntention::onDisarm.
+        self.intended = self.after_disarm;
+    }
+
+    fn set_home(&mut self, vehicle: &VehicleStatus) {
+        let est = &vehicle.estimate;
+        self.home = Some(Home {
+            position: est.position,
+            yaw: yaw_of(est),
+            alt_amsl: self.amsl_of(est.position.z),
+        });
     }
 
     #[allow(deprecated)] // SET_MODE, see the import.
@@ -631,22 +767,49 @@ impl Commander {
         match ModeRequest::from_main_sub(main, sub) {
             ModeRequest::Unknown => MavResult::MAV_RESULT_ACCEPTED,
             ModeRequest::NotSimulated => MavResult::MAV_RESULT_UNSUPPORTED,
+            ModeRequest::UnsupportedAuto => MavResult::MAV_RESULT_TEMPORARILY_REJECTED,
             ModeRequest::Simulated(FlightMode::Offboard) if self.faults.reject_offboard => {
-                MavResult::MAV_RESULT_DENIED
-            }
-            ModeRequest::Simulated(FlightMode::Offboard) if !self.offboard_available(now_ns) => {
                 MavResult::MAV_RESULT_TEMPORARILY_REJECTED
             }
             ModeRequest::Simulated(mode) => {
-                if mode != self.mode {
-                    if mode == FlightMode::AutoTakeoff {
-                        self.takeoff_alt_m = self.params.mis_takeoff_alt;
-                    }
-                    self.enter_mode(mode, now_ns, vehicle);
+                let result = self.change_mode(now_ns, mode, mode == FlightMode::AutoLand, vehicle);
+                if result == MavResult::MAV_RESULT_ACCEPTED && mode == FlightMode::AutoTakeoff {
+                    // No NAV_TAKEOFF: MIS_TAKEOFF_ALT above the current altitude.
+                    self.takeoff_param7 = None;
                 }
-                MavResult::MAV_RESULT_ACCEPTED
+                result
             }
         }
+    }
+
+    /// UserModeIntention::change: while armed a mode whose requirements are not
+    /// met is TEMPORARILY_REJECTED (unless `forced`); disarmed, every change is
+    /// accepted. An accepted change ends a failsafe (the user took over).
+    fn change_mode(
+        &mut self,
+        now_ns: u64,
+        mode: FlightMode,
+        forced: bool,
+        vehicle: &VehicleStatus,
+    ) -> MavResult {
+        if self.armed && !forced && !self.can_run(mode, now_ns) {
+            return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
+        }
+        if mode != self.mode() {
+            self.enter_mode(mode, vehicle);
+        }
+        self.intended = mode;
+        self.failsafe = None;
+        if !mode.prevents_arming() {
+            self.after_disarm = mode;
+        }
+        MavResult::MAV_RESULT_ACCEPTED
+    }
+
+    /// Mode requirements (mode_requirements.cpp) the simulator can miss: the
+    /// offboard signal. Position and attitude are always valid here.
+    fn can_run(&self, mode: FlightMode, now_ns: u64) -> bool {
+        mode != FlightMode::Offboard || self.offboard_available(now_ns)
     }
 
     fn set_message_interval(&mut self, now_ns: u64, id: f32, interval_us: f32) -> MavResult {
@@ -674,7 +837,7 @@ impl Commander {
         self.streams.iter().position(|s| s.id == id)
     }
 
-    fn enter_mode(&mut self, mode: FlightMode, _now_ns: u64, vehicle: &VehicleStatus) {
+    fn enter_mode(&mut self, mode: FlightMode, vehicle: &VehicleStatus) {
         let est = &vehicle.estimate;
         let yaw = yaw_of(est);
         match mode {
@@ -685,10 +848,9 @@ impl Commander {
             FlightMode::AutoTakeoff => self.takeoff = None,
             FlightMode::Offboard => self.setpoint = self.offboard_setpoint,
         }
-        if mode != self.mode {
-            tracing::debug!(from = ?self.mode, to = ?mode, "mode change");
+        if mode != self.mode() {
+            tracing::debug!(from = ?self.mode(), to = ?mode, "mode change");
         }
-        self.mode = mode;
     }
 
     /// Runs the commander for this step: failsafes, mode logic, auto-disarm,
@@ -697,8 +859,12 @@ impl Commander {
     pub fn update(&mut self, now_ns: u64, vehicle: &VehicleStatus) {
         self.crashed |= vehicle.crashed;
         self.update_silence(now_ns);
+        if self.home.is_none() {
+            // Home is set as soon as the position is valid (HomePosition.cpp).
+            self.set_home(vehicle);
+        }
         if self.crashed && self.armed {
-            self.armed = false;
+            self.disarm();
             self.events.push(CommanderEvent::DisarmCrash);
         }
         self.detect_landing(now_ns, vehicle);
@@ -711,9 +877,15 @@ impl Commander {
     fn detect_landing(&mut self, now_ns: u64, vehicle: &VehicleStatus) {
         if vehicle.estimate.landed {
             let since = *self.contact_since_ns.get_or_insert(now_ns);
-            self.landed = now_ns.saturating_sub(since) >= LAND_DETECT_NS;
+            // Landed stays landed (PX4 boots landed); a touchdown needs the detector.
+            self.landed |= now_ns.saturating_sub(since) >= LAND_DETECT_NS;
         } else {
             self.contact_since_ns = None;
+            if self.landed && self.armed {
+                // Takeoff detected: PX4 sets home again (landDetectorUpdate).
+                self.has_flown = true;
+                self.set_home(vehicle);
+            }
             self.landed = false;
             if self.armed {
                 self.has_flown = true;
@@ -721,22 +893,31 @@ impl Commander {
         }
     }
 
+    /// Failsafe::checkModeFallback: with OFFBOARD asked for and armed, a setpoint
+    /// older than COM_OF_LOSS_T switches to the COM_OBL_RC_ACT mode at once (no
+    /// COM_FAIL_ACT_T hold for this failsafe); fresh setpoints switch back.
     fn offboard_failsafe(&mut self, now_ns: u64, vehicle: &VehicleStatus) {
-        if self.mode != FlightMode::Offboard || !self.armed {
+        if self.intended != FlightMode::Offboard || !self.armed {
+            self.failsafe = None;
             return;
         }
-        let alive = self
-            .last_setpoint_ns
-            .is_some_and(|last| self.stream_alive(now_ns, last));
-        if !alive {
-            let mode = if self.params.com_obl_rc_act == 5 {
-                FlightMode::AutoLoiter
-            } else {
-                FlightMode::AutoLand
-            };
-            tracing::warn!(?mode, "offboard setpoints lost");
-            self.enter_mode(mode, now_ns, vehicle);
-            self.events.push(CommanderEvent::OffboardLost(mode));
+        let lost = !self.offboard_available(now_ns);
+        match (lost, self.failsafe) {
+            (true, None) => {
+                let action = OffboardLossAction::from_param(self.params.com_obl_rc_act)
+                    .unwrap_or(OffboardLossAction::Position);
+                let mode = action.mode();
+                tracing::warn!(?mode, "offboard setpoints lost");
+                self.enter_mode(mode, vehicle);
+                self.failsafe = Some(mode);
+                self.events.push(CommanderEvent::OffboardLost(mode));
+            }
+            (false, Some(_)) => {
+                self.failsafe = None;
+                self.enter_mode(FlightMode::Offboard, vehicle);
+                self.events.push(CommanderEvent::OffboardRegained);
+            }
+            _ => {}
         }
     }
 
@@ -746,7 +927,15 @@ impl Commander {
             self.setpoint = Setpoint::position(est.position, yaw_of(est));
             return;
         }
-        self.setpoint = match self.mode {
+        let spooling = self.landed
+            && now_ns.saturating_sub(self.armed_at_ns) < secs_to_ns(self.params.com_spoolup_time);
+        if spooling {
+            // The motors spool up for COM_SPOOLUP_TIME after arming: no take-off yet,
+            // in any mode.
+            self.setpoint = self.ground_idle(est);
+            return;
+        }
+        self.setpoint = match self.mode() {
             FlightMode::Posctl | FlightMode::AutoLoiter => {
                 Setpoint::position(self.hold_position, self.hold_yaw)
             }
@@ -757,60 +946,113 @@ impl Commander {
                 yaw: Some(self.hold_yaw),
                 ..Setpoint::default()
             },
-            FlightMode::AutoTakeoff => {
-                let alt = self.takeoff_alt_m;
-                let t = *self.takeoff.get_or_insert(Takeoff {
-                    start_ns: now_ns,
-                    start_z: est.position.z,
-                    target_z: alt,
-                    xy: [est.position.x, est.position.y],
-                    yaw: yaw_of(est),
-                });
-                if est.position.z >= t.target_z - TAKEOFF_ACCEPTANCE_M {
-                    self.mode = FlightMode::AutoLoiter;
-                    self.takeoff = None;
-                    self.hold_position =
-                        Vector3::new(t.xy[0], t.xy[1], t.target_z.max(est.position.z));
-                    self.hold_yaw = t.yaw;
-                    Setpoint::position(self.hold_position, self.hold_yaw)
-                } else {
-                    let elapsed = now_ns.saturating_sub(t.start_ns) as f64 * 1e-9;
-                    let z = (t.start_z + self.params.mpc_tko_speed * elapsed).min(t.target_z);
-                    let vz = if z < t.target_z {
-                        self.params.mpc_tko_speed
-                    } else {
-                        0.0
-                    };
-                    Setpoint {
-                        position: [Some(t.xy[0]), Some(t.xy[1]), Some(z)],
-                        velocity: [None, None, Some(vz)],
-                        yaw: Some(t.yaw),
-                        ..Setpoint::default()
-                    }
-                }
-            }
+            FlightMode::AutoTakeoff => self.fly_takeoff(now_ns, est),
         };
+        if self.landed && !wants_takeoff(&self.setpoint, est) {
+            // Landed, PX4's take-off state machine keeps the motors at idle until a
+            // setpoint asks to climb (Takeoff.cpp, FlightTask::_checkTakeoff).
+            self.setpoint = self.ground_idle(est);
+        }
     }
 
+    /// Motors at idle on the ground: hold xy, press down as AUTO.LAND does (thrust
+    /// below hover, so the land detector stays "landed").
+    fn ground_idle(&self, est: &EstimatedState) -> Setpoint {
+        Setpoint {
+            position: [Some(est.position.x), Some(est.position.y), None],
+            velocity: [None, None, Some(-self.params.mpc_land_speed)],
+            yaw: Some(yaw_of(est)),
+            ..Setpoint::default()
+        }
+    }
+
+    /// AUTO.TAKEOFF (takeoff.cpp): the target is NAV_TAKEOFF's param7 read as
+    /// AMSL, or the current altitude plus MIS_TAKEOFF_ALT when it is NaN or was
+    /// not given; a target below the current altitude is clamped to it ("Already
+    /// higher than takeoff altitude"), so a vehicle on the ground stays there.
+    /// Reached within NAV_MC_ALT_RAD (halved for a low takeoff), then AUTO.LOITER.
+    fn fly_takeoff(&mut self, now_ns: u64, est: &EstimatedState) -> Setpoint {
+        let t = match self.takeoff {
+            Some(t) => t,
+            None => {
+                let current = self.amsl_of(est.position.z);
+                let mut target = match self.takeoff_param7 {
+                    Some(p) if p.is_finite() => f64::from(p),
+                    _ => current + self.params.mis_takeoff_alt,
+                };
+                if target < current {
+                    tracing::warn!(
+                        target_amsl_m = target,
+                        current_amsl_m = current,
+                        "Already higher than takeoff altitude"
+                    );
+                    self.events.push(CommanderEvent::AlreadyHigher);
+                    target = current;
+                }
+                let t = Takeoff {
+                    start_ns: now_ns,
+                    start_z: est.position.z,
+                    target_z: target - self.params.sih_loc_h0,
+                    xy: [est.position.x, est.position.y],
+                    yaw: yaw_of(est),
+                };
+                self.takeoff = Some(t);
+                t
+            }
+        };
+        let home_z = self.home.map_or(0.0, |h| h.position.z);
+        let mut radius = self.params.nav_mc_alt_rad;
+        let above_home = t.target_z - home_z;
+        if above_home > 0.0 && above_home < radius {
+            radius = above_home / 2.0;
+        }
+        if !self.landed && est.position.z > t.target_z - radius {
+            // Checked in Commander::checkForMissionUpdate: on to Hold.
+            self.intended = FlightMode::AutoLoiter;
+            self.after_disarm = FlightMode::AutoLoiter;
+            self.takeoff = None;
+            self.hold_position = Vector3::new(t.xy[0], t.xy[1], t.target_z.max(est.position.z));
+            self.hold_yaw = t.yaw;
+            return Setpoint::position(self.hold_position, self.hold_yaw);
+        }
+        let elapsed = now_ns.saturating_sub(t.start_ns) as f64 * 1e-9;
+        let z = (t.start_z + self.params.mpc_tko_speed * elapsed).min(t.target_z);
+        let vz = if z < t.target_z {
+            self.params.mpc_tko_speed
+        } else {
+            0.0
+        };
+        Setpoint {
+            position: [Some(t.xy[0]), Some(t.xy[1]), Some(z)],
+            velocity: [None, None, Some(vz)],
+            yaw: Some(t.yaw),
+            ..Setpoint::default()
+        }
+    }
+
+    /// Commander::handleAutoDisarm: COM_DISARM_LAND after landing if the vehicle
+    /// took off since arming, else COM_SPOOLUP_TIME + COM_DISARM_PRFLT after
+    /// arming; a value <= 0 disables each.
     fn auto_disarm(&mut self, now_ns: u64) {
         if !self.armed || !self.landed {
             return;
         }
         if self.has_flown {
-            if self.params.com_disarm_land >= 0.0
+            if self.params.com_disarm_land > 0.0
                 && let Some(since) = self.contact_since_ns
             {
                 let after = LAND_DETECT_NS + secs_to_ns(self.params.com_disarm_land);
                 if now_ns.saturating_sub(since) >= after {
-                    self.armed = false;
+                    self.disarm();
                     self.events.push(CommanderEvent::AutoDisarmLanded);
                 }
             }
-        } else if self.params.com_disarm_prflt >= 0.0
-            && now_ns.saturating_sub(self.armed_at_ns) >= secs_to_ns(self.params.com_disarm_prflt)
-        {
-            self.armed = false;
-            self.events.push(CommanderEvent::AutoDisarmPreflight);
+        } else if self.params.com_disarm_prflt > 0.0 {
+            let after = secs_to_ns(self.params.com_spoolup_time + self.params.com_disarm_prflt);
+            if now_ns.saturating_sub(self.armed_at_ns) >= after {
+                self.disarm();
+                self.events.push(CommanderEvent::AutoDisarmPreflight);
+            }
         }
     }
 
@@ -834,10 +1076,23 @@ impl Commander {
         }
     }
 
+    /// Latitude and longitude (deg) of a local ENU position: PX4's map
+    /// projection around the SIH origin (azimuthal equidistant; flat at these
+    /// distances).
+    fn lat_lon_of(&self, p: &Vector3<f64>) -> (f64, f64) {
+        let lat0 = self.params.sih_loc_lat0;
+        let lat = lat0 + (p.y / EARTH_RADIUS_M).to_degrees();
+        let lon = self.params.sih_loc_lon0
+            + (p.x / (EARTH_RADIUS_M * lat0.to_radians().cos())).to_degrees();
+        (lat, lon)
+    }
+
     /// Builds telemetry message `id` for now, as PX4 would report it.
     fn telemetry(&self, id: u32, now_ns: u64, vehicle: &VehicleStatus) -> Option<MavMessage> {
         let est = &vehicle.estimate;
         let time_boot_ms = (now_ns / 1_000_000) as u32;
+        let deg_e7 = |deg: f64| (deg * 1e7).round() as i32;
+        let mm = |m: f64| (m * 1e3).round() as i32;
         Some(match id {
             msg_id::HEARTBEAT => MavMessage::HEARTBEAT(self.heartbeat()),
             msg_id::LOCAL_POSITION_NED => {
@@ -851,6 +1106,45 @@ impl Commander {
                     vx: v.x as f32,
                     vy: v.y as f32,
                     vz: v.z as f32,
+                })
+            }
+            msg_id::GLOBAL_POSITION_INT => {
+                let (lat, lon) = self.lat_lon_of(&est.position);
+                let alt = self.amsl_of(est.position.z);
+                // PX4's quirk: without a home altitude, relative_alt is the AMSL one.
+                let relative = self.home.map_or(alt, |h| alt - h.alt_amsl);
+                let v = enu_to_ned(&est.velocity);
+                let cm_s = |x: f64| (x * 100.0).round().clamp(-32768.0, 32767.0) as i16;
+                let hdg = yaw_enu_to_ned(yaw_of(est)).to_degrees().rem_euclid(360.0);
+                MavMessage::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+                    time_boot_ms,
+                    lat: deg_e7(lat),
+                    lon: deg_e7(lon),
+                    alt: mm(alt),
+                    relative_alt: mm(relative),
+                    vx: cm_s(v.x),
+                    vy: cm_s(v.y),
+                    vz: cm_s(v.z),
+                    hdg: ((hdg * 100.0).round() as u16) % 36000,
+                })
+            }
+            msg_id::HOME_POSITION => {
+                let h = self.home?;
+                let (lat, lon) = self.lat_lon_of(&h.position);
+                let p = enu_to_ned(&h.position);
+                let q = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw_enu_to_ned(h.yaw));
+                MavMessage::HOME_POSITION(HOME_POSITION_DATA {
+                    latitude: deg_e7(lat),
+                    longitude: deg_e7(lon),
+                    altitude: mm(h.alt_amsl),
+                    x: p.x as f32,
+                    y: p.y as f32,
+                    z: p.z as f32,
+                    q: [q.w as f32, q.i as f32, q.j as f32, q.k as f32],
+                    approach_x: 0.0,
+                    approach_y: 0.0,
+                    approach_z: 0.0,
+                    time_usec: now_ns / 1000,
                 })
             }
             msg_id::ATTITUDE_QUATERNION => {
@@ -905,28 +1199,34 @@ impl Commander {
         })
     }
 
-    /// The HEARTBEAT PX4 would send now (type, autopilot, mode flags, custom
-    /// mode, status).
+    /// The HEARTBEAT PX4 would send now (HEARTBEAT.hpp): base_mode CUSTOM plus
+    /// the control flags of the mode (AUTO modes 29, POSCTL 81, OFFBOARD 17;
+    /// +128 armed), system_status STANDBY / ACTIVE / CRITICAL (armed in a
+    /// failsafe) / EMERGENCY (crashed).
     pub fn heartbeat(&self) -> HEARTBEAT_DATA {
         let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-            | MavModeFlag::MAV_MODE_FLAG_STABILIZE_ENABLED
-            | MavModeFlag::MAV_MODE_FLAG_GUIDED_ENABLED;
-        base_mode |= match self.mode {
+            | MavModeFlag::MAV_MODE_FLAG_STABILIZE_ENABLED;
+        base_mode |= match self.mode() {
             FlightMode::Posctl => MavModeFlag::MAV_MODE_FLAG_MANUAL_INPUT_ENABLED,
-            _ => MavModeFlag::MAV_MODE_FLAG_AUTO_ENABLED,
+            FlightMode::Offboard => MavModeFlag::empty(),
+            FlightMode::AutoTakeoff | FlightMode::AutoLoiter | FlightMode::AutoLand => {
+                MavModeFlag::MAV_MODE_FLAG_AUTO_ENABLED | MavModeFlag::MAV_MODE_FLAG_GUIDED_ENABLED
+            }
         };
         if self.armed {
             base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
         }
         let system_status = if self.crashed {
             MavState::MAV_STATE_EMERGENCY
+        } else if self.armed && self.failsafe.is_some() {
+            MavState::MAV_STATE_CRITICAL
         } else if self.armed {
             MavState::MAV_STATE_ACTIVE
         } else {
             MavState::MAV_STATE_STANDBY
         };
         HEARTBEAT_DATA {
-            custom_mode: self.mode.custom_mode(),
+            custom_mode: self.mode().custom_mode(),
             mavtype: MavType::MAV_TYPE_QUADROTOR,
             autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
             base_mode,
@@ -936,6 +1236,22 @@ impl Commander {
     }
 }
 
+/// Whether a setpoint asks a landed multicopter to take off (FlightTask::_checkTakeoff):
+/// a position more than 0.2 m above it, or a climb faster than 0.3 m/s.
+fn wants_takeoff(sp: &Setpoint, est: &EstimatedState) -> bool {
+    sp.position[2].is_some_and(|z| z > est.position.z + 0.2)
+        || sp.velocity[2].is_some_and(|vz| vz > 0.3)
+}
+
+/// Whether PX4's receiver passes a COMMAND_LONG to its commander: our system
+/// (1), or 0 for the broadcast requests only; component 1 or 0.
+fn command_addressed_to_us(cmd: &COMMAND_LONG_DATA) -> bool {
+    let system_ok = cmd.target_system == 1
+        || (cmd.target_system == 0 && BROADCAST_COMMANDS.contains(&cmd.command));
+    system_ok && (cmd.target_component == 0 || cmd.target_component == 1)
+}
+
+/// Whether a setpoint or SET_MODE is for us (system 1 or 0, component 1 or 0).
 fn addressed_to_us(system: u8, component: u8) -> bool {
     (system == 0 || system == 1) && (component == 0 || component == 1)
 }

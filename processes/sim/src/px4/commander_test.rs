@@ -65,6 +65,32 @@ fn command(c: &mut Commander, now: u64, msg: &MavMessage, v: &VehicleStatus) -> 
     acks[0].result
 }
 
+/// Sends a command; returns every ACK it produced (PX4 sends none for some).
+fn acks(c: &mut Commander, now: u64, msg: &MavMessage, v: &VehicleStatus) -> Vec<MavResult> {
+    c.take_outgoing();
+    c.handle_message(now, &COMPANION, msg, v);
+    c.take_outgoing()
+        .into_iter()
+        .filter_map(|m| match m {
+            MavMessage::COMMAND_ACK(a) => Some(a.result),
+            _ => None,
+        })
+        .collect()
+}
+
+/// NAV_TAKEOFF with `param7` (AMSL, or NaN).
+fn takeoff_msg(param7: f32) -> MavMessage {
+    cmd(
+        MavCmd::MAV_CMD_NAV_TAKEOFF,
+        [0.0, 0.0, 0.0, f32::NAN, f32::NAN, f32::NAN, param7],
+    )
+}
+
+/// The AMSL altitude of local height `z` with the default SIH origin.
+fn amsl(z: f64) -> f32 {
+    (Px4Params::default().sih_loc_h0 + z) as f32
+}
+
 fn arm_msg(arm: bool) -> MavMessage {
     cmd(
         MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
@@ -109,6 +135,11 @@ fn pos_sp(x: f32, y: f32, z: f32) -> MavMessage {
     )
 }
 
+/// Motors at idle on the ground: xy held, pressed down, no height.
+fn ground_idle(sp: &Setpoint) -> bool {
+    sp.position[2].is_none() && sp.velocity[2].is_some_and(|vz| vz < 0.0)
+}
+
 fn new() -> Commander {
     Commander::new(Px4Params::default()).unwrap()
 }
@@ -138,6 +169,16 @@ fn params_parse_with_px4_names_and_validate() {
         ..Px4Params::default()
     };
     assert!(bad.validate().is_err());
+    // PX4 v1.16's defaults: Position on offboard loss, SIH home at 489.4 m.
+    let d = Px4Params::default();
+    assert_eq!(
+        (d.com_obl_rc_act, d.sih_loc_h0, d.nav_mc_alt_rad),
+        (0, 489.4, 0.8)
+    );
+    assert_eq!(
+        (d.com_disarm_prflt, d.com_spoolup_time, d.com_disarm_land),
+        (10.0, 1.0, 2.0)
+    );
     let bad = Px4Params {
         mpc_land_speed: f64::NAN,
         ..Px4Params::default()
@@ -167,6 +208,18 @@ fn custom_mode_packing() {
         );
     }
     assert_eq!(ModeRequest::from_main_sub(4, 5), ModeRequest::NotSimulated);
+    assert_eq!(
+        ModeRequest::from_main_sub(4, 10),
+        ModeRequest::UnsupportedAuto
+    );
+    assert_eq!(
+        ModeRequest::from_main_sub(4, 1),
+        ModeRequest::UnsupportedAuto
+    );
+    assert_eq!(
+        ModeRequest::from_main_sub(3, 1),
+        ModeRequest::Simulated(FlightMode::Posctl)
+    );
     assert_eq!(ModeRequest::from_main_sub(1, 0), ModeRequest::NotSimulated);
     assert_eq!(ModeRequest::from_main_sub(0, 6), ModeRequest::Unknown);
     assert_eq!(ModeRequest::from_main_sub(42, 0), ModeRequest::Unknown);
@@ -197,17 +250,27 @@ fn heartbeat_at_1_hz_with_px4_identity() {
             .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED)
     );
     assert_eq!(h.system_status, MavState::MAV_STATE_STANDBY);
-    assert_eq!(h.custom_mode, FlightMode::Posctl.custom_mode());
+    // PX4 v1.16 boots into Hold; an AUTO mode's base_mode is 29 disarmed.
+    assert_eq!(h.custom_mode, FlightMode::AutoLoiter.custom_mode());
+    assert_eq!(h.base_mode.bits(), 29);
     assert_eq!(
         command(&mut c, 3 * S, &arm_msg(true), &v),
         MavResult::MAV_RESULT_ACCEPTED
     );
     let h = c.heartbeat();
-    assert!(
-        h.base_mode
-            .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED)
-    );
+    assert_eq!(h.base_mode.bits(), 157, "AUTO armed");
     assert_eq!(h.system_status, MavState::MAV_STATE_ACTIVE);
+}
+
+#[test]
+fn heartbeat_base_mode_per_mode_is_px4s() {
+    let mut c = new();
+    let g = ground();
+    c.handle_message(0, &COMPANION, &pos_sp(0.0, 0.0, 0.0), &g);
+    command(&mut c, 0, &set_mode_msg(6.0, 0.0), &g);
+    assert_eq!(c.heartbeat().base_mode.bits(), 17, "OFFBOARD");
+    command(&mut c, 0, &set_mode_msg(3.0, 0.0), &g);
+    assert_eq!(c.heartbeat().base_mode.bits(), 81, "POSCTL");
 }
 
 #[test]
@@ -229,6 +292,8 @@ fn telemetry_default_rates_and_frames() {
     assert_eq!(n(msg_id::ATTITUDE_QUATERNION), 50);
     assert!((29..=31).contains(&n(msg_id::LOCAL_POSITION_NED)));
     assert_eq!(n(msg_id::EXTENDED_SYS_STATE), 5);
+    assert_eq!(n(msg_id::GLOBAL_POSITION_INT), 5);
+    assert_eq!(n(msg_id::HOME_POSITION), 1, "0.5 Hz");
     assert_eq!(n(msg_id::ODOMETRY), 0);
     for m in &out {
         match m {
@@ -244,6 +309,20 @@ fn telemetry_default_rates_and_frames() {
             MavMessage::EXTENDED_SYS_STATE(s) => {
                 // Disarmed counts as on the ground.
                 assert_eq!(s.landed_state, MavLandedState::MAV_LANDED_STATE_ON_GROUND);
+            }
+            MavMessage::GLOBAL_POSITION_INT(g) => {
+                // AMSL in mm; home was set at the first update (here, at 3 m).
+                assert_eq!(g.alt, 492_400);
+                assert_eq!(g.relative_alt, 0);
+                assert_eq!([g.vx, g.vy, g.vz], [0, 100, -50]);
+                // 2 m north, 1 m east of the SIH origin.
+                let lat = 47.397742 + (2.0f64 / 6_371_000.0).to_degrees();
+                assert!((f64::from(g.lat) * 1e-7 - lat).abs() < 2e-7);
+                assert!(f64::from(g.lon) * 1e-7 > 8.545594);
+            }
+            MavMessage::HOME_POSITION(h) => {
+                assert_eq!(h.altitude, 492_400);
+                assert_eq!([h.x, h.y, h.z], [2.0, 1.0, -3.0]);
             }
             _ => {}
         }
@@ -352,12 +431,12 @@ fn arm_disarm_results() {
         command(&mut c, 0, &arm_msg(true), &g),
         MavResult::MAV_RESULT_ACCEPTED
     );
-    // Bad param1.
+    // param1 neither 0 nor 1 (rounded): PX4 sends no ACK at all.
     let bad = cmd(
         MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-        [0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
     );
-    assert_eq!(command(&mut c, 0, &bad, &g), MavResult::MAV_RESULT_DENIED);
+    assert!(acks(&mut c, 0, &bad, &g).is_empty());
     // Disarm in the air refused unless forced.
     let air = status(3.0, false);
     c.update(10 * MS, &air);
@@ -375,13 +454,13 @@ fn arm_disarm_results() {
         MavResult::MAV_RESULT_ACCEPTED
     );
     assert!(!c.armed());
-    // Crashed: arming denied.
+    // Crashed: arming refused, as every arming refusal, TEMPORARILY_REJECTED.
     let mut crashed = ground();
     crashed.crashed = true;
     c.update(40 * MS, &crashed);
     assert_eq!(
         command(&mut c, 50 * MS, &arm_msg(true), &crashed),
-        MavResult::MAV_RESULT_DENIED
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
     );
     assert!(!c.armed());
     assert_eq!(c.heartbeat().system_status, MavState::MAV_STATE_EMERGENCY);
@@ -410,6 +489,12 @@ fn commands_for_other_systems_are_ignored_and_unknown_ones_unsupported() {
     c.handle_message(0, &COMPANION, &m, &g);
     assert!(c.take_outgoing().is_empty());
     assert!(!c.armed());
+    // Broadcast (target_system 0): PX4's receiver drops it too.
+    if let MavMessage::COMMAND_LONG(d) = &mut m {
+        d.target_system = 0;
+    }
+    assert!(acks(&mut c, 0, &m, &g).is_empty());
+    assert!(!c.armed());
     let r = command(&mut c, 0, &cmd(MavCmd::MAV_CMD_DO_REPOSITION, [0.0; 7]), &g);
     assert_eq!(r, MavResult::MAV_RESULT_UNSUPPORTED);
 }
@@ -419,19 +504,15 @@ fn takeoff_climbs_at_tko_speed_then_loiters() {
     let mut c = new();
     let g = ground();
     command(&mut c, 0, &arm_msg(true), &g);
-    let r = command(
-        &mut c,
-        0,
-        &cmd(
-            MavCmd::MAV_CMD_NAV_TAKEOFF,
-            [0.0, 0.0, 0.0, f32::NAN, f32::NAN, f32::NAN, f32::NAN],
-        ),
-        &g,
-    );
+    let r = command(&mut c, 0, &takeoff_msg(f32::NAN), &g);
     assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
     assert_eq!(c.mode(), FlightMode::AutoTakeoff);
     c.update(0, &g);
-    c.update(S, &status(1.0, false));
+    // COM_SPOOLUP_TIME (1 s) after arming: motors at idle, no climb yet.
+    c.update(500 * MS, &g);
+    assert!(ground_idle(&c.setpoint()), "{:?}", c.setpoint());
+    c.update(S, &g);
+    c.update(2 * S, &status(1.0, false));
     assert_eq!(c.landed_state(), LandedState::Takeoff);
     let sp = c.setpoint();
     assert_eq!(sp.position[0], Some(1.0));
@@ -441,45 +522,103 @@ fn takeoff_climbs_at_tko_speed_then_loiters() {
         "ramp at 1.5 m/s"
     );
     assert_eq!(sp.velocity[2], Some(1.5));
-    // Reaching MIS_TAKEOFF_ALT (2.5 m) switches to AUTO.LOITER there.
-    c.update(2 * S, &status(2.4, false));
+    // Within NAV_MC_ALT_RAD (0.8 m) of MIS_TAKEOFF_ALT (2.5 m): AUTO.LOITER there.
+    c.update(3 * S, &status(1.6, false));
+    assert_eq!(c.mode(), FlightMode::AutoTakeoff);
+    c.update(3 * S + 100 * MS, &status(1.8, false));
     assert_eq!(c.mode(), FlightMode::AutoLoiter);
     assert_eq!(c.landed_state(), LandedState::InAir);
     let sp = c.setpoint();
     assert_eq!(sp.position, [Some(1.0), Some(2.0), Some(2.5)]);
-    // param7 gives the altitude.
-    let r = command(
-        &mut c,
-        3 * S,
-        &cmd(
-            MavCmd::MAV_CMD_NAV_TAKEOFF,
-            [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 6.0],
-        ),
-        &status(2.5, false),
-    );
+    // param7 gives the altitude, above mean sea level.
+    let r = command(&mut c, 3 * S, &takeoff_msg(amsl(6.0)), &status(2.5, false));
     assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
     c.update(3 * S, &status(2.5, false));
     c.update(4 * S, &status(3.0, false));
     assert_eq!(c.mode(), FlightMode::AutoTakeoff);
-    c.update(5 * S, &status(5.9, false));
+    c.update(5 * S, &status(5.3, false));
     assert_eq!(c.mode(), FlightMode::AutoLoiter);
-    assert_eq!(c.setpoint().position[2], Some(6.0));
+    let z = c.setpoint().position[2].unwrap();
+    assert!(
+        (z - 6.0).abs() < 1e-4,
+        "loiters at the takeoff altitude: {z}"
+    );
+}
+
+#[test]
+fn takeoff_below_the_current_altitude_is_clamped_and_the_vehicle_stays_down() {
+    // The bug PX4 showed the stack: param7 = 2.5 read as 2.5 m AMSL, home at
+    // 489.4 m. ACCEPTED, "Already higher than takeoff altitude", no climb, and
+    // the pre-flight auto-disarm 11 s after arming.
+    let mut c = new();
+    let g = ground();
+    command(&mut c, 0, &arm_msg(true), &g);
+    assert_eq!(
+        command(&mut c, 0, &takeoff_msg(2.5), &g),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    let mut t = 0;
+    while t < 11 * S - 10 * MS {
+        c.update(t, &g);
+        assert!(ground_idle(&c.setpoint()), "no climb: {:?}", c.setpoint());
+        t += 10 * MS;
+    }
+    assert!(c.armed());
+    assert_eq!(c.mode(), FlightMode::AutoTakeoff);
+    c.update(11 * S, &g);
+    assert!(!c.armed());
+    assert_eq!(
+        c.take_events(),
+        vec![
+            CommanderEvent::AlreadyHigher,
+            CommanderEvent::AutoDisarmPreflight
+        ]
+    );
+    // Takeoff does not prevent arming: it stays the mode after the disarm.
+    assert_eq!(c.mode(), FlightMode::AutoTakeoff);
+}
+
+#[test]
+fn takeoff_param7_is_amsl_whatever_the_home_altitude() {
+    for h0 in [488.0, 0.0, -10.0] {
+        let mut c = Commander::new(Px4Params {
+            sih_loc_h0: h0,
+            ..Px4Params::default()
+        })
+        .unwrap();
+        let g = ground();
+        c.update(0, &g);
+        assert_eq!(c.home().unwrap().alt_amsl, h0);
+        command(&mut c, 0, &arm_msg(true), &g);
+        command(&mut c, 0, &takeoff_msg((h0 + 4.0) as f32), &g);
+        c.update(0, &g);
+        c.update(S, &status(1.5, false));
+        assert!(c.take_events().is_empty(), "home {h0}: no clamp");
+        c.update(4 * S, &status(3.5, false));
+        assert_eq!(c.mode(), FlightMode::AutoLoiter, "home {h0}");
+        let z = c.setpoint().position[2].unwrap();
+        assert!((z - 4.0).abs() < 1e-3, "home {h0}: {z}");
+    }
 }
 
 #[test]
 fn takeoff_while_disarmed_waits_for_arming() {
     let mut c = new();
     let g = ground();
-    let to = cmd(MavCmd::MAV_CMD_NAV_TAKEOFF, [0.0; 7]);
+    let to = takeoff_msg(f32::NAN);
     assert_eq!(command(&mut c, 0, &to, &g), MavResult::MAV_RESULT_ACCEPTED);
     c.update(S, &g);
     assert_eq!(c.mode(), FlightMode::AutoTakeoff);
     assert_eq!(c.landed_state(), LandedState::OnGround);
     command(&mut c, 2 * S, &arm_msg(true), &g);
     c.update(2 * S, &g);
-    c.update(2 * S + 500 * MS, &g);
+    c.update(3 * S, &g);
+    c.update(3 * S + 500 * MS, &g);
     let z = c.setpoint().position[2].unwrap();
-    assert!((z - 0.75).abs() < 1e-9, "ramp starts at arming: {z}");
+    assert!(
+        (z - 0.75).abs() < 1e-9,
+        "ramp starts after the spool-up: {z}"
+    );
 }
 
 #[test]
@@ -505,9 +644,16 @@ fn land_descends_then_disarms_after_com_disarm_land() {
     }
     assert_eq!(c.landed_state(), LandedState::OnGround);
     assert!(c.armed());
+    assert_eq!(
+        c.mode(),
+        FlightMode::AutoLand,
+        "LAND while armed on the ground"
+    );
     c.update(S + LAND_DETECT_NS + 2 * S + 2 * MS, &ground());
     assert!(!c.armed());
-    assert_eq!(c.mode(), FlightMode::AutoLand);
+    // After the disarm: the last mode asked for that does not prevent arming
+    // (here the boot mode, Hold); LAND never sticks.
+    assert_eq!(c.mode(), FlightMode::AutoLoiter);
     assert_eq!(c.take_events(), vec![CommanderEvent::AutoDisarmLanded]);
 }
 
@@ -516,70 +662,73 @@ fn preflight_auto_disarm() {
     let mut c = new();
     let g = ground();
     command(&mut c, 0, &arm_msg(true), &g);
+    // COM_SPOOLUP_TIME + COM_DISARM_PRFLT = 11 s.
     let mut t = 0;
-    while t < 10 * S - 10 * MS {
+    while t < 11 * S - 10 * MS {
         c.update(t, &g);
         t += 10 * MS;
     }
     assert!(c.armed());
-    c.update(10 * S, &g);
+    c.update(11 * S, &g);
     assert!(!c.armed());
     assert_eq!(c.take_events(), vec![CommanderEvent::AutoDisarmPreflight]);
 }
 
 #[test]
-fn offboard_needs_a_one_second_stream() {
+fn offboard_needs_only_a_setpoint_younger_than_com_of_loss_t() {
     let mut c = new();
     let g = ground();
-    // No stream at all.
+    // Disarmed: the mode change is always accepted, even with no setpoint.
     assert_eq!(
         command(&mut c, 0, &set_mode_msg(6.0, 0.0), &g),
-        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
-    );
-    assert_eq!(c.mode(), FlightMode::Posctl);
-    // 0.5 s of stream: still refused.
-    let t = stream(&mut c, 0, 500 * MS, &g);
-    assert_eq!(
-        command(&mut c, t, &set_mode_msg(6.0, 0.0), &g),
-        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
-    );
-    assert_eq!(c.mode(), FlightMode::Posctl);
-    // Setpoints do not drive the vehicle outside OFFBOARD.
-    command(&mut c, t, &arm_msg(true), &g);
-    c.update(t, &g);
-    assert_eq!(c.setpoint().position[2], Some(0.0));
-    // >= 1 s: accepted, and the setpoint (NED z -2 = ENU z 2) applies.
-    let t = stream(&mut c, t, 600 * MS, &g);
-    assert!(c.offboard_available(t));
-    assert_eq!(
-        command(&mut c, t, &set_mode_msg(6.0, 0.0), &g),
         MavResult::MAV_RESULT_ACCEPTED
     );
     assert_eq!(c.mode(), FlightMode::Offboard);
-    assert_eq!(c.heartbeat().custom_mode, 6 << 16);
+    // Arming needs the offboard signal: refused without, accepted after one setpoint.
+    assert_eq!(
+        command(&mut c, 0, &arm_msg(true), &g),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+    );
+    c.handle_message(10 * MS, &COMPANION, &pos_sp(0.0, 0.0, -2.0), &g);
+    assert!(c.offboard_available(10 * MS + 999 * MS));
+    assert!(!c.offboard_available(10 * MS + S));
+    assert_eq!(
+        command(&mut c, 20 * MS, &arm_msg(true), &g),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    // After the spool-up, the setpoint (NED z -2 = ENU z 2) applies.
+    let t = stream(&mut c, 20 * MS, 1100 * MS, &g);
     c.update(t, &g);
     assert_eq!(c.setpoint().position, [Some(0.0), Some(0.0), Some(2.0)]);
 }
 
 #[test]
-fn a_gap_restarts_the_stream_clock() {
+fn armed_offboard_without_a_fresh_setpoint_is_temporarily_rejected() {
     let mut c = new();
     let g = ground();
-    let t = stream(&mut c, 0, 800 * MS, &g);
-    // A 1.5 s gap (> COM_OF_LOSS_T), then 0.5 s more: not 1 s continuous.
-    let t = stream(&mut c, t + 1500 * MS, 500 * MS, &g);
-    assert!(!c.offboard_available(t));
+    command(&mut c, 0, &arm_msg(true), &g);
     assert_eq!(
-        command(&mut c, t, &set_mode_msg(6.0, 0.0), &g),
+        command(&mut c, 0, &set_mode_msg(6.0, 0.0), &g),
         MavResult::MAV_RESULT_TEMPORARILY_REJECTED
     );
+    assert_eq!(c.mode(), FlightMode::AutoLoiter);
+    // One setpoint is enough (no 1 s stream), and setpoints do not move the
+    // vehicle outside OFFBOARD.
+    c.handle_message(S, &COMPANION, &pos_sp(0.0, 0.0, -2.0), &g);
+    c.update(S, &g);
+    assert!(ground_idle(&c.setpoint()), "{:?}", c.setpoint());
+    assert_eq!(
+        command(&mut c, S, &set_mode_msg(6.0, 0.0), &g),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(c.heartbeat().custom_mode, 6 << 16);
 }
 
 #[test]
 fn arming_in_offboard_without_stream_is_rejected() {
     let mut c = new();
     let g = ground();
-    let t = stream(&mut c, 0, 1200 * MS, &g);
+    let t = stream(&mut c, 0, 200 * MS, &g);
     command(&mut c, t, &set_mode_msg(6.0, 0.0), &g);
     assert_eq!(c.mode(), FlightMode::Offboard);
     // Stream stops; disarmed, so no failsafe, but arming is refused.
@@ -598,7 +747,7 @@ fn offboard_loss(action: u8) -> (FlightMode, u64, Vec<CommanderEvent>) {
     })
     .unwrap();
     let air = status(2.0, false);
-    let t = stream(&mut c, 0, 1200 * MS, &air);
+    let t = stream(&mut c, 0, 200 * MS, &air);
     command(&mut c, t, &arm_msg(true), &air);
     command(&mut c, t, &set_mode_msg(6.0, 0.0), &air);
     assert_eq!(c.mode(), FlightMode::Offboard);
@@ -612,7 +761,44 @@ fn offboard_loss(action: u8) -> (FlightMode, u64, Vec<CommanderEvent>) {
 }
 
 #[test]
-fn offboard_loss_lands_after_com_of_loss_t() {
+fn offboard_loss_switches_to_position_by_default_after_com_of_loss_t() {
+    let (mode, after, events) = offboard_loss(0);
+    assert_eq!(mode, FlightMode::Posctl);
+    assert!((1000 * MS..=1010 * MS).contains(&after), "after {after} ns");
+    assert_eq!(
+        events,
+        vec![CommanderEvent::OffboardLost(FlightMode::Posctl)]
+    );
+}
+
+#[test]
+fn offboard_comes_back_when_setpoints_resume_after_a_loss() {
+    let mut c = new();
+    let air = status(2.0, false);
+    let t = stream(&mut c, 0, 200 * MS, &air);
+    command(&mut c, t, &arm_msg(true), &air);
+    command(&mut c, t, &set_mode_msg(6.0, 0.0), &air);
+    let mut now = t;
+    while now < t + 2 * S {
+        c.update(now, &air);
+        now += 2 * MS;
+    }
+    assert_eq!(c.mode(), FlightMode::Posctl);
+    assert_eq!(c.heartbeat().system_status, MavState::MAV_STATE_CRITICAL);
+    stream(&mut c, now, 100 * MS, &air);
+    assert_eq!(c.mode(), FlightMode::Offboard);
+    assert_eq!(c.heartbeat().system_status, MavState::MAV_STATE_ACTIVE);
+    assert_eq!(
+        c.take_events(),
+        vec![
+            CommanderEvent::OffboardLost(FlightMode::Posctl),
+            CommanderEvent::OffboardRegained
+        ]
+    );
+}
+
+#[test]
+fn offboard_loss_lands_after_com_of_loss_t_with_com_obl_rc_act_4() {
     let (mode, after, events) = offboard_loss(4);
     assert_eq!(mode, FlightMode::AutoLand);
     assert!((1000 * MS..=1010 * MS).contains(&after), "after {after} ns");
@@ -637,6 +823,8 @@ fn do_set_mode_results() {
     let mut c = new();
     let air = status(2.0, false);
     command(&mut c, 0, &arm_msg(true), &ground());
+    // Hold was the boot mode; from POSCTL, entering it holds where the vehicle is.
+    command(&mut c, 0, &set_mode_msg(3.0, 0.0), &air);
     assert_eq!(
         command(&mut c, 0, &set_mode_msg(4.0, 3.0), &air),
         MavResult::MAV_RESULT_ACCEPTED
@@ -681,7 +869,14 @@ fn do_set_mode_results() {
     assert_eq!(c.mode(), FlightMode::Posctl);
     assert_eq!(
         command(&mut c, 0, &set_mode_msg(f32::NAN, 0.0), &air),
-        MavResult::MAV_RESULT_DENIED
+        MavResult::MAV_RESULT_ACCEPTED,
+        "no mode: nothing changes"
+    );
+    assert_eq!(c.mode(), FlightMode::Posctl);
+    // An AUTO sub mode PX4 does not have: "Unsupported auto mode".
+    assert_eq!(
+        command(&mut c, 0, &set_mode_msg(4.0, 10.0), &air),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
     );
     // DO_SET_MODE to AUTO.TAKEOFF uses MIS_TAKEOFF_ALT.
     assert_eq!(
@@ -787,14 +982,14 @@ fn with_faults(f: Faults) -> Commander {
 }
 
 #[test]
-fn the_reject_arming_fault_denies_every_arm() {
+fn the_reject_arming_fault_refuses_every_arm() {
     let mut c = with_faults(Faults {
         reject_arming: true,
         ..Faults::default()
     });
     for t in 0..3 {
         let r = command(&mut c, t * S, &arm_msg(true), &ground());
-        assert_eq!(r, MavResult::MAV_RESULT_DENIED);
+        assert_eq!(r, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
     }
     assert!(!c.armed());
 }
@@ -822,7 +1017,7 @@ fn the_reject_arming_times_fault_rejects_temporarily_then_arms() {
 }
 
 #[test]
-fn the_reject_offboard_fault_denies_offboard_even_with_a_stream() {
+fn the_reject_offboard_fault_refuses_offboard_even_with_a_stream() {
     let mut c = with_faults(Faults {
         reject_offboard: true,
         ..Faults::default()
@@ -832,7 +1027,7 @@ fn the_reject_offboard_fault_denies_offboard_even_with_a_stream() {
     assert!(c.offboard_available(t));
     assert_eq!(
         command(&mut c, t, &set_mode_msg(6.0, 0.0), &v),
-        MavResult::MAV_RESULT_DENIED
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
     );
     assert_ne!(c.mode(), FlightMode::Offboard);
     // Other modes still switch.
@@ -870,4 +1065,25 @@ fn contradictory_arming_faults_are_refused() {
         })
         .unwrap_err();
     assert_eq!(e.field, "reject_arming_times");
+}
+
+#[test]
+fn a_landed_vehicle_stays_at_idle_until_a_setpoint_asks_it_to_climb() {
+    // PX4's take-off state machine: a position more than 0.2 m up or a climb faster
+    // than 0.3 m/s starts a take-off; anything less keeps the motors at idle.
+    let mut c = new();
+    let g = ground();
+    c.handle_message(0, &COMPANION, &pos_sp(0.0, 0.0, -0.1), &g);
+    command(&mut c, 0, &set_mode_msg(6.0, 0.0), &g);
+    command(&mut c, 0, &arm_msg(true), &g);
+    let mut t = 0;
+    while t < 1200 * MS {
+        c.handle_message(t, &COMPANION, &pos_sp(0.0, 0.0, -0.1), &g);
+        c.update(t, &g);
+        t += 20 * MS;
+    }
+    assert!(ground_idle(&c.setpoint()), "10 cm up: idle");
+    c.handle_message(t, &COMPANION, &pos_sp(0.0, 0.0, -0.5), &g);
+    c.update(t, &g);
+    assert_eq!(c.setpoint().position[2], Some(0.5), "50 cm up: take-off");
 }

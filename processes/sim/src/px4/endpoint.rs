@@ -18,11 +18,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use mavlink::MavHeader;
-use mavlink::dialects::common::MavMessage;
+use mavlink::dialects::common::{MavMessage, MavResult};
 use serde::Deserialize;
 use thiserror::Error;
 
 use super::commander::{Commander, Px4Params, VehicleStatus};
+use super::raw::{UnknownCommand, command_ack_frame, unknown_commands};
 use crate::lockstep::{PHYSICS_STEP_NS, Simulator, StepReport};
 use crate::params::ParamError;
 use crate::world::{World, WorldError};
@@ -106,6 +107,7 @@ pub struct Endpoint {
     sequence: u8,
     stats: EndpointStats,
     buf: Vec<u8>,
+    unknown: Vec<UnknownCommand>,
 }
 
 impl Endpoint {
@@ -126,6 +128,7 @@ impl Endpoint {
             sequence: 0,
             stats: EndpointStats::default(),
             buf: vec![0; MAX_DATAGRAM],
+            unknown: Vec::new(),
         })
     }
 
@@ -155,6 +158,9 @@ impl Endpoint {
                     self.peer = Some(from);
                     let before = out.len();
                     let errors = decode_datagram(&self.buf[..len], &mut out);
+                    if errors > 0 {
+                        self.unknown.extend(unknown_commands(&self.buf[..len]));
+                    }
                     self.stats.parse_errors += errors;
                     let decoded = (out.len() - before) as u64;
                     self.stats.messages_received += decoded;
@@ -186,14 +192,50 @@ impl Endpoint {
         Ok(out)
     }
 
-    /// Sends each message to the last peer and to the configured remote.
-    /// Sends `msgs` to the last peer and to the configured remote.
-    pub fn send(&mut self, msgs: &[MavMessage]) {
+    /// The commands with a number the dialect lacks that arrived since the last call.
+    pub fn take_unknown_commands(&mut self) -> Vec<UnknownCommand> {
+        std::mem::take(&mut self.unknown)
+    }
+
+    /// Answers `cmd` MAV_RESULT_UNSUPPORTED as PX4's commander does, if it was sent to
+    /// us (our system, component ours or 0); otherwise nothing, as PX4's receiver.
+    pub fn answer_unsupported(&mut self, cmd: &UnknownCommand) {
+        let ours = cmd.target_system == self.config.system_id
+            && (cmd.target_component == 0 || cmd.target_component == self.config.component_id);
+        if !ours {
+            return;
+        }
+        let frame = command_ack_frame(
+            self.sequence,
+            self.config.system_id,
+            self.config.component_id,
+            cmd,
+            MavResult::MAV_RESULT_UNSUPPORTED as u8,
+        );
+        self.sequence = self.sequence.wrapping_add(1);
+        self.send_frame(&frame);
+    }
+
+    /// Sends one encoded frame to the last peer and to the configured remote.
+    fn send_frame(&mut self, frame: &[u8]) {
         let mut targets: [Option<SocketAddr>; 2] = [self.peer, self.config.remote];
         if targets[0] == targets[1] {
             targets[1] = None;
         }
-        if targets.iter().all(Option::is_none) {
+        for to in targets.iter().flatten() {
+            match self.socket.send_to(frame, to) {
+                Ok(_) => self.stats.messages_sent += 1,
+                Err(e) => {
+                    self.stats.io_errors += 1;
+                    tracing::trace!(%to, error = %e, "MAVLink send failed");
+                }
+            }
+        }
+    }
+
+    /// Sends `msgs` to the last peer and to the configured remote.
+    pub fn send(&mut self, msgs: &[MavMessage]) {
+        if self.peer.is_none() && self.config.remote.is_none() {
             return;
         }
         let mut frame = Vec::with_capacity(300);
@@ -209,15 +251,7 @@ impl Endpoint {
                 self.stats.io_errors += 1;
                 continue;
             }
-            for to in targets.iter().flatten() {
-                match self.socket.send_to(&frame, to) {
-                    Ok(_) => self.stats.messages_sent += 1,
-                    Err(e) => {
-                        self.stats.io_errors += 1;
-                        tracing::trace!(%to, error = %e, "MAVLink send failed");
-                    }
-                }
-            }
+            self.send_frame(&frame);
         }
     }
 }
@@ -291,6 +325,11 @@ impl SimVehicle {
     pub fn step(&mut self) -> Result<StepReport, EndpointError> {
         for (header, msg) in self.endpoint.receive()? {
             self.sim.handle_mavlink(&header, &msg);
+        }
+        for cmd in self.endpoint.take_unknown_commands() {
+            if !self.sim.autopilot_silent() {
+                self.endpoint.answer_unsupported(&cmd);
+            }
         }
         let report = self.sim.step()?;
         let out = self.sim.take_mavlink();

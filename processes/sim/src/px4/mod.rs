@@ -7,7 +7,10 @@
 //! - [`endpoint`]: the UDP socket around it, and [`endpoint::SimVehicle`]
 //!   that steps a [`crate::world::World`] with it.
 //! - [`frames`]: ENU/FLU <-> NED/FRD, used only at this boundary.
+//! - [`raw`]: the COMMAND_LONG/ACK frames the `mavlink` crate cannot express (a
+//!   command number the dialect lacks), which PX4 answers UNSUPPORTED.
 
 pub mod commander;
 pub mod endpoint;
 pub mod frames;
+pub mod raw;
