@@ -44,11 +44,14 @@ test: lint
 	$(CARGO) test --release --workspace
 	$(MAKE) --no-print-directory peers
 
-# Independent MAVLink peers (pymavlink from PyPI) fly the simulator as they fly PX4 SITL.
+# Independent MAVLink peers fly the simulator as they fly PX4 SITL: pymavlink, and
+# MAVSDK (PyPI `mavsdk` 4.x, the native library, no server to download).
 peers:
 	@python3 -c 'import pymavlink' 2>/dev/null || python3 -m pip install --quiet --disable-pip-version-check pymavlink
+	@python3 -c 'import mavsdk, sys; sys.exit(not mavsdk.__version__.startswith("4."))' 2>/dev/null || python3 -m pip install --quiet --disable-pip-version-check 'mavsdk>=4,<5'
 	$(CARGO) build --release -p sim
 	python3 tests/peers/pymavlink_flight.py target/release/sim
+	python3 tests/peers/mavsdk_flight.py target/release/sim
 
 bench: build
 	./target/release/landing bench ipc

@@ -22,7 +22,15 @@ struct Flight {
 
 impl Flight {
     fn new(scenario: &str) -> Self {
-        let scn = scenario_named(scenario);
+        Self::with_home(scenario, None)
+    }
+
+    /// `scenario` with the simulated PX4's home (SIH_LOC_H0) at `home_amsl` m.
+    fn with_home(scenario: &str, home_amsl: Option<f64>) -> Self {
+        let mut scn = scenario_named(scenario);
+        if let Some(h) = home_amsl {
+            scn.px4.sih_loc_h0 = h;
+        }
         Self {
             sim: Simulator::new(&scn, 1).unwrap(),
             link: Px4Link::new(LinkSettings::default()),
@@ -114,6 +122,44 @@ fn arm_and_takeoff_are_acked_and_the_state_climbs_up_in_enu() {
         .world_from_body
         .translation[2];
     assert!((z - 2.0).abs() < 0.3, "ENU height {z}");
+}
+
+#[test]
+fn the_takeoff_altitude_is_one_px4s_rule_accepts_whatever_the_home_altitude() {
+    // PX4 reads NAV_TAKEOFF's param7 as AMSL and does not climb to an altitude below
+    // the current one ("Already higher than takeoff altitude"): px4-link's request
+    // must climb to the world height asked for with home at 488 m, 0 m and -10 m.
+    for home in [488.0, 0.0, -10.0] {
+        let mut f = Flight::with_home("indoor-static", Some(home));
+        f.run(1.5, |_, _| {});
+        f.link.request(Request::Arm);
+        f.link.request(Request::Takeoff { altitude_m: 2.0 });
+        let mut outcomes = Vec::new();
+        while outcomes.len() < 2 && f.now() < 6_000_000_000 {
+            outcomes.extend(f.wait_outcome(1.0));
+        }
+        assert_eq!(
+            outcomes,
+            vec![
+                (Request::Arm, Outcome::Accepted),
+                (Request::Takeoff { altitude_m: 2.0 }, Outcome::Accepted)
+            ],
+            "home {home}"
+        );
+        f.run(8.0, |_, _| {});
+        let events = f.sim.commander_mut().take_events();
+        assert!(
+            !events.contains(&sim::px4::commander::CommanderEvent::AlreadyHigher),
+            "home {home}: {events:?}"
+        );
+        let z = f
+            .link
+            .vehicle_state(f.now())
+            .unwrap()
+            .world_from_body
+            .translation[2];
+        assert!((z - 2.0).abs() < 0.3, "home {home}: height {z}");
+    }
 }
 
 #[test]
