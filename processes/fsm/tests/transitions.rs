@@ -48,6 +48,14 @@ struct World {
     setpoints: u64,
     nan_setpoints: u64,
     next_obs: u64,
+    /// The estimate's height on the ground creeps from 0.04 m to 0.9 m over the first
+    /// minute, as PX4 SITL's did, and keeps that offset.
+    ground_drift: bool,
+    /// The estimate wanders this much (m) horizontally, as PX4 SITL's did hovering.
+    wander_m: f64,
+    /// The mode the autopilot shows once it disarmed after landing (PX4: the mode
+    /// asked for last that does not prevent arming).
+    mode_after_disarm: Option<FlightMode>,
 }
 
 impl World {
@@ -80,7 +88,29 @@ impl World {
             setpoints: 0,
             nan_setpoints: 0,
             next_obs: 0,
+            ground_drift: false,
+            wander_m: 0.0,
+            mode_after_disarm: None,
         }
+    }
+
+    /// The estimate minus the truth at `t`: what the autopilot reports and steers by is
+    /// `pos + error`, and a pad seen from there sits at `pad + error`.
+    fn error_at(&self, t: u64) -> Vector3<f64> {
+        let s = t as f64 * 1e-9;
+        let z = if self.ground_drift {
+            0.04 + (0.9 - 0.04) * (s / 60.0).min(1.0)
+        } else {
+            0.0
+        };
+        let w = std::f64::consts::TAU * s / 20.0;
+        Vector3::new(self.wander_m * w.sin(), self.wander_m * w.cos(), z)
+    }
+
+    /// How fast the estimate error changes: the estimated velocity is the true one plus
+    /// this.
+    fn error_rate_at(&self, t: u64) -> Vector3<f64> {
+        (self.error_at(t + 1_000_000) - self.error_at(t)) / 1e-3
     }
 
     fn answer(&mut self, kind: LinkRequestKind, a: Answer) -> &mut Self {
@@ -112,10 +142,10 @@ impl World {
         let mut v = VehicleState {
             msg: Header::captured_at(self.t),
             world_from_body: Pose {
-                translation: self.pos.into(),
+                translation: (self.pos + self.error_at(self.t)).into(),
                 rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
             },
-            velocity: self.vel.into(),
+            velocity: (self.vel + self.error_rate_at(self.t)).into(),
             armed: u32::from(self.armed),
             flight_mode: self.mode as u32,
             landed_state: landed as u32,
@@ -149,7 +179,12 @@ impl World {
         if accept {
             match kind {
                 LinkRequestKind::Arm => self.armed = true,
-                LinkRequestKind::Disarm => self.armed = !self.on_ground(),
+                LinkRequestKind::Disarm => {
+                    self.armed = !self.on_ground();
+                    if let (false, Some(m)) = (self.armed, self.mode_after_disarm) {
+                        self.mode = m;
+                    }
+                }
                 LinkRequestKind::Takeoff => {
                     self.mode = FlightMode::Takeoff;
                     self.takeoff_alt = r.altitude_m;
@@ -201,7 +236,11 @@ impl World {
                 self.nan_setpoints += 1;
             } else if self.mode == FlightMode::Offboard {
                 let p = Vector3::from(sp.position);
-                target_v = Vector3::from(sp.velocity) + (p - self.pos) * 2.0;
+                // The autopilot tracks the setpoint on its estimate: position and
+                // velocity both carry the estimate's error.
+                let estimate = self.pos + self.error_at(self.t);
+                target_v =
+                    Vector3::from(sp.velocity) - self.error_rate_at(self.t) + (p - estimate) * 2.0;
             }
         }
         match self.mode {
@@ -209,7 +248,8 @@ impl World {
                 target_v = Vector3::new(
                     0.0,
                     0.0,
-                    (self.takeoff_alt - self.pos.z).clamp(-1.0, 1.0) * 2.0,
+                    (self.takeoff_alt - self.pos.z - self.error_at(self.t).z).clamp(-1.0, 1.0)
+                        * 2.0,
                 );
             }
             FlightMode::Land if self.armed => target_v = Vector3::new(0.0, 0.0, -0.7),
@@ -230,8 +270,11 @@ impl World {
             self.pos.z = g;
             self.vel.z = 0.0;
         }
-        if self.on_ground() && self.mode == FlightMode::Land {
+        if self.on_ground() && self.mode == FlightMode::Land && self.armed {
             self.armed = false;
+            if let Some(m) = self.mode_after_disarm {
+                self.mode = m;
+            }
         }
         if let Some(p) = &mut self.pad {
             *p += self.pad_vel * dt;
@@ -248,8 +291,8 @@ impl World {
             }
         }
         let state = State {
-            p: self.pos,
-            v: self.vel,
+            p: self.pos + self.error_at(self.t),
+            v: self.vel + self.error_rate_at(self.t),
             a: Vector3::zeros(),
         };
         let o = self.planner.step(
@@ -273,7 +316,8 @@ impl World {
         if !self.pad_visible || h < 0.1 || rel.xy().norm() > h + 0.3 {
             return None;
         }
-        Some(self.observation_at(pad - self.pad_vel * 0.03, h))
+        let captured = self.t.saturating_sub(30_000_000);
+        Some(self.observation_at(pad - self.pad_vel * 0.03 + self.error_at(captured), h))
     }
 
     fn observation_at(&self, pad: Vector3<f64>, range: f64) -> PadObservation {
@@ -665,6 +709,60 @@ fn a_pilot_taking_over_from_offboard_ends_the_mission() {
         "{}",
         w.fsm.reason()
     );
+}
+
+#[test]
+fn a_drifting_ground_estimate_and_a_wandering_one_in_the_air_still_take_off_and_land() {
+    // What PX4 SITL showed the stack: the height estimate on the ground reads 0.04 to
+    // 0.9 m over a minute, and the position wanders +-0.5 m while hovering.
+    let mut cfg = config();
+    cfg.autostart = false;
+    let mut w = World::new(cfg);
+    w.ground_drift = true;
+    w.wander_m = 0.5;
+    w.run_for(60.0);
+    assert!(w.on_ground() && !w.armed);
+    assert!(
+        w.requests.is_empty(),
+        "nothing asked on the ground: {:?}",
+        w.requests
+    );
+    w.fsm.start();
+    w.expect(MissionState::Landed, 90.0);
+    let path: Vec<_> = w.fsm.transitions().iter().map(|t| t.to).collect();
+    assert!(
+        !path.contains(&MissionState::SafeLand) && !path.contains(&MissionState::Abort),
+        "{:?}",
+        w.reasons()
+    );
+    assert!(
+        (w.pos - w.pad.unwrap()).xy().norm() < 0.3,
+        "on the pad: {:?} vs {:?}",
+        w.pos,
+        w.pad
+    );
+}
+
+#[test]
+fn the_mode_px4_falls_back_to_after_landing_does_not_upset_the_mission() {
+    for after in [FlightMode::Hold, FlightMode::Offboard, FlightMode::Manual] {
+        let mut w = World::new(config());
+        w.mode_after_disarm = Some(after);
+        w.expect(MissionState::Landed, 60.0);
+        w.run_for(10.0);
+        assert_eq!(
+            w.state(),
+            MissionState::Landed,
+            "{after:?}: {:?}",
+            w.reasons()
+        );
+        assert_eq!(w.mode, after);
+        assert_eq!(
+            w.count(LinkRequestKind::Arm),
+            1,
+            "{after:?}: no second take-off"
+        );
+    }
 }
 
 #[test]
