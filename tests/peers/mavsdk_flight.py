@@ -6,8 +6,6 @@ leaves the altitude to PX4's MIS_TAKEOFF_ALT), an initial position setpoint,
 offboard.start(), fly 5 m north, land, disarm. Usage: mavsdk_flight.py PATH_TO_SIM
 """
 
-import socket
-import subprocess
 import sys
 import time
 
@@ -16,18 +14,12 @@ from mavsdk.plugins.action import Action
 from mavsdk.plugins.offboard import Offboard, PositionNedYaw
 from mavsdk.plugins.telemetry import Telemetry
 
-
-def free_port():
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
+from peer_common import free_port, running_sim
+from peer_common import fail as peer_fail
 
 
 def fail(msg):
-    print(f"mavsdk peer: FAILED: {msg}", flush=True)
-    sys.exit(1)
+    peer_fail("mavsdk", msg)
 
 
 def wait(what, pred, timeout):
@@ -43,20 +35,8 @@ def main():
     if len(sys.argv) != 2:
         fail("usage: mavsdk_flight.py PATH_TO_SIM")
     sim_port, mavsdk_port = free_port(), free_port()
-    sim = subprocess.Popen(
-        [sys.argv[1], "--scenario", "indoor-static", "--duration-s", "120",
-         "--mavlink-listen", f"127.0.0.1:{sim_port}",
-         "--mavlink-remote", f"127.0.0.1:{mavsdk_port}",
-         "--ipc-prefix", f"mavsdk_{mavsdk_port}_"],
-        stderr=subprocess.DEVNULL)
-    try:
+    with running_sim(sys.argv[1], sim_port, mavsdk_port):
         fly(mavsdk_port)
-    finally:
-        sim.terminate()
-        try:
-            sim.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            sim.kill()
     print("mavsdk peer: 1 passed, 0 failed", flush=True)
 
 

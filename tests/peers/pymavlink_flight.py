@@ -5,44 +5,26 @@ pymavlink (not this project's code) connects over UDP, decodes the autopilot's P
 custom modes with its own PX4 mode table, arms, takes off, streams offboard setpoints,
 switches to OFFBOARD, flies 5 m, and lands. Usage: pymavlink_flight.py PATH_TO_SIM
 """
-import os
-import signal
-import socket
-import subprocess
 import sys
 import time
 
 from pymavlink import mavutil
 
-
-def free_port():
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
+from peer_common import free_port, running_sim
+from peer_common import fail as peer_fail
 
 
 def fail(msg):
-    print(f"pymavlink peer: FAILED: {msg}")
-    sys.exit(1)
+    peer_fail("pymavlink", msg)
 
 
 def main():
     if len(sys.argv) != 2:
         fail("usage: pymavlink_flight.py PATH_TO_SIM")
     port = free_port()
-    env = dict(os.environ, LANDING_LOG="warn", LANDING_IPC_PREFIX=f"peer_{os.getpid()}_")
-    sim = subprocess.Popen(
-        [sys.argv[1], "--scenario", "indoor-static", "--duration-s", "120",
-         "--mavlink-listen", f"127.0.0.1:{port}", "--mavlink-remote", "127.0.0.1:9"],
-        env=env,
-    )
-    try:
+    # Nothing listens at port 9: the simulator's unsolicited messages go nowhere.
+    with running_sim(sys.argv[1], port, 9):
         fly(port)
-    finally:
-        sim.send_signal(signal.SIGTERM)
-        sim.wait(timeout=10)
     print("pymavlink peer: 1 passed, 0 failed")
 
 
