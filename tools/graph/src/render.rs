@@ -24,7 +24,7 @@ pub fn text(graph: &Graph) -> String {
             } else {
                 from
             };
-            let _ = writeln!(s, "  in   {:<20} {:<22} from {from}", i.topic, policy(i));
+            let _ = writeln!(s, "  in   {:<20} {:<25} from {from}", i.topic, policy(i));
         }
         for o in &n.outputs {
             let to = names(graph.readers(o));
@@ -33,7 +33,7 @@ pub fn text(graph: &Graph) -> String {
                 _ if to.is_empty() => "no node".to_string(),
                 _ => to,
             };
-            let _ = writeln!(s, "  out  {o:<20} {:<22} to {to}", "");
+            let _ = writeln!(s, "  out  {o:<20} {:<25} to {to}", "");
         }
     }
     let _ = writeln!(s);

@@ -9,6 +9,7 @@ mod bench_sim;
 mod companion;
 mod config_cmd;
 mod flight_log;
+mod graph_cmd;
 mod map_cmd;
 mod pad_detect;
 mod pad_print;
@@ -64,6 +65,12 @@ enum Command {
     /// Look into MCAP recordings (`landing run --record`).
     #[command(subcommand)]
     Mcap(McapCommand),
+    /// Print the pipeline's dataflow graph (deploy/graph.toml): every process with the
+    /// topics it reads and publishes, rates, drop policies, heartbeat deadlines; as text,
+    /// JSON or Graphviz DOT. A graph that breaks a rule (an undeclared topic, a cycle
+    /// without a delayed input, a node without a binary, a rate of 0, ...) is one line
+    /// and exit code 2.
+    Graph(graph_cmd::GraphArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -188,6 +195,7 @@ fn main() -> ExitCode {
             other => other.map(|_| ()),
         },
         Command::Mcap(McapCommand::Info { file, json }) => mcap_info(&file, json),
+        Command::Graph(args) => graph_cmd::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -42,9 +42,10 @@ pub struct RunArgs {
     /// Print the summary as one JSON object on stdout.
     #[arg(long)]
     json: bool,
-    /// Start every stage as its own OS process (sim, camera-ingest, aruco-pnp,
-    /// depth-map, planner, fsm, px4-link) over iceoryx2 and MAVLink/UDP on the wall
-    /// clock, as systemd does on the vehicle, instead of the one-process lockstep.
+    /// Start every stage as its own OS process (the nodes of the deploy directory's
+    /// graph.toml: sim, camera-ingest, aruco-pnp, depth-map, planner, fsm, px4-link)
+    /// over iceoryx2 and MAVLink/UDP on the wall clock, as systemd does on the vehicle,
+    /// instead of the one-process lockstep.
     #[arg(long)]
     processes: bool,
     /// Record every message the stages exchange into an MCAP file (JSON, open it in
@@ -123,6 +124,13 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         .unwrap_or_else(|| deploy.join("config").join("landing.toml"));
     let cfg: StackConfig = cfgload::load(&cfg_path)?;
     let scn = sim::scenario::load(&args.scenario, &deploy)?;
+    // --processes starts what the deploy directory's graph declares; checked before
+    // anything starts.
+    let graph = if args.processes {
+        Some(graph::Graph::load(&graph::default_path(&deploy))?)
+    } else {
+        None
+    };
     let seed = args.seed.unwrap_or(scn.scenario.seed);
     let mut fsm_cfg = cfg.fsm.clone();
     fsm_cfg.preset_m = scn.scenario.mission.preset_m;
@@ -168,7 +176,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             eprintln!("{line}");
         }
     };
-    let (end, stats, transitions) = if args.processes {
+    let (end, stats, transitions) = if let Some(graph) = &graph {
         let log_dir = args.log_dir.clone().unwrap_or_else(|| {
             std::env::temp_dir().join(format!("landing-run-{}", std::process::id()))
         });
@@ -179,6 +187,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             deploy: &deploy,
             log_dir: &log_dir,
             ipc_prefix,
+            graph,
         };
         let r = run_processes::run(&launch, &mut eval, &mut recorder, progress)?;
         if tty {

@@ -1,6 +1,7 @@
 //! `landing run --processes`: every stage as its own OS process, as systemd starts them
-//! on the vehicle (sim, camera-ingest, aruco-pnp, depth-map, planner, fsm, px4-link),
-//! over iceoryx2 and MAVLink/UDP on the wall clock. This process only watches: the fsm's
+//! on the vehicle (the nodes of deploy/graph.toml: sim, camera-ingest, aruco-pnp,
+//! depth-map, planner, fsm, px4-link, each with the graph's arguments), over iceoryx2
+//! and MAVLink/UDP on the wall clock. This process only watches: the fsm's
 //! status and the planner's statistics (pipeline topics) and the simulator's
 //! evaluator-only truth topics.
 
@@ -11,6 +12,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use fsm::Transition;
+use graph::{Graph, RunValues};
 use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::msg::{
     FsmStatus, LinkOutcome, LinkRequest, MissionState, PadObservation, PlannerGoal, PlannerStats,
@@ -41,6 +43,9 @@ pub struct Launch<'a> {
     pub log_dir: &'a Path,
     /// The iceoryx2 prefix (`--ipc-prefix`); a fresh one when `None`.
     pub ipc_prefix: Option<&'a str>,
+    /// The dataflow graph: which processes to start, in which order, with which
+    /// arguments.
+    pub graph: &'a Graph,
 }
 
 /// Runs the mission with every stage as a process; returns how it ended, the statistics
@@ -68,93 +73,41 @@ pub fn run(
 
     let scn = launch.scenario;
     let (sim_port, link_port) = (free_udp_port()?, free_udp_port()?);
-    let calibration = scn.calibration_path();
-    let pad = scn.pad_path();
-    let config = launch.config.display().to_string();
-    let deploy = launch.deploy.display().to_string();
     let preset = scn.scenario.mission.preset_m;
-    // `--x=v` form: a preset may start with a minus sign.
-    let preset = format!("--preset={},{},{}", preset[0], preset[1], preset[2]);
-    let commit = format!("--commit-height={}", scn.scenario.mission.commit_height_m);
-    let sim_addr = format!("127.0.0.1:{sim_port}");
-    let link_addr = format!("127.0.0.1:{link_port}");
-    let duration = scn.scenario.duration_s.to_string();
-    let seed = launch.seed.to_string();
-    let scenario_arg = scn.path.display().to_string();
-    let calibration = calibration.display().to_string();
-    let pad = pad.display().to_string();
-    let link_arg = format!("udp:{link_addr}");
-    let stages: Vec<(&str, Vec<&str>)> = vec![
-        (
-            "px4-link",
-            vec![
-                "--config", &config, "--link", &link_arg, "--remote", &sim_addr,
-            ],
-        ),
-        (
-            "camera-ingest",
-            vec![
-                "--config",
-                &config,
-                "--deploy-dir",
-                &deploy,
-                "--source",
-                "sim",
-                "--camera",
-                &calibration,
-            ],
-        ),
-        (
-            "aruco-pnp",
-            vec![
-                "--config",
-                &config,
-                "--deploy-dir",
-                &deploy,
-                "--camera",
-                &calibration,
-                "--pad",
-                &pad,
-            ],
-        ),
-        ("depth-map", vec!["--config", &config, "--input", "sim"]),
-        ("planner", vec!["--config", &config]),
-        ("fsm", vec!["--config", &config, &preset, &commit]),
-        (
-            "sim",
-            vec![
-                "--scenario",
-                &scenario_arg,
-                "--seed",
-                &seed,
-                "--duration-s",
-                &duration,
-                "--deploy-dir",
-                &deploy,
-                "--mavlink-listen",
-                &sim_addr,
-                "--mavlink-remote",
-                &link_addr,
-            ],
-        ),
-    ];
+    let values = RunValues {
+        config: launch.config.display().to_string(),
+        deploy: launch.deploy.display().to_string(),
+        calibration: scn.calibration_path().display().to_string(),
+        pad: scn.pad_path().display().to_string(),
+        scenario: scn.path.display().to_string(),
+        seed: launch.seed.to_string(),
+        duration: scn.scenario.duration_s.to_string(),
+        sim_addr: format!("127.0.0.1:{sim_port}"),
+        link_addr: format!("127.0.0.1:{link_port}"),
+        // The fsm gets `--preset={preset}`: the `--x=v` form, as a preset may start
+        // with a minus sign.
+        preset: format!("{},{},{}", preset[0], preset[1], preset[2]),
+        commit_height: scn.scenario.mission.commit_height_m.to_string(),
+    };
     std::fs::create_dir_all(launch.log_dir)
         .with_context(|| format!("creating {}", launch.log_dir.display()))?;
     let mut children = Children::default();
-    for (name, args) in &stages {
-        let path = binary(name)?;
-        let log: PathBuf = launch.log_dir.join(format!("{name}.log"));
+    // The graph's start order: the nodes marked start_last (the simulator, whose clock
+    // starts the world) after the others.
+    for node in launch.graph.start_order() {
+        let path = binary(&node.binary)?;
+        let log: PathBuf = launch.log_dir.join(format!("{}.log", node.name));
         let file = File::create(&log).with_context(|| format!("creating {}", log.display()))?;
         let child = Command::new(&path)
-            .args(args)
+            .args(node.command_args(&values))
             .args(["--ipc-prefix", prefix.as_str()])
             .env("LANDING_LOG", "info")
             .stdout(Stdio::null())
             .stderr(file)
             .spawn()
             .with_context(|| format!("starting {}", path.display()))?;
-        children.push(name, child);
-        if *name != "sim" {
+        children.push(&node.name, child);
+        if !node.start_last {
             // Let each stage open its ports before the simulator's clock starts.
             std::thread::sleep(Duration::from_millis(150));
         }

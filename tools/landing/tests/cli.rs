@@ -32,6 +32,7 @@ fn every_subcommand_has_help() {
         vec!["pad", "print"],
         vec!["mcap"],
         vec!["mcap", "info"],
+        vec!["graph"],
     ] {
         let mut a = args.clone();
         a.push("--help");
