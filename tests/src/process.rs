@@ -161,10 +161,10 @@ pub fn sim_binary() -> PathBuf {
 
 /// How many iceoryx2 nodes under `ipc`'s prefix are alive and how many died without
 /// cleaning up (a process that crashed, or exited without dropping its node).
-pub fn node_census(ipc: &ipc_types::runtime::Ipc) -> (usize, usize) {
+pub fn node_census(ipc: &runtime::Ipc) -> (usize, usize) {
     use iceoryx2::prelude::{CallbackProgression, Node, NodeState};
     let (mut alive, mut dead) = (0, 0);
-    let listed = Node::<ipc_types::runtime::ipc::Svc>::list(ipc.node().config(), |state| {
+    let listed = Node::<runtime::ipc::Svc>::list(ipc.node().config(), |state| {
         match state {
             NodeState::Alive(_) => alive += 1,
             NodeState::Dead(_) => dead += 1,

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus};
 use std::time::Duration;
 
-use ipc_types::runtime::IpcPrefix;
+use runtime::IpcPrefix;
 use sim::scenario::LoadedScenario;
 
 use crate::process::Running;

@@ -14,11 +14,11 @@ use std::sync::{Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
 use ipc_types::msg::{CameraFrameHeader, DepthFrameHeader, OccupancyMapHeader, VehicleState};
-use ipc_types::runtime::{Ipc, IpcPrefix};
 use ipc_types::services;
 use landing_tests::process::Running;
 use landing_tests::stack::{STAGES, Stack, deploy_dir, stack_binary};
 use landing_tests::stop::{BusyLoops, Moments, catches_sigterm, count_in, last_line_with, stop};
+use runtime::{Ipc, IpcPrefix};
 
 /// Stops per binary.
 const TRIALS: usize = 30;
@@ -52,8 +52,8 @@ fn states<'a>(ipc: &Ipc, airborne_only: bool) -> Watch<'a> {
 /// Any sample of the slice service `service` (frames, depth frames, maps).
 fn slices<'a, T, H>(ipc: &Ipc, service: &str) -> Watch<'a>
 where
-    T: std::fmt::Debug + ipc_types::iceoryx2::prelude::ZeroCopySend + Copy + 'static,
-    H: ipc_types::runtime::MessageHeader,
+    T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static,
+    H: runtime::MessageHeader,
 {
     let sub = ipc.slice_subscriber::<T, H>(service).unwrap();
     Box::new(move || {

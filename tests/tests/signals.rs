@@ -6,7 +6,7 @@
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 
-use ipc_types::runtime::IpcPrefix;
+use runtime::IpcPrefix;
 
 fn ends_cleanly_on(signal: i32, expected: &str) {
     let prefix = IpcPrefix::unique("signals");

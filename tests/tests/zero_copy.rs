@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Command, Stdio};
 
-use ipc_types::runtime::IpcPrefix;
+use runtime::IpcPrefix;
 
 fn fields(line: &str) -> HashMap<String, String> {
     line.split_whitespace()

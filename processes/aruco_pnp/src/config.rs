@@ -1,6 +1,6 @@
 //! The `[aruco_pnp]` section of the stack configuration.
 
-use ipc_types::runtime::config::{Invalid, Validate, check_range};
+use runtime::config::{Invalid, Validate, check_range};
 use serde::Deserialize;
 
 use crate::{DetectSettings, EstimatorSettings, PoseSettings};

@@ -14,11 +14,11 @@ use clap::Parser;
 use ipc_types::msg::{
     CameraFrameHeader, Header, PadObservation, PixelEncoding, Stage, VehicleState,
 };
-use ipc_types::runtime::config::{IpcConfig, deploy_dir, load_process_or_default};
-use ipc_types::runtime::ipc::{Wake, run_wait_loop};
-use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
 use optics::{CameraCalibration, PadModel};
+use runtime::config::{IpcConfig, deploy_dir, load_process_or_default};
+use runtime::ipc::{Wake, run_wait_loop};
+use runtime::{Ipc, IpcPrefix, monotonic_ns};
 use state_history::{StateHistory, TimedPose};
 
 /// Finds the landing pad in camera frames and publishes its pose.
@@ -45,7 +45,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    ipc_types::runtime::process_main("info", run)
+    runtime::process_main("info", run)
 }
 
 /// How many vehicle states are kept (2 s at 50 Hz).
@@ -209,7 +209,7 @@ struct Counts {
 }
 
 fn drain_states(
-    states: &ipc_types::runtime::Subscriber<VehicleState>,
+    states: &runtime::Subscriber<VehicleState>,
     history: &mut StateHistory,
     counters: &mut Counts,
 ) {

@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use ipc_types::runtime::config::{Invalid, IpcConfig, Validate};
+use runtime::config::{Invalid, IpcConfig, Validate};
 use serde::Deserialize;
 
 use crate::source::{ALLOWED_SOURCES, SourceSpec};

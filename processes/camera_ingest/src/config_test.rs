@@ -1,6 +1,6 @@
 use std::path::{Path, PathBuf};
 
-use ipc_types::runtime::config::{self, ConfigError};
+use runtime::config::{self, ConfigError};
 
 use super::*;
 

@@ -20,14 +20,14 @@ use camera_ingest::{
 };
 use clap::Parser;
 use ipc_types::msg::{CameraFrameHeader, Stage};
-use ipc_types::runtime::config::{self, deploy_dir};
-use ipc_types::runtime::{
-    Heartbeat, Ipc, IpcError, IpcPrefix, JOIN_TIMEOUT, PeriodicWait, SlicePublisher, StopFlag,
-    ThreadRole, Worker, monotonic_ns,
-};
 use ipc_types::services;
 use opencv::core::Mat;
 use optics::CameraCalibration;
+use runtime::config::{self, deploy_dir};
+use runtime::{
+    Heartbeat, Ipc, IpcError, IpcPrefix, JOIN_TIMEOUT, PeriodicWait, SlicePublisher, StopFlag,
+    ThreadRole, Worker, monotonic_ns,
+};
 
 /// The iceoryx2 node and heartbeat name.
 const PROCESS: &str = "camera-ingest";
@@ -70,7 +70,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    ipc_types::runtime::process_main("info", run)
+    runtime::process_main("info", run)
 }
 
 /// Flags, the stack file and defaults, resolved.

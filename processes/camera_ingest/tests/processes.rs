@@ -14,9 +14,9 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use ipc_types::msg::{CameraFrameHeader, Header, PixelEncoding, Stage};
-use ipc_types::runtime::{Ipc, IpcPrefix};
 use ipc_types::services;
 use landing_tests::process::{Running, sim_binary};
+use runtime::{Ipc, IpcPrefix};
 
 const WIDTH: u32 = 640;
 const HEIGHT: u32 = 480;

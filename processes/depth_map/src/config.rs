@@ -1,8 +1,8 @@
 //! The `[depth_map]` section of the stack configuration.
 
-use ipc_types::runtime::config::{Invalid, Validate, check_range};
 use ipc_types::services;
 use nalgebra::Isometry3;
+use runtime::config::{Invalid, Validate, check_range};
 use serde::Deserialize;
 
 use crate::map::{LogOdds, MapSettings, RaySettings};

@@ -14,10 +14,10 @@ use anyhow::{Context, Result, anyhow};
 use clap::Parser;
 use depth_map::{DepthError, DepthMapConfig, DepthMapper, DepthView, Input};
 use ipc_types::msg::{DepthFrameHeader, Header, OccupancyMapHeader, Stage, VehicleState};
-use ipc_types::runtime::config::{IpcConfig, load_process_or_default};
-use ipc_types::runtime::ipc::{Wake, run_wait_loop};
-use ipc_types::runtime::{Ipc, IpcError, IpcPrefix, SlicePublisher, Subscriber, monotonic_ns};
 use ipc_types::services;
+use runtime::config::{IpcConfig, load_process_or_default};
+use runtime::ipc::{Wake, run_wait_loop};
+use runtime::{Ipc, IpcError, IpcPrefix, SlicePublisher, Subscriber, monotonic_ns};
 
 /// The iceoryx2 node and heartbeat name.
 const PROCESS: &str = "depth-map";
@@ -40,7 +40,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    ipc_types::runtime::process_main("info", run)
+    runtime::process_main("info", run)
 }
 
 /// Losses the process counts besides the mapper's own counters.

@@ -13,9 +13,9 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use ipc_types::msg::{Header, OccupancyMapHeader, Pose, Stage, VehicleState};
-use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
 use landing_tests::process::{Running, sim_binary};
+use runtime::{Ipc, IpcPrefix, monotonic_ns};
 
 fn workspace() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")

@@ -2,7 +2,7 @@
 //! follow the paper where it gives a number (commit height 0.6 m) and are otherwise set
 //! for a 450 mm quadrotor with a downward camera.
 
-use ipc_types::runtime::config::{Invalid, Validate, check_range};
+use runtime::config::{Invalid, Validate, check_range};
 use serde::Deserialize;
 
 /// What the fsm reads from `landing.toml`.

@@ -16,10 +16,10 @@ use ipc_types::msg::{
     FsmStatus, LinkOutcome, LinkRequest, PadObservation, PlannerGoal, SafetyCommand, Setpoint,
     Trajectory, VehicleState,
 };
-use ipc_types::runtime::config::{IpcConfig, Validate, load_process_or_default};
-use ipc_types::runtime::ipc::{Wake, run_wait_loop};
-use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
+use runtime::config::{IpcConfig, Validate, load_process_or_default};
+use runtime::ipc::{Wake, run_wait_loop};
+use runtime::{Ipc, IpcPrefix, monotonic_ns};
 
 /// Flies the landing mission: take off, find the pad, track it, descend, land on it.
 #[derive(Debug, Parser)]
@@ -42,7 +42,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    ipc_types::runtime::process_main("info", run)
+    runtime::process_main("info", run)
 }
 
 fn parse_xyz(s: &str) -> Option<[f64; 3]> {

@@ -1,6 +1,6 @@
 //! The `[planner]` section of the stack configuration. Defaults are the paper's.
 
-use ipc_types::runtime::config::{Invalid, Validate, check_range};
+use runtime::config::{Invalid, Validate, check_range};
 use serde::Deserialize;
 
 /// What the planner reads from `landing.toml`.

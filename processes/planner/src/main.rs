@@ -14,11 +14,11 @@ use clap::Parser;
 use ipc_types::msg::{
     Header, OccupancyMapHeader, PlannerGoal, PlannerStats, Trajectory, VehicleState,
 };
-use ipc_types::runtime::config::{IpcConfig, load_process_or_default};
-use ipc_types::runtime::ipc::{Wake, run_wait_loop};
-use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
 use planner::{CellView, PlannerConfig, PlannerNode, State};
+use runtime::config::{IpcConfig, load_process_or_default};
+use runtime::ipc::{Wake, run_wait_loop};
+use runtime::{Ipc, IpcPrefix, monotonic_ns};
 
 /// Plans collision-free B-spline trajectories to the goal and publishes them.
 #[derive(Debug, Parser)]
@@ -33,7 +33,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    ipc_types::runtime::process_main("info", run)
+    runtime::process_main("info", run)
 }
 
 /// How often the replanning policy is consulted when no message wakes the loop.

@@ -12,11 +12,11 @@ use ipc_types::msg::{
     CellState, GoalMode, Header, OccupancyMapHeader, PlannerGoal, PlannerStats, Pose, Trajectory,
     VehicleState,
 };
-use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
 use landing_tests::process::Running;
 use nalgebra::Vector3;
 use planner::{Aabb, BSpline, CellView, GridMap, OccupancyQuery};
+use runtime::{Ipc, IpcPrefix, monotonic_ns};
 
 /// The paper's 60 x 120 x 120 cm box, inflated as the depth-map would (0.15 m cells,
 /// 0.299 m), as a `GridMap` for the occupancy and its wire cells.

@@ -3,7 +3,7 @@
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
-use ipc_types::runtime::config::{Invalid, Validate, check_range};
+use runtime::config::{Invalid, Validate, check_range};
 use serde::Deserialize;
 
 use crate::LinkSettings;

@@ -15,14 +15,14 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use clap::Parser;
 use ipc_types::msg::{LinkOutcome, LinkRequest, SafetyCommand, Setpoint, VehicleState};
-use ipc_types::runtime::config::{IpcConfig, load_process_or_default};
-use ipc_types::runtime::{Ipc, IpcPrefix, Validate, monotonic_ns};
 use ipc_types::services;
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
 use px4_link::LinkNode;
 use px4_link::codec::{StreamDecoder, decode_datagram, encode};
 use px4_link::config::{LinkAddress, Px4LinkConfig};
+use runtime::config::{IpcConfig, load_process_or_default};
+use runtime::{Ipc, IpcPrefix, Validate, monotonic_ns};
 
 use serial_port::{Readiness, SerialPort};
 
@@ -46,7 +46,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    ipc_types::runtime::process_main("info", run)
+    runtime::process_main("info", run)
 }
 
 /// How long one receive may block: the loop's period when the autopilot is quiet.

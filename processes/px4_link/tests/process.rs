@@ -16,9 +16,9 @@ use ipc_types::msg::{
     FlightMode, Header, LinkOutcome, LinkOutcomeKind, LinkRequest, LinkRequestKind, SafetyAction,
     SafetyCommand, Text, VehicleState,
 };
-use ipc_types::runtime::IpcPrefix;
 use ipc_types::services;
 use landing_tests::process::{Running, sim_binary};
+use runtime::IpcPrefix;
 
 fn free_port() -> u16 {
     UdpSocket::bind("127.0.0.1:0")
@@ -76,7 +76,7 @@ fn px4_link_flies_the_sim_process_on_requests_and_lands_it_on_a_safety_order() {
     let state = latest(Duration::from_secs(10)).expect("vehicle state from px4-link");
     assert_eq!(state.link.connected, 1);
 
-    let ask = |requests: &mut ipc_types::runtime::Publisher<LinkRequest>, id, kind: u32| {
+    let ask = |requests: &mut runtime::Publisher<LinkRequest>, id, kind: u32| {
         let r = LinkRequest {
             msg: Header::default(),
             id,

@@ -15,10 +15,10 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use ipc_types::msg::{Header, LinkOutcomeKind, LinkRequest, LinkRequestKind, VehicleState};
-use ipc_types::runtime::IpcPrefix;
 use landing_tests::process::Running;
 use mavlink::MavHeader;
 use px4_link::codec::{StreamDecoder, encode};
+use runtime::IpcPrefix;
 use sim::lockstep::{PHYSICS_STEP_NS, Simulator};
 
 /// A pseudo-terminal pair: (master, slave, slave path). The slave is made raw here so

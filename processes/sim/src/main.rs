@@ -15,11 +15,11 @@ use clap::Parser;
 use ipc_types::msg::{
     CameraFrameHeader, DepthFrameHeader, Header, Intrinsics, PixelEncoding, Stage, TruthKind,
 };
-use ipc_types::runtime::config::deploy_dir;
-use ipc_types::runtime::ipc::SliceSample;
-use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
-use ipc_types::runtime::{MessageHeader, SlicePublisher};
 use ipc_types::services;
+use runtime::config::deploy_dir;
+use runtime::ipc::SliceSample;
+use runtime::{Ipc, IpcPrefix, monotonic_ns};
+use runtime::{MessageHeader, SlicePublisher};
 use sim::camera::PixelFormat;
 use sim::lockstep::{PHYSICS_STEP_NS, Simulator, TRUTH_STATE_PERIOD_NS};
 use sim::px4::endpoint::{EndpointConfig, SimVehicle};
@@ -56,7 +56,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    ipc_types::runtime::process_main("info", run)
+    runtime::process_main("info", run)
 }
 
 fn run(args: &Args) -> Result<()> {
@@ -251,7 +251,7 @@ fn release<T, H>(
     force: bool,
 ) -> bool
 where
-    T: std::fmt::Debug + ipc_types::iceoryx2::prelude::ZeroCopySend + Copy + 'static,
+    T: std::fmt::Debug + runtime::iceoryx2::prelude::ZeroCopySend + Copy + 'static,
     H: MessageHeader,
 {
     if !pending.as_ref().is_some_and(|(_, at)| now >= *at || force) {

@@ -8,7 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
-use ipc_types::runtime::config::{self, ConfigError, Invalid, Validate, check_range};
+use runtime::config::{self, ConfigError, Invalid, Validate, check_range};
 use serde::Deserialize;
 
 use crate::autopilot::AutopilotParams;

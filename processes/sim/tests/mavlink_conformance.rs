@@ -948,7 +948,7 @@ fn garbage_datagrams_do_not_crash_it() {
 #[test]
 fn the_sim_process_flies_over_mavlink_and_publishes_camera_depth_and_ground_truth() {
     use ipc_types::msg::{TruthEvent, TruthKind};
-    use ipc_types::runtime::{Ipc, IpcPrefix};
+    use runtime::{Ipc, IpcPrefix};
 
     let port = UdpSocket::bind("127.0.0.1:0")
         .unwrap()

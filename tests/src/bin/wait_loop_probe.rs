@@ -8,7 +8,7 @@ use std::io::Write;
 use std::time::Duration;
 
 use anyhow::{Result, bail};
-use ipc_types::runtime::{Ipc, IpcPrefix, LoopExit, Wake, run_wait_loop};
+use runtime::{Ipc, IpcPrefix, LoopExit, Wake, run_wait_loop};
 
 fn main() -> Result<()> {
     let Some(prefix) = std::env::args().nth(1) else {

@@ -11,8 +11,8 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use ipc_types::msg::{CameraFrameHeader, Header, PixelEncoding};
-use ipc_types::runtime::{Ipc, IpcPrefix, PeriodicWait};
 use landing_tests::mapped_location;
+use runtime::{Ipc, IpcPrefix, PeriodicWait};
 
 /// Counts every allocation, so the test can assert that receiving and reading a frame
 /// allocates nothing (a copy would need a buffer).

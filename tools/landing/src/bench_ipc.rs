@@ -14,10 +14,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
-use ipc_types::iceoryx2::sample::Sample;
+use iceoryx2::sample::Sample;
 use ipc_types::msg::{CameraFrameHeader, Header, PixelEncoding, Stage};
-use ipc_types::runtime::ipc::Svc;
-use ipc_types::runtime::{Ipc, IpcPrefix, PeriodicWait, Wake, monotonic_ns, run_wait_loop};
+use runtime::ipc::Svc;
+use runtime::{Ipc, IpcPrefix, PeriodicWait, Wake, monotonic_ns, run_wait_loop};
 use serde_json::json;
 
 use crate::stats::percentile;

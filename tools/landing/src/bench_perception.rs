@@ -15,9 +15,9 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use clap::Args;
 use ipc_types::msg::{Header, LinkRequest, LinkRequestKind, PadObservation, Stage};
-use ipc_types::runtime::ipc::{Wake, run_wait_loop};
-use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
+use runtime::ipc::{Wake, run_wait_loop};
+use runtime::{Ipc, IpcPrefix, monotonic_ns};
 use serde_json::json;
 
 use crate::procs::{Children, binary, free_udp_port};

@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use ipc_types::runtime::config::deploy_dir;
+use runtime::config::deploy_dir;
 use serde_json::json;
 use sim::camera_worker::CameraPipeline;
 use sim::lockstep::Simulator;

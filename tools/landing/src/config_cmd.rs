@@ -4,7 +4,7 @@ use std::path::Path;
 
 use anyhow::Result;
 use camera_ingest::CameraIngestConfig;
-use ipc_types::runtime::config::{self, Invalid, IpcConfig, Validate};
+use runtime::config::{self, Invalid, IpcConfig, Validate};
 use serde::Deserialize;
 
 /// The whole stack configuration. Each process reads only its own section, strictly; this

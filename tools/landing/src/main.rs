@@ -166,7 +166,7 @@ fn main() -> ExitCode {
     // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
     unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
     let cli = Cli::parse();
-    ipc_types::runtime::logging::init("warn");
+    runtime::logging::init("warn");
     let result = match cli.command {
         Command::Bench(BenchCommand::Ipc(args)) => bench_ipc::run(&args, cli.ipc_prefix.as_deref()),
         Command::Bench(BenchCommand::Sim(args)) => bench_sim::run(&args),

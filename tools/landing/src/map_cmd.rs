@@ -20,13 +20,13 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use depth_map::{DepthMapConfig, DepthMapper, DepthPixels, DepthView, OccupancyMap};
 use ipc_types::msg::{CellState, Intrinsics};
-use ipc_types::runtime::config::{self as cfgload, deploy_dir};
 use mavlink::dialects::common::{
     MavCmd, MavFrame, MavMessage, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
 use nalgebra::{Isometry3, Point3, Translation3, Vector3};
 use opencv::core::{Mat, Point, Rect, Scalar, Vector};
 use opencv::{core, imgcodecs, imgproc};
+use runtime::config::{self as cfgload, deploy_dir};
 use sim::lockstep::Simulator;
 use sim::world::Aabb;
 use state_history::{StateHistory, TimedPose};

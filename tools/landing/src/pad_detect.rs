@@ -6,11 +6,11 @@ use anyhow::{Context, Result};
 use aruco_pnp::{EstimatorSettings, Frame, PadEstimator};
 use clap::Args;
 use ipc_types::msg::PixelEncoding;
-use ipc_types::runtime::config::deploy_dir;
 use nalgebra::Isometry3;
 use opencv::imgcodecs;
 use opencv::prelude::*;
 use optics::{CameraCalibration, PadModel};
+use runtime::config::deploy_dir;
 use serde_json::json;
 
 /// Arguments of `landing pad detect`.

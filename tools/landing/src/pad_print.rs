@@ -8,11 +8,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
 use clap::Args;
-use ipc_types::runtime::config::deploy_dir;
 use opencv::core::{Mat, Vector};
 use opencv::imgcodecs;
 use opencv::prelude::*;
 use optics::{MARKER_CELLS, Marker, PadError, PadModel, marker_cells};
+use runtime::config::deploy_dir;
 
 /// Metres per inch: dots per inch to pixels per metre.
 pub const METRES_PER_INCH: f64 = 0.0254;

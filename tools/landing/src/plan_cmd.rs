@@ -5,9 +5,9 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use ipc_types::runtime::config::load_process;
 use nalgebra::Vector3;
 use planner::{Aabb, Goal, GridMap, Planner, PlannerConfig, State};
+use runtime::config::load_process;
 use serde::Deserialize;
 use serde_json::json;
 

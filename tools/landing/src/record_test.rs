@@ -1,6 +1,6 @@
 //! Tests of `record`.
 
-use ipc_types::iceoryx2::prelude::ZeroCopySend;
+use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::msg::{Header, Pose, Text};
 use mcap::MessageStream;
 

@@ -10,10 +10,10 @@ use clap::Args;
 use depth_map::DepthMapper;
 use fsm::Fsm;
 use ipc_types::msg::MissionState;
-use ipc_types::runtime::config::{self as cfgload, Validate, deploy_dir};
 use optics::mount::down_camera_from_body;
 use optics::{CameraCalibration, PadModel};
 use planner::PlannerNode;
+use runtime::config::{self as cfgload, Validate, deploy_dir};
 use sim::lockstep::Simulator;
 
 use crate::config_cmd::StackConfig;

@@ -18,10 +18,10 @@ use ipc_types::msg::{
     FsmStatus, LinkOutcome, LinkRequest, MissionState, PadObservation, PlannerGoal, PlannerStats,
     Setpoint, Trajectory, TruthEvent, TruthState, VehicleState,
 };
-use ipc_types::runtime::ipc::Subscriber;
-use ipc_types::runtime::ipc::{Wake, run_wait_loop};
-use ipc_types::runtime::{Ipc, IpcPrefix, monotonic_ns};
 use ipc_types::services;
+use runtime::ipc::Subscriber;
+use runtime::ipc::{Wake, run_wait_loop};
+use runtime::{Ipc, IpcPrefix, monotonic_ns};
 use sim::scenario::LoadedScenario;
 
 use crate::procs::{Children, binary, free_udp_port};

@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 
 use ipc_types::msg::{Header, LinkOutcome, LinkRequest, Setpoint, VehicleState};
-use ipc_types::runtime::{Ipc, IpcPrefix, Publisher, Subscriber};
 use ipc_types::services;
+use runtime::{Ipc, IpcPrefix, Publisher, Subscriber};
 use sim::scenario::LoadedScenario;
 
 /// A shipped scenario from `deploy/`.

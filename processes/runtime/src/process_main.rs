@@ -11,7 +11,7 @@ use clap::error::ErrorKind;
 /// the process starts is kept, never fatal), parses the flags (a usage error is one line
 /// and exit code 2; `--help` and `--version` print and exit 0), starts logging at
 /// `default_level` and runs `run`. An error is one line on stderr and exit code 2, except
-/// a thread that could not be joined ([`crate::runtime::threads::JoinError`]): the
+/// a thread that could not be joined ([`crate::threads::JoinError`]): the
 /// process then ends at once with that thread's exit code, through `_exit`, so no C++
 /// exit handler runs under the thread still inside a library. `run` must have dropped
 /// its iceoryx2 resources by then (it has, by returning).
@@ -20,7 +20,7 @@ where
     A: Parser,
     E: Display + AsRef<dyn std::error::Error + Send + Sync + 'static>,
 {
-    crate::runtime::shutdown::install();
+    crate::shutdown::install();
     let args = match A::try_parse() {
         Ok(a) => a,
         Err(e) if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) => {
@@ -35,12 +35,12 @@ where
             return ExitCode::from(2);
         }
     };
-    crate::runtime::logging::init(default_level);
+    crate::logging::init(default_level);
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            if let Some(code) = crate::runtime::threads::exit_code_of(e.as_ref()) {
+            if let Some(code) = crate::threads::exit_code_of(e.as_ref()) {
                 let _ = std::io::stderr().flush();
                 // SAFETY: `_exit` ends the process without running exit handlers; it has
                 // no preconditions. Nothing is left to flush (stderr is unbuffered).

@@ -44,12 +44,12 @@ fn a_message_sent_in_one_node_arrives_in_another_with_its_header() {
     let a = Ipc::open("a", &prefix).expect("node a");
     let b = Ipc::open("b", &prefix).expect("node b");
     let sub = b
-        .subscriber::<crate::msg::PlannerGoal>("t/goal")
+        .subscriber::<ipc_types::msg::PlannerGoal>("t/goal")
         .expect("subscriber");
     let mut publ = a
-        .publisher::<crate::msg::PlannerGoal>("t/goal")
+        .publisher::<ipc_types::msg::PlannerGoal>("t/goal")
         .expect("publisher");
-    let goal = crate::msg::PlannerGoal {
+    let goal = ipc_types::msg::PlannerGoal {
         position: [1.0, 2.0, 3.0],
         ..Default::default()
     };

@@ -19,8 +19,8 @@ use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::sample_mut_uninit::SampleMutUninit;
 use iceoryx2::waitset::WaitSetRunResult;
 
-use crate::msg::{CameraFrameHeader, DepthFrameHeader, Header, OccupancyMapHeader};
-use crate::runtime::clock::monotonic_ns;
+use crate::clock::monotonic_ns;
+use ipc_types::msg::{CameraFrameHeader, DepthFrameHeader, Header, OccupancyMapHeader};
 
 /// The iceoryx2 service flavour used between processes.
 pub type Svc = ipc::Service;
@@ -218,7 +218,7 @@ impl Ipc {
                 reason: format!("{e:?}"),
             })?;
         // For processes that do not start through `process_main` (tools, probes).
-        crate::runtime::shutdown::install();
+        crate::shutdown::install();
         let cleaned = node.try_cleanup_dead_nodes();
         if cleaned.cleanups > 0 {
             tracing::info!(
@@ -232,11 +232,11 @@ impl Ipc {
         })
     }
 
-    /// True once SIGTERM or SIGINT arrived (see [`crate::runtime::shutdown`]). Not
+    /// True once SIGTERM or SIGINT arrived (see [`crate::shutdown`]). Not
     /// `Node::wait`: iceoryx2 (re)installs its own handlers there, which remember only
     /// the last signal.
     pub fn shutdown_requested(&self) -> bool {
-        crate::runtime::shutdown::requested()
+        crate::shutdown::requested()
     }
 
     /// The iceoryx2 node (for node listing and dead-node detection).
@@ -409,7 +409,7 @@ impl Ipc {
         process: &str,
         deadline: Duration,
     ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, IpcError> {
-        let name = crate::services::heartbeat(process);
+        let name = ipc_types::services::heartbeat(process);
         self.node
             .service_builder(&Self::service_name(&name)?)
             .event()
@@ -428,7 +428,7 @@ impl Ipc {
             .heartbeat_service(&self.process, deadline)?
             .notifier_builder()
             .create()
-            .map_err(|e| service_err(&crate::services::heartbeat(&self.process), e))?;
+            .map_err(|e| service_err(&ipc_types::services::heartbeat(&self.process), e))?;
         Ok(Heartbeat {
             notifier,
             missed: 0,
@@ -445,7 +445,7 @@ impl Ipc {
         self.heartbeat_service(process, deadline)?
             .listener_builder()
             .create()
-            .map_err(|e| service_err(&crate::services::heartbeat(process), e))
+            .map_err(|e| service_err(&ipc_types::services::heartbeat(process), e))
     }
 }
 
@@ -893,12 +893,12 @@ pub fn run_wait_loop(
     // stage, always in its callback, then never stopped). A signal that lands between
     // the look and the wait is seen when the wait ends, at the latest at the next tick.
     loop {
-        if crate::runtime::shutdown::requested() {
+        if crate::shutdown::requested() {
             return Ok(LoopExit::Signal);
         }
         match waitset.wait_and_process_once(&mut on_event) {
             Ok(WaitSetRunResult::StopRequest) => {
-                if crate::runtime::shutdown::requested() {
+                if crate::shutdown::requested() {
                     return Ok(LoopExit::Signal);
                 }
                 return Ok(LoopExit::Stopped);

@@ -6,7 +6,7 @@
 //! process (camera-ingest did, one stop in four under load). So every thread is joined
 //! first. A thread that cannot be joined in time (a camera read blocked in a driver) ends
 //! the process with the exit code of its [`ThreadRole`] through `_exit`, which skips
-//! those handlers: a defined exit, never a crash. See [`crate::runtime::process_main`].
+//! those handlers: a defined exit, never a crash. See [`crate::process_main`].
 
 use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::thread::JoinHandle;

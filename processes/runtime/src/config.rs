@@ -166,7 +166,7 @@ pub struct IpcConfig {
 impl Default for IpcConfig {
     fn default() -> Self {
         Self {
-            prefix: crate::runtime::ipc::DEFAULT_PREFIX.to_string(),
+            prefix: crate::ipc::DEFAULT_PREFIX.to_string(),
             heartbeat_period_ms: 100,
             heartbeat_deadline_ms: 500,
         }
@@ -175,7 +175,7 @@ impl Default for IpcConfig {
 
 impl Validate for IpcConfig {
     fn validate(&self) -> Result<(), Invalid> {
-        crate::runtime::ipc::IpcPrefix::new(&self.prefix).map_err(|_| {
+        crate::ipc::IpcPrefix::new(&self.prefix).map_err(|_| {
             Invalid::new(
                 "prefix",
                 format!(

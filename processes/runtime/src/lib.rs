@@ -1,8 +1,9 @@
 //! The runtime every process shares: iceoryx2 node and ports, heartbeats, the wait loop,
-//! the clock, configuration loading and logging.
+//! the clock, configuration loading, logging, signals, threads and `process_main`.
 //!
-//! Process *libraries* never use this module: they take inputs and time as arguments. Only
-//! the thin `main.rs` of each process, and tools, bind those libraries to it.
+//! Process *libraries* never use this crate: they take inputs and time as arguments. Only
+//! the thin `main.rs` of each process, the lockstep runner and tools bind those libraries
+//! to it.
 
 pub mod clock;
 pub mod config;
@@ -11,6 +12,10 @@ pub mod logging;
 pub mod process_main;
 pub mod shutdown;
 pub mod threads;
+
+/// The iceoryx2 this runtime is built on, for the few binaries that name its types
+/// (a sample, the `ZeroCopySend` bound of a generic port helper).
+pub use iceoryx2;
 
 pub use clock::{Clock, MonotonicClock, SimClock, monotonic_ns};
 pub use config::{ConfigError, Invalid, IpcConfig, Validate};
