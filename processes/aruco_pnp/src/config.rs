@@ -1,7 +1,7 @@
 //! The `[aruco_pnp]` section of the stack configuration.
 
-use runtime::config::{Invalid, Validate, check_range};
 use serde::Deserialize;
+use stack_config::{Invalid, Validate, check_range};
 
 use crate::{DetectSettings, EstimatorSettings, PoseSettings};
 

@@ -16,9 +16,9 @@ use ipc_types::msg::{
 };
 use ipc_types::services;
 use optics::{CameraCalibration, PadModel};
-use runtime::config::{IpcConfig, deploy_dir, load_process_or_default};
 use runtime::ipc::{Wake, run_wait_loop};
 use runtime::{Ipc, IpcPrefix, monotonic_ns};
+use stack_config::{IpcConfig, deploy_dir, load_process_or_default};
 use state_history::{StateHistory, TimedPose};
 
 /// Finds the landing pad in camera frames and publishes its pose.

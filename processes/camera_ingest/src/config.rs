@@ -4,8 +4,8 @@
 
 use std::path::{Path, PathBuf};
 
-use runtime::config::{Invalid, IpcConfig, Validate};
 use serde::Deserialize;
+use stack_config::{Invalid, IpcConfig, Validate};
 
 use crate::source::{ALLOWED_SOURCES, SourceSpec};
 

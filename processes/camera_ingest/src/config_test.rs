@@ -1,6 +1,6 @@
 use std::path::{Path, PathBuf};
 
-use runtime::config::{self, ConfigError};
+use stack_config::{self as config, ConfigError};
 
 use super::*;
 

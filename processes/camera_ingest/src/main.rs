@@ -23,11 +23,11 @@ use ipc_types::msg::{CameraFrameHeader, Stage};
 use ipc_types::services;
 use opencv::core::Mat;
 use optics::CameraCalibration;
-use runtime::config::{self, deploy_dir};
 use runtime::{
     Heartbeat, Ipc, IpcError, IpcPrefix, JOIN_TIMEOUT, PeriodicWait, SlicePublisher, StopFlag,
     ThreadRole, Worker, monotonic_ns,
 };
+use stack_config::{self as config, deploy_dir};
 
 /// The iceoryx2 node and heartbeat name.
 const PROCESS: &str = "camera-ingest";

@@ -2,8 +2,8 @@
 
 use ipc_types::services;
 use nalgebra::Isometry3;
-use runtime::config::{Invalid, Validate, check_range};
 use serde::Deserialize;
+use stack_config::{Invalid, Validate, check_range};
 
 use crate::map::{LogOdds, MapSettings, RaySettings};
 

@@ -12,7 +12,7 @@ fn the_defaults_are_valid_and_give_valid_map_settings() {
 fn the_shipped_stack_file_section_is_read_strictly() {
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/config/landing.toml");
-    let (_, c): (_, DepthMapConfig) = runtime::config::load_process(&path, "depth_map").unwrap();
+    let (_, c): (_, DepthMapConfig) = stack_config::load_process(&path, "depth_map").unwrap();
     assert_eq!(
         c,
         DepthMapConfig::default(),
@@ -40,14 +40,14 @@ fn an_unknown_key_or_an_out_of_range_value_names_the_key() {
         ("[depth_map]\nfloor_z_m = nan\n", "depth_map.floor_z_m"),
     ] {
         std::fs::write(&file, text).unwrap();
-        let e = runtime::config::load_process::<DepthMapConfig>(&file, "depth_map")
+        let e = stack_config::load_process::<DepthMapConfig>(&file, "depth_map")
             .unwrap_err()
             .to_string();
         assert!(e.contains(key), "{text}: {e}");
         assert_eq!(e.lines().count(), 1, "{e}");
     }
     std::fs::write(&file, "[depth_map]\nfloor_z_m = -inf\n").unwrap();
-    assert!(runtime::config::load_process::<DepthMapConfig>(&file, "depth_map").is_ok());
+    assert!(stack_config::load_process::<DepthMapConfig>(&file, "depth_map").is_ok());
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -15,9 +15,9 @@ use clap::Parser;
 use depth_map::{DepthError, DepthMapConfig, DepthMapper, DepthView, Input};
 use ipc_types::msg::{DepthFrameHeader, Header, OccupancyMapHeader, Stage, VehicleState};
 use ipc_types::services;
-use runtime::config::{IpcConfig, load_process_or_default};
 use runtime::ipc::{Wake, run_wait_loop};
 use runtime::{Ipc, IpcError, IpcPrefix, SlicePublisher, Subscriber, monotonic_ns};
+use stack_config::{IpcConfig, load_process_or_default};
 
 /// The iceoryx2 node and heartbeat name.
 const PROCESS: &str = "depth-map";

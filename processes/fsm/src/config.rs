@@ -2,8 +2,8 @@
 //! follow the paper where it gives a number (commit height 0.6 m) and are otherwise set
 //! for a 450 mm quadrotor with a downward camera.
 
-use runtime::config::{Invalid, Validate, check_range};
 use serde::Deserialize;
+use stack_config::{Invalid, Validate, check_range};
 
 /// What the fsm reads from `landing.toml`.
 #[derive(Debug, Clone, PartialEq, Deserialize)]

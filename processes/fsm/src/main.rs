@@ -17,9 +17,9 @@ use ipc_types::msg::{
     Trajectory, VehicleState,
 };
 use ipc_types::services;
-use runtime::config::{IpcConfig, Validate, load_process_or_default};
 use runtime::ipc::{Wake, run_wait_loop};
 use runtime::{Ipc, IpcPrefix, monotonic_ns};
+use stack_config::{IpcConfig, Validate, load_process_or_default};
 
 /// Flies the landing mission: take off, find the pad, track it, descend, land on it.
 #[derive(Debug, Parser)]

@@ -1,7 +1,7 @@
 //! The `[planner]` section of the stack configuration. Defaults are the paper's.
 
-use runtime::config::{Invalid, Validate, check_range};
 use serde::Deserialize;
+use stack_config::{Invalid, Validate, check_range};
 
 /// What the planner reads from `landing.toml`.
 #[derive(Debug, Clone, PartialEq, Deserialize)]

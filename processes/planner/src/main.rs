@@ -16,9 +16,9 @@ use ipc_types::msg::{
 };
 use ipc_types::services;
 use planner::{CellView, PlannerConfig, PlannerNode, State};
-use runtime::config::{IpcConfig, load_process_or_default};
 use runtime::ipc::{Wake, run_wait_loop};
 use runtime::{Ipc, IpcPrefix, monotonic_ns};
+use stack_config::{IpcConfig, load_process_or_default};
 
 /// Plans collision-free B-spline trajectories to the goal and publishes them.
 #[derive(Debug, Parser)]

@@ -3,8 +3,8 @@
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
-use runtime::config::{Invalid, Validate, check_range};
 use serde::Deserialize;
+use stack_config::{Invalid, Validate, check_range};
 
 use crate::LinkSettings;
 

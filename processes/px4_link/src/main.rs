@@ -21,8 +21,9 @@ use mavlink::dialects::common::MavMessage;
 use px4_link::LinkNode;
 use px4_link::codec::{StreamDecoder, decode_datagram, encode};
 use px4_link::config::{LinkAddress, Px4LinkConfig};
-use runtime::config::{IpcConfig, load_process_or_default};
-use runtime::{Ipc, IpcPrefix, Validate, monotonic_ns};
+use runtime::{Ipc, IpcPrefix, monotonic_ns};
+use stack_config::Validate;
+use stack_config::{IpcConfig, load_process_or_default};
 
 use serial_port::{Readiness, SerialPort};
 

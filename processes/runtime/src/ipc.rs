@@ -27,8 +27,7 @@ pub type Svc = ipc::Service;
 
 /// Environment variable holding the per-run iceoryx2 prefix.
 pub const PREFIX_ENV: &str = "LANDING_IPC_PREFIX";
-/// Prefix used when neither flag nor environment sets one.
-pub const DEFAULT_PREFIX: &str = "landing_";
+pub use stack_config::DEFAULT_PREFIX;
 
 /// How many samples a subscriber buffers before the oldest is overwritten.
 const SUBSCRIBER_BUFFER: usize = 4;
@@ -100,11 +99,7 @@ pub struct IpcPrefix(String);
 impl IpcPrefix {
     /// Checks a prefix: 1 to 32 characters from `[A-Za-z0-9_.-]`.
     pub fn new(s: &str) -> Result<Self, IpcError> {
-        let ok = !s.is_empty()
-            && s.len() <= 32
-            && s.bytes()
-                .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-' || b == b'.');
-        if ok {
+        if stack_config::is_valid_prefix(s) {
             Ok(Self(s.to_string()))
         } else {
             Err(IpcError::BadPrefix(s.to_string()))

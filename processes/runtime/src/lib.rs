@@ -1,12 +1,12 @@
 //! The runtime every process shares: iceoryx2 node and ports, heartbeats, the wait loop,
-//! the clock, configuration loading, logging, signals, threads and `process_main`.
+//! the clock, logging, signals, threads and `process_main`. Configuration loading is
+//! `stack_config`, a crate below this one that process libraries may use.
 //!
 //! Process *libraries* never use this crate: they take inputs and time as arguments. Only
 //! the thin `main.rs` of each process, the lockstep runner and tools bind those libraries
 //! to it.
 
 pub mod clock;
-pub mod config;
 pub mod ipc;
 pub mod logging;
 pub mod process_main;
@@ -18,7 +18,6 @@ pub mod threads;
 pub use iceoryx2;
 
 pub use clock::{Clock, MonotonicClock, SimClock, monotonic_ns};
-pub use config::{ConfigError, Invalid, IpcConfig, Validate};
 pub use ipc::{
     Heartbeat, Ipc, IpcError, IpcPrefix, LoopExit, MessageHeader, PeriodicWait, Publisher,
     SlicePublisher, SliceSubscriber, Subscriber, Wake, run_wait_loop,

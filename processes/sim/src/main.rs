@@ -16,13 +16,13 @@ use ipc_types::msg::{
     CameraFrameHeader, DepthFrameHeader, Header, Intrinsics, PixelEncoding, Stage, TruthKind,
 };
 use ipc_types::services;
-use runtime::config::deploy_dir;
 use runtime::ipc::SliceSample;
 use runtime::{Ipc, IpcPrefix, monotonic_ns};
 use runtime::{MessageHeader, SlicePublisher};
 use sim::camera::PixelFormat;
 use sim::lockstep::{PHYSICS_STEP_NS, Simulator, TRUTH_STATE_PERIOD_NS};
 use sim::px4::endpoint::{EndpointConfig, SimVehicle};
+use stack_config::deploy_dir;
 
 /// The landing stack's simulator: quadrotor, PX4-like autopilot over MAVLink, moving pad.
 #[derive(Debug, Parser)]

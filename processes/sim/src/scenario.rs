@@ -8,8 +8,8 @@
 
 use std::path::{Path, PathBuf};
 
-use runtime::config::{self, ConfigError, Invalid, Validate, check_range};
 use serde::Deserialize;
+use stack_config::{self as config, ConfigError, Invalid, Validate, check_range};
 
 use crate::autopilot::AutopilotParams;
 use crate::camera::DownCameraParams;

@@ -6,7 +6,7 @@
 //! A crate of its own rather than a module of the `landing` tool: the tool is not the
 //! only reader (the watchdog process will take its heartbeat deadlines from the graph)
 //! and a process must not pull in the tool's dependencies (OpenCV, the simulator).
-//! Loading follows `runtime::config`: the file is parsed strictly, then every
+//! Loading follows `stack_config`: the file is parsed strictly, then every
 //! rule is checked, and a mistake is one line naming the file, the node or topic and
 //! what is allowed.
 
@@ -15,8 +15,8 @@ mod render;
 
 use std::path::{Path, PathBuf};
 
-use runtime::config::{self, ConfigError, Invalid, Validate};
 use serde::{Deserialize, Serialize};
+use stack_config::{self as config, ConfigError, Invalid, Validate};
 
 pub use render::{dot, text};
 

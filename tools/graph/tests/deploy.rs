@@ -9,9 +9,9 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use graph::{Graph, RunValues, STACK_BINARIES};
+use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::msg;
 use ipc_types::services;
-use runtime::iceoryx2::prelude::ZeroCopySend;
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")

@@ -19,10 +19,10 @@ use opencv::core::{Mat, Point2f, Point3f, Vector};
 use opencv::prelude::*;
 use opencv::{aruco, calib3d};
 use optics::{CameraCalibration, PadModel};
-use runtime::config::deploy_dir;
 use serde_json::json;
 use sim::camera::{BodyMotion, DownCamera, DownCameraParams};
 use sim::ground_vehicle::PadState;
+use stack_config::deploy_dir;
 
 use crate::stats::percentile;
 

@@ -12,10 +12,10 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use runtime::config::deploy_dir;
 use serde_json::json;
 use sim::camera_worker::CameraPipeline;
 use sim::lockstep::Simulator;
+use stack_config::deploy_dir;
 
 use crate::stats::percentile;
 

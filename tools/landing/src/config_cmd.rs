@@ -4,8 +4,8 @@ use std::path::Path;
 
 use anyhow::Result;
 use camera_ingest::CameraIngestConfig;
-use runtime::config::{self, Invalid, IpcConfig, Validate};
 use serde::Deserialize;
+use stack_config::{self as config, Invalid, IpcConfig, Validate};
 
 /// The whole stack configuration. Each process reads only its own section, strictly; this
 /// type checks the file as a whole, so an unknown section is caught too.

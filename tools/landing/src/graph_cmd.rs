@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use runtime::config::deploy_dir;
+use stack_config::deploy_dir;
 
 /// Arguments of `landing graph`.
 #[derive(Debug, Args)]

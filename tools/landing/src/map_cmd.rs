@@ -26,9 +26,9 @@ use mavlink::dialects::common::{
 use nalgebra::{Isometry3, Point3, Translation3, Vector3};
 use opencv::core::{Mat, Point, Rect, Scalar, Vector};
 use opencv::{core, imgcodecs, imgproc};
-use runtime::config::{self as cfgload, deploy_dir};
 use sim::lockstep::Simulator;
 use sim::world::Aabb;
+use stack_config::{self as cfgload, deploy_dir};
 use state_history::{StateHistory, TimedPose};
 
 /// Arguments of `landing map`.

@@ -10,8 +10,8 @@ use nalgebra::Isometry3;
 use opencv::imgcodecs;
 use opencv::prelude::*;
 use optics::{CameraCalibration, PadModel};
-use runtime::config::deploy_dir;
 use serde_json::json;
+use stack_config::deploy_dir;
 
 /// Arguments of `landing pad detect`.
 #[derive(Debug, Args)]

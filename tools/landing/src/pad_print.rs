@@ -12,7 +12,7 @@ use opencv::core::{Mat, Vector};
 use opencv::imgcodecs;
 use opencv::prelude::*;
 use optics::{MARKER_CELLS, Marker, PadError, PadModel, marker_cells};
-use runtime::config::deploy_dir;
+use stack_config::deploy_dir;
 
 /// Metres per inch: dots per inch to pixels per metre.
 pub const METRES_PER_INCH: f64 = 0.0254;

@@ -7,9 +7,9 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use nalgebra::Vector3;
 use planner::{Aabb, Goal, GridMap, Planner, PlannerConfig, State};
-use runtime::config::load_process;
 use serde::Deserialize;
 use serde_json::json;
+use stack_config::load_process;
 
 /// Exit code when the inputs were fine but no trajectory was found.
 pub const NO_PLAN: u8 = 3;

@@ -13,8 +13,8 @@ use ipc_types::msg::MissionState;
 use optics::mount::down_camera_from_body;
 use optics::{CameraCalibration, PadModel};
 use planner::PlannerNode;
-use runtime::config::{self as cfgload, Validate, deploy_dir};
 use sim::lockstep::Simulator;
+use stack_config::{self as cfgload, Validate, deploy_dir};
 
 use crate::config_cmd::StackConfig;
 use crate::flight_log::{FlightLog, FlightSample, Outcome, RunSummary, Touchdown};

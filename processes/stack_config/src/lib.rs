@@ -1,9 +1,13 @@
-//! TOML configuration loading with validation.
+//! TOML configuration loading with validation, for every crate of the stack.
 //!
 //! A user mistake must produce one line that names the file, the key and what is allowed,
 //! so config types derive `Deserialize` with `deny_unknown_fields` and implement
 //! [`Validate`] for ranges and cross-field rules; [`load`] turns every failure into a
 //! [`ConfigError`] whose `Display` is that one line.
+//!
+//! A crate of its own, below the runtime: process libraries validate their sections with
+//! it and must not depend on the runtime (iceoryx2, signals, logging); the runtime uses
+//! it for the `[ipc]` prefix rules, and binaries and tools load their files with it.
 
 use std::path::{Path, PathBuf};
 
@@ -150,6 +154,20 @@ fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
+/// The iceoryx2 prefix when neither the `--ipc-prefix` flag, `LANDING_IPC_PREFIX` nor a
+/// config file sets one.
+pub const DEFAULT_PREFIX: &str = "landing_";
+
+/// True when `prefix` can be an iceoryx2 prefix: 1 to 32 characters of `A-Z a-z 0-9 _ - .`
+/// (it becomes part of file names under `/dev/shm` and `/tmp`, so no path characters).
+pub fn is_valid_prefix(prefix: &str) -> bool {
+    !prefix.is_empty()
+        && prefix.len() <= 32
+        && prefix
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-' || b == b'.')
+}
+
 /// The `[ipc]` section every process reads: how it finds the others and how often it
 /// must say it is alive.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize)]
@@ -166,7 +184,7 @@ pub struct IpcConfig {
 impl Default for IpcConfig {
     fn default() -> Self {
         Self {
-            prefix: crate::ipc::DEFAULT_PREFIX.to_string(),
+            prefix: DEFAULT_PREFIX.to_string(),
             heartbeat_period_ms: 100,
             heartbeat_deadline_ms: 500,
         }
@@ -175,15 +193,15 @@ impl Default for IpcConfig {
 
 impl Validate for IpcConfig {
     fn validate(&self) -> Result<(), Invalid> {
-        crate::ipc::IpcPrefix::new(&self.prefix).map_err(|_| {
-            Invalid::new(
+        if !is_valid_prefix(&self.prefix) {
+            return Err(Invalid::new(
                 "prefix",
                 format!(
                     "`{}` is not allowed (allowed: 1 to 32 characters of A-Z a-z 0-9 _ - .)",
                     self.prefix
                 ),
-            )
-        })?;
+            ));
+        }
         check_range("heartbeat_period_ms", self.heartbeat_period_ms, 10, 10_000)?;
         check_range(
             "heartbeat_deadline_ms",
@@ -286,5 +304,5 @@ pub fn deploy_dir() -> PathBuf {
 }
 
 #[cfg(test)]
-#[path = "config_test.rs"]
+#[path = "lib_test.rs"]
 mod tests;

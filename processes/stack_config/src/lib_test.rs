@@ -1,4 +1,4 @@
-//! Tests of `config`.
+//! Tests of `stack_config`.
 
 use super::*;
 use serde::Deserialize;
@@ -75,4 +75,13 @@ fn a_missing_file_is_a_read_error() {
         e.starts_with("config /nonexistent/cam.toml: cannot read"),
         "{e}"
     );
+}
+
+#[test]
+fn prefixes_reject_path_characters() {
+    assert!(is_valid_prefix("run_1-a.b"));
+    assert!(is_valid_prefix(DEFAULT_PREFIX));
+    assert!(!is_valid_prefix("../x"));
+    assert!(!is_valid_prefix(""));
+    assert!(!is_valid_prefix(&"a".repeat(33)));
 }

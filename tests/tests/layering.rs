@@ -1,0 +1,185 @@
+//! The crates keep their layers: `ipc_types` is messages only, process libraries never
+//! touch the runtime or iceoryx2 (only the binaries do, through `runtime`), and crates
+//! without a binary do not depend on the runtime at all. The lockstep runner drives the
+//! libraries without IPC; a library that reached for a port would break that quietly.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a panic is a failed test
+
+use std::path::{Path, PathBuf};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The package names in a manifest's `[dependencies]` (not dev- or build-dependencies).
+fn dependencies(manifest: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(manifest).expect("read Cargo.toml");
+    let doc: toml::Table = toml::from_str(&text).expect("parse Cargo.toml");
+    doc.get("dependencies")
+        .and_then(|d| d.as_table())
+        .map(|t| t.keys().cloned().collect())
+        .unwrap_or_default()
+}
+
+/// True when the crate at `dir` builds a binary (`src/main.rs` or a `[[bin]]`).
+fn has_binary(dir: &Path) -> bool {
+    let text = std::fs::read_to_string(dir.join("Cargo.toml")).expect("read Cargo.toml");
+    dir.join("src/main.rs").is_file() || text.contains("[[bin]]")
+}
+
+/// The library's source files: everything under `src/` but `main.rs`, `src/bin/` and the
+/// unit-test files (`*_test.rs`, compiled only under `cfg(test)`).
+fn library_sources(dir: &Path, out: &mut Vec<PathBuf>) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let p = e.path();
+        let name = p.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+        if p.is_dir() {
+            if name != "bin" {
+                library_sources(&p, out);
+            }
+        } else if name.ends_with(".rs") && name != "main.rs" && !name.ends_with("_test.rs") {
+            out.push(p);
+        }
+    }
+}
+
+/// The code of a Rust file without its `//` comments (doc comments included), so that a
+/// sentence mentioning iceoryx2 is not taken for a use of it.
+fn code_of(path: &Path) -> String {
+    let text = std::fs::read_to_string(path).expect("read source");
+    text.lines()
+        .map(|l| l.split("//").next().unwrap_or_default())
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// Byte offsets where `word` starts as a whole path segment (not the tail of a longer
+/// identifier).
+fn uses_of(code: &str, word: &str) -> Vec<usize> {
+    code.match_indices(word)
+        .filter(|(i, _)| {
+            code[..*i]
+                .chars()
+                .next_back()
+                .is_none_or(|c| !(c.is_alphanumeric() || c == '_'))
+        })
+        .map(|(i, _)| i)
+        .collect()
+}
+
+fn process_crates() -> Vec<PathBuf> {
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(root().join("processes"))
+        .expect("processes/")
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.join("Cargo.toml").is_file())
+        .collect();
+    dirs.sort();
+    assert!(
+        dirs.len() >= 10,
+        "processes/ holds the stack's crates: {dirs:?}"
+    );
+    dirs
+}
+
+#[test]
+fn no_process_library_uses_the_runtime_or_iceoryx2() {
+    let mut offenders = Vec::new();
+    for dir in process_crates() {
+        if dir.ends_with("runtime") {
+            continue;
+        }
+        let mut files = Vec::new();
+        library_sources(&dir.join("src"), &mut files);
+        for f in files {
+            let code = code_of(&f);
+            for word in ["runtime::", "iceoryx2"] {
+                if !uses_of(&code, word).is_empty() {
+                    offenders.push(format!("{} uses {word}", f.display()));
+                }
+            }
+        }
+    }
+    assert!(
+        offenders.is_empty(),
+        "process libraries take messages and time as arguments; only main.rs binds them \
+         to the runtime:\n{}",
+        offenders.join("\n")
+    );
+}
+
+#[test]
+fn only_binaries_depend_on_the_runtime_and_none_on_iceoryx2_directly() {
+    let mut offenders = Vec::new();
+    for dir in process_crates() {
+        if dir.ends_with("runtime") {
+            continue;
+        }
+        let deps = dependencies(&dir.join("Cargo.toml"));
+        if deps.iter().any(|d| d == "iceoryx2") {
+            offenders.push(format!(
+                "{}: iceoryx2 in [dependencies] (a binary reaches it through runtime)",
+                dir.display()
+            ));
+        }
+        if !has_binary(&dir) && deps.iter().any(|d| d == "runtime") {
+            offenders.push(format!(
+                "{}: runtime in [dependencies] of a crate without a binary",
+                dir.display()
+            ));
+        }
+    }
+    assert!(offenders.is_empty(), "{}", offenders.join("\n"));
+}
+
+#[test]
+fn ipc_types_is_the_message_crate_only() {
+    let dir = root().join("ipc_types");
+    let deps = dependencies(&dir.join("Cargo.toml"));
+    for banned in ["runtime", "stack_config"] {
+        assert!(
+            !deps.iter().any(|d| d == banned),
+            "ipc_types depends on {banned}: it must stay the bottom of the graph"
+        );
+    }
+    let mut files = Vec::new();
+    library_sources(&dir.join("src"), &mut files);
+    assert!(!files.is_empty());
+    for f in files {
+        let code = code_of(&f);
+        assert!(
+            uses_of(&code, "runtime::").is_empty(),
+            "{} uses the runtime",
+            f.display()
+        );
+        // iceoryx2 only for the derive that gives payloads their versioned type names.
+        for at in uses_of(&code, "iceoryx2") {
+            assert!(
+                code[at..].starts_with("iceoryx2::prelude::ZeroCopySend"),
+                "{}: iceoryx2 beyond ZeroCopySend: {}",
+                f.display(),
+                code[at..].lines().next().unwrap_or_default()
+            );
+        }
+    }
+}
+
+#[test]
+fn the_checks_see_a_use_and_ignore_a_comment() {
+    let code = "/// binds it to iceoryx2\nfn f() {} // runtime::x\nuse stack_runtime::y;";
+    let dir = std::env::temp_dir().join(format!("layering-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("lib.rs");
+    std::fs::write(&file, code).unwrap();
+    let stripped = code_of(&file);
+    assert!(uses_of(&stripped, "iceoryx2").is_empty());
+    assert!(uses_of(&stripped, "runtime::").is_empty());
+    std::fs::write(&file, "use runtime::Ipc;\nlet x: iceoryx2::Foo;").unwrap();
+    let stripped = code_of(&file);
+    assert_eq!(uses_of(&stripped, "runtime::"), vec![4]);
+    assert_eq!(uses_of(&stripped, "iceoryx2").len(), 1);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
