@@ -3,14 +3,12 @@
 //! [`Px4Link`] is the whole protocol as a pure state machine (messages and time in,
 //! messages and the vehicle state out); [`LinkNode`] wraps it with the stack's messages
 //! (requests with ids, safety orders, outcomes, the vehicle state to publish); the
-//! `px4-link` binary owns the UDP socket or serial port, the clock and iceoryx2. NED and
-//! FRD appear only in this crate ([`frames`]).
+//! `px4-link` binary owns the UDP socket or serial port, the clock and iceoryx2. The
+//! protocol pieces the simulated autopilot shares (codec, NED/FRD frames, PX4 modes,
+//! COMMAND_LONG) are the `px4_protocol` crate's; NED and FRD appear nowhere else.
 
-pub mod codec;
 pub mod config;
-pub mod frames;
 pub mod link;
-pub mod mode;
 pub mod node;
 
 pub use link::{LinkSettings, Outcome, Px4Link, Request, Status};

@@ -7,16 +7,14 @@ use std::collections::VecDeque;
 use ipc_types::msg::{FlightMode, Header, LandedState, LinkHealth, Pose, Setpoint, VehicleState};
 use mavlink::MavHeader;
 use mavlink::dialects::common::{
-    COMMAND_LONG_DATA, HEARTBEAT_DATA, MavAutopilot, MavCmd, MavFrame, MavLandedState, MavMessage,
-    MavModeFlag, MavResult, MavState, MavType, PositionTargetTypemask,
-    SET_POSITION_TARGET_LOCAL_NED_DATA,
+    HEARTBEAT_DATA, MavAutopilot, MavCmd, MavFrame, MavLandedState, MavMessage, MavModeFlag,
+    MavResult, MavState, MavType, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
 use nalgebra::{UnitQuaternion, Vector3};
-
-use crate::frames::{
+use px4_protocol::frames::{
     enu_from_ned, flu_from_frd, ned_from_enu, world_from_body_enu, yaw_enu_to_ned,
 };
-use crate::mode::{OFFBOARD, flight_mode};
+use px4_protocol::mode::{OFFBOARD, flight_mode};
 
 /// What the stack asks of the autopilot.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -580,22 +578,15 @@ impl Px4Link {
     }
 
     fn command_long(&self, command: MavCmd, p: [f32; 7]) -> MavMessage {
-        self.command_long_confirm(command, p, 0)
+        px4_protocol::command_long(command, p, self.settings.target)
     }
 
     fn command_long_confirm(&self, command: MavCmd, p: [f32; 7], confirmation: u32) -> MavMessage {
-        MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-            param1: p[0],
-            param2: p[1],
-            param3: p[2],
-            param4: p[3],
-            param5: p[4],
-            param6: p[5],
-            param7: p[6],
+        px4_protocol::command_long_confirmation(
             command,
-            target_system: self.settings.target.0,
-            target_component: self.settings.target.1,
-            confirmation: confirmation.min(255) as u8,
-        })
+            p,
+            self.settings.target,
+            confirmation.min(255) as u8,
+        )
     }
 }

@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use ipc_types::msg::{Header, LinkOutcomeKind, LinkRequest, LinkRequestKind, VehicleState};
 use landing_tests::process::Running;
 use mavlink::MavHeader;
-use px4_link::codec::{StreamDecoder, encode};
+use px4_protocol::codec::{StreamDecoder, encode};
 use runtime::IpcPrefix;
 use sim::lockstep::{PHYSICS_STEP_NS, Simulator};
 

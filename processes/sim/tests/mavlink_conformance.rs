@@ -12,14 +12,15 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use mavlink::dialects::common::{
-    COMMAND_LONG_DATA, HEARTBEAT_DATA, MavAutopilot, MavCmd, MavFrame, MavLandedState, MavMessage,
-    MavModeFlag, MavResult, MavState, MavType, PositionTargetTypemask,
-    SET_POSITION_TARGET_LOCAL_NED_DATA,
+    HEARTBEAT_DATA, MavAutopilot, MavCmd, MavFrame, MavLandedState, MavMessage, MavModeFlag,
+    MavResult, MavState, MavType, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
 use mavlink::{MavHeader, MavlinkVersion};
+use px4_protocol::codec::decode_datagram;
+use px4_protocol::command_long;
+use px4_protocol::raw::renumber_command_long;
 use sim::px4::commander::Px4Params;
-use sim::px4::endpoint::{EndpointConfig, SimVehicle, decode_datagram};
-use sim::px4::raw::crc_accumulate;
+use sim::px4::endpoint::{EndpointConfig, SimVehicle};
 use sim::world::{World, WorldParams};
 
 const OFFBOARD: u32 = 6 << 16;
@@ -27,6 +28,8 @@ const POSCTL: u32 = 3 << 16;
 const AUTO_TAKEOFF: u32 = (2 << 24) | (4 << 16);
 const AUTO_LOITER: u32 = (3 << 24) | (4 << 16);
 const AUTO_LAND: u32 = (6 << 24) | (4 << 16);
+/// MAV_CMD_COMPONENT_ARM_DISARM's parameters for "arm".
+const ARM: [f32; 7] = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
 
 struct Sim {
     stop: Arc<AtomicBool>,
@@ -138,19 +141,10 @@ impl Companion {
                 component_id: 191,
                 sequence: 0,
             },
-            &MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-                param1: 1.0,
-                command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-                target_system: 1,
-                target_component: 1,
-                ..Default::default()
-            }),
+            &command_long(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, ARM, (1, 1)),
         )
         .unwrap();
-        frame[10 + 28..10 + 30].copy_from_slice(&number.to_le_bytes());
-        let n = frame.len();
-        let crc = crc_accumulate(crc_accumulate(0xffff, &frame[1..n - 2]), &[152]);
-        frame[n - 2..].copy_from_slice(&crc.to_le_bytes());
+        assert!(renumber_command_long(&mut frame, number));
         self.send_raw(&frame);
         let end = Instant::now() + timeout;
         let mut buf = [0u8; 2048];
@@ -242,19 +236,7 @@ impl Companion {
         p: [f32; 7],
         mut tick: impl FnMut(&mut Self),
     ) -> MavResult {
-        self.send(&MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-            param1: p[0],
-            param2: p[1],
-            param3: p[2],
-            param4: p[3],
-            param5: p[4],
-            param6: p[5],
-            param7: p[6],
-            command,
-            target_system: 1,
-            target_component: 1,
-            confirmation: 0,
-        }));
+        self.send(&command_long(command, p, (1, 1)));
         self.wait_for(Duration::from_secs(3), &mut tick, |m| match m {
             MavMessage::COMMAND_ACK(a) if a.command == command => {
                 assert_eq!((a.target_system, a.target_component), (1, 191));
@@ -459,13 +441,11 @@ fn unknown_commands_are_answered_unsupported_and_broadcast_ones_ignored() {
     // A command number no dialect has: still a COMMAND_ACK, UNSUPPORTED (3).
     assert_eq!(c.raw_command(31_999, secs(3)), Some(3));
     // Sent to every system (target_system 0): PX4's receiver drops it, no ACK.
-    c.send(&MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-        param1: 1.0,
-        command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-        target_system: 0,
-        target_component: 1,
-        ..Default::default()
-    }));
+    c.send(&command_long(
+        MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+        ARM,
+        (0, 1),
+    ));
     let got = c.collect(Duration::from_millis(1200));
     assert!(
         !got.iter()
@@ -674,13 +654,11 @@ fn temporarily_rejected_where_px4_answers_it() {
         MavResult::MAV_RESULT_TEMPORARILY_REJECTED
     );
     // An ARM param1 neither 0 nor 1: PX4 sends no ACK at all.
-    c.send(&MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-        param1: 3.0,
-        command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-        target_system: 1,
-        target_component: 1,
-        ..Default::default()
-    }));
+    c.send(&command_long(
+        MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+        [3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        (1, 1),
+    ));
     let got = c.collect(Duration::from_millis(800));
     assert!(
         !got.iter()

@@ -2,7 +2,7 @@
 //! companion computer would send, handed straight to the simulated autopilot.
 
 use mavlink::MavHeader;
-use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd, MavMessage};
+use mavlink::dialects::common::{MavCmd, MavMessage};
 use sim::lockstep::Simulator;
 
 /// The header a companion (MAV_COMP_ID_ONBOARD_COMPUTER) sends with.
@@ -14,22 +14,7 @@ pub const COMPANION: MavHeader = MavHeader {
 
 /// Sends COMMAND_LONG `command` with parameters `p` to the simulated autopilot.
 pub fn command(sim: &mut Simulator, command: MavCmd, p: [f32; 7]) {
-    sim.handle_mavlink(
-        &COMPANION,
-        &MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-            param1: p[0],
-            param2: p[1],
-            param3: p[2],
-            param4: p[3],
-            param5: p[4],
-            param6: p[5],
-            param7: p[6],
-            command,
-            target_system: 1,
-            target_component: 1,
-            confirmation: 0,
-        }),
-    );
+    sim.handle_mavlink(&COMPANION, &px4_protocol::command_long(command, p, (1, 1)));
 }
 
 /// The AMSL altitude of the local origin if `msg` is a HOME_POSITION (its altitude

@@ -82,7 +82,7 @@ fn setpoint(sim: &mut Simulator, p: &Vector3<f64>, yaw_enu: f64) {
         | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE
         | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE;
     let time_boot_ms = (sim.time_ns() / 1_000_000) as u32;
-    let ned = px4_link::frames::ned_from_enu(p);
+    let ned = px4_protocol::frames::ned_from_enu(p);
     sim.handle_mavlink(
         &COMPANION,
         &MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
@@ -96,7 +96,7 @@ fn setpoint(sim: &mut Simulator, p: &Vector3<f64>, yaw_enu: f64) {
             afx: 0.0,
             afy: 0.0,
             afz: 0.0,
-            yaw: px4_link::frames::yaw_enu_to_ned(yaw_enu) as f32,
+            yaw: px4_protocol::frames::yaw_enu_to_ned(yaw_enu) as f32,
             yaw_rate: 0.0,
             type_mask: ignore,
             target_system: 1,
@@ -133,7 +133,8 @@ impl Telemetry {
                     self.origin_amsl = crate::companion::origin_amsl(m);
                 }
                 MavMessage::ATTITUDE_QUATERNION(a) => {
-                    if let Some(r) = px4_link::frames::world_from_body_enu([a.q1, a.q2, a.q3, a.q4])
+                    if let Some(r) =
+                        px4_protocol::frames::world_from_body_enu([a.q1, a.q2, a.q3, a.q4])
                     {
                         self.attitude.push(TimedPose {
                             time_ns: u64::from(a.time_boot_ms) * 1_000_000,

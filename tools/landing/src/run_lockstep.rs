@@ -26,7 +26,7 @@ use planner::PlannerNode;
 use planner::bspline::State;
 use planner::map::CellView;
 use px4_link::LinkNode;
-use px4_link::codec::{decode_datagram, encode};
+use px4_protocol::codec::{decode_datagram, encode};
 use sim::lockstep::Simulator;
 use state_history::StateHistory;
 

@@ -33,19 +33,7 @@ fn ground() -> VehicleStatus {
 }
 
 fn cmd(command: MavCmd, p: [f32; 7]) -> MavMessage {
-    MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-        param1: p[0],
-        param2: p[1],
-        param3: p[2],
-        param4: p[3],
-        param5: p[4],
-        param6: p[5],
-        param7: p[6],
-        command,
-        target_system: 1,
-        target_component: 1,
-        confirmation: 0,
-    })
+    px4_protocol::command_long(command, p, (1, 1))
 }
 
 /// Sends a command and returns its ACK result (and drops other output).

@@ -19,11 +19,12 @@ use std::time::{Duration, Instant};
 
 use mavlink::MavHeader;
 use mavlink::dialects::common::{MavMessage, MavResult};
+use px4_protocol::codec::decode_datagram;
+use px4_protocol::raw::{UnknownCommand, command_ack_frame, unknown_commands};
 use serde::Deserialize;
 use thiserror::Error;
 
 use super::commander::{Commander, Px4Params, VehicleStatus};
-use super::raw::{UnknownCommand, command_ack_frame, unknown_commands};
 use crate::lockstep::{PHYSICS_STEP_NS, Simulator, StepReport};
 use crate::params::ParamError;
 use crate::world::{World, WorldError};
@@ -255,8 +256,6 @@ impl Endpoint {
         }
     }
 }
-
-pub use px4_link::codec::decode_datagram;
 
 /// A simulated PX4 vehicle reachable over UDP: the lockstep [`Simulator`] (world +
 /// commander + sensor schedules) behind an [`Endpoint`].

@@ -7,10 +7,11 @@
 //! - [`endpoint`]: the UDP socket around it, and [`endpoint::SimVehicle`]
 //!   that steps a [`crate::world::World`] with it.
 //! - [`frames`]: ENU/FLU <-> NED/FRD, used only at this boundary.
-//! - [`raw`]: the COMMAND_LONG/ACK frames the `mavlink` crate cannot express (a
-//!   command number the dialect lacks), which PX4 answers UNSUPPORTED.
+//!
+//! The codec, the frame conversions, PX4's modes and the raw COMMAND_LONG/ACK frames
+//! (a command number the dialect lacks, which PX4 answers UNSUPPORTED) are
+//! `px4_protocol`'s, shared with px4-link.
 
 pub mod commander;
 pub mod endpoint;
 pub mod frames;
-pub mod raw;

@@ -1,8 +1,8 @@
 //! MAVLink 2 frames the `mavlink` crate cannot express: a COMMAND_LONG whose command
 //! number is not in the common dialect fails to parse there, and a COMMAND_ACK for it
 //! cannot be built there. PX4 answers such a command MAV_RESULT_UNSUPPORTED
-//! (Commander::handle_command's `default:` branch), so the endpoint reads and writes
-//! those two frames itself.
+//! (Commander::handle_command's `default:` branch), so the simulator's endpoint reads
+//! and writes those two frames itself, and its tests write such a command.
 
 use mavlink::MavlinkVersion;
 use mavlink::dialects::common::MavMessage;
@@ -51,6 +51,28 @@ pub fn crc_accumulate(mut crc: u16, bytes: &[u8]) -> u16 {
 /// The checksum of a frame: header (without the start byte), payload, CRC_EXTRA.
 fn frame_crc(header_and_payload: &[u8], crc_extra: u8) -> u16 {
     crc_accumulate(crc_accumulate(0xffff, header_and_payload), &[crc_extra])
+}
+
+/// Gives an unsigned MAVLink 2 COMMAND_LONG `frame` (as `mavlink::write_v2_msg` writes
+/// one) the command number `number`, which the dialect may lack, and redoes its checksum;
+/// false (and `frame` unchanged) when `frame` is not such a frame.
+pub fn renumber_command_long(frame: &mut [u8], number: u16) -> bool {
+    let n = frame.len();
+    let payload_len = frame.get(1).map_or(0, |&l| usize::from(l));
+    let is_command_long = n >= 1 + HEADER_LEN + 30 + 2
+        && frame[0] == STX_V2
+        && frame[2] & SIGNED == 0
+        && n == 1 + HEADER_LEN + payload_len + 2
+        && u32::from_le_bytes([frame[7], frame[8], frame[9], 0]) == COMMAND_LONG_ID;
+    if !is_command_long {
+        return false;
+    }
+    // The command is payload bytes 28-29 (after the seven f32 parameters).
+    let at = 1 + HEADER_LEN + 28;
+    frame[at..at + 2].copy_from_slice(&number.to_le_bytes());
+    let crc = frame_crc(&frame[1..n - 2], COMMAND_LONG_CRC_EXTRA);
+    frame[n - 2..].copy_from_slice(&crc.to_le_bytes());
+    true
 }
 
 /// Every well-formed MAVLink 2 COMMAND_LONG in `datagram` whose command number the

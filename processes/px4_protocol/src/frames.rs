@@ -1,7 +1,7 @@
 //! NED/FRD (PX4, MAVLink) <-> ENU/FLU (the rest of the stack). The only place NED
 //! appears: px4-link converts telemetry in and setpoints out, and the simulator's
-//! autopilot (`sim::px4::frames` re-exports these) converts the other way, so the two
-//! ends of the link cannot disagree on a sign.
+//! autopilot (`sim::px4::frames` re-exports these) converts the other way, with the same
+//! code, so the two ends of the link cannot disagree on a sign.
 
 use std::f64::consts::{FRAC_PI_2, PI};
 

@@ -1,7 +1,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use mavlink::MavHeader;
-use mavlink::dialects::common::{COMMAND_ACK_DATA, COMMAND_LONG_DATA, MavCmd, MavResult};
+use mavlink::dialects::common::{COMMAND_ACK_DATA, MavCmd, MavResult};
 
 use super::*;
 
@@ -13,28 +13,14 @@ const COMPANION: MavHeader = MavHeader {
 
 fn command_long(command: MavCmd) -> Vec<u8> {
     let mut buf = Vec::new();
-    mavlink::write_v2_msg(
-        &mut buf,
-        COMPANION,
-        &MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-            param1: 1.0,
-            command,
-            target_system: 1,
-            target_component: 1,
-            ..Default::default()
-        }),
-    )
-    .unwrap();
+    let msg = crate::command::command_long(command, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], (1, 1));
+    mavlink::write_v2_msg(&mut buf, COMPANION, &msg).unwrap();
     buf
 }
 
 /// `frame` with its command number replaced by `number` and the checksum redone.
 fn with_command_number(mut frame: Vec<u8>, number: u16) -> Vec<u8> {
-    let payload_start = 10;
-    frame[payload_start + 28..payload_start + 30].copy_from_slice(&number.to_le_bytes());
-    let n = frame.len();
-    let crc = frame_crc(&frame[1..n - 2], COMMAND_LONG_CRC_EXTRA);
-    frame[n - 2..].copy_from_slice(&crc.to_le_bytes());
+    assert!(renumber_command_long(&mut frame, number));
     frame
 }
 
@@ -100,4 +86,29 @@ fn the_ack_frame_is_what_the_mavlink_crate_writes_for_a_known_command() {
     )
     .unwrap();
     assert_eq!(ours, theirs);
+}
+
+#[test]
+fn only_an_unsigned_command_long_is_renumbered() {
+    let mut frame = command_long(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM);
+    let mut cut = frame[..frame.len() - 1].to_vec();
+    assert!(!renumber_command_long(&mut cut, 7));
+    let mut ack = command_ack_frame(
+        0,
+        1,
+        1,
+        &UnknownCommand {
+            sender_system: 1,
+            sender_component: 191,
+            command: 400,
+            target_system: 1,
+            target_component: 1,
+        },
+        0,
+    );
+    let before = ack.clone();
+    assert!(!renumber_command_long(&mut ack, 7));
+    assert_eq!(ack, before);
+    assert!(renumber_command_long(&mut frame, 31_999));
+    assert_eq!(unknown_commands(&frame)[0].command, 31_999);
 }
