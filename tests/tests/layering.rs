@@ -1,6 +1,8 @@
 //! The crates keep their layers: `ipc_types` is messages only, process libraries never
-//! touch the runtime or iceoryx2 (only the binaries do, through `runtime`), and crates
-//! without a binary do not depend on the runtime at all. The lockstep runner drives the
+//! touch the runtime or iceoryx2 (only the binaries do, through `runtime`), crates
+//! without a binary do not depend on the runtime at all, and no process crate depends
+//! on another process's crate (what two processes share is a library crate of its own:
+//! optics, state_history, bspline, px4_protocol). The lockstep runner drives the
 //! libraries without IPC; a library that reached for a port would break that quietly.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a panic is a failed test
@@ -19,6 +21,17 @@ fn dependencies(manifest: &Path) -> Vec<String> {
         .and_then(|d| d.as_table())
         .map(|t| t.keys().cloned().collect())
         .unwrap_or_default()
+}
+
+/// The package name of the crate at `dir`.
+fn package_name(dir: &Path) -> String {
+    let text = std::fs::read_to_string(dir.join("Cargo.toml")).expect("read Cargo.toml");
+    let doc: toml::Table = toml::from_str(&text).expect("parse Cargo.toml");
+    doc.get("package")
+        .and_then(|p| p.get("name"))
+        .and_then(|n| n.as_str())
+        .expect("[package] name")
+        .to_string()
 }
 
 /// True when the crate at `dir` builds a binary (`src/main.rs` or a `[[bin]]`).
@@ -133,6 +146,31 @@ fn only_binaries_depend_on_the_runtime_and_none_on_iceoryx2_directly() {
         }
     }
     assert!(offenders.is_empty(), "{}", offenders.join("\n"));
+}
+
+#[test]
+fn no_process_crate_depends_on_another_process() {
+    let crates = process_crates();
+    let processes: Vec<String> = crates
+        .iter()
+        .filter(|d| has_binary(d))
+        .map(|d| package_name(d))
+        .collect();
+    assert!(processes.iter().any(|p| p == "fsm") && processes.iter().any(|p| p == "sim"));
+    let mut offenders = Vec::new();
+    for dir in &crates {
+        for dep in dependencies(&dir.join("Cargo.toml")) {
+            if processes.contains(&dep) {
+                offenders.push(format!("{} depends on {dep}", package_name(dir)));
+            }
+        }
+    }
+    assert!(
+        offenders.is_empty(),
+        "a process crate must not pull in another process (tests may, as a \
+         dev-dependency); share a library crate instead:\n{}",
+        offenders.join("\n")
+    );
 }
 
 #[test]

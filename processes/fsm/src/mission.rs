@@ -3,13 +3,13 @@
 //! autopilot requests and status out. No clock, no IPC: the `fsm` binary and
 //! `landing run` call the same code.
 
+use bspline::BSpline;
 use ipc_types::msg::{
     FlightMode, FsmStatus, GoalMode, Header, LandedState, LinkOutcome, LinkOutcomeKind,
     LinkRequest, LinkRequestKind, MissionState, PadObservation, PlannerGoal, SafetyAction,
     SafetyCommand, Setpoint, Stage, Text, Trajectory, VehicleState,
 };
 use nalgebra::{UnitQuaternion, Vector3};
-use planner::bspline::BSpline;
 
 use crate::config::FsmConfig;
 use crate::pad_filter::{PadEstimate, PadFilter, Update};

@@ -4,15 +4,16 @@
 //! returns a uniform cubic B-spline: a quintic initialization fitted to control points,
 //! collisions of the control polygon resolved by A*-guided {p, v} pairs and L-BFGS
 //! ("rebound"), time re-allocation with a fitness refinement, and a final dense check.
-//! [`ReplanPolicy`] decides when to plan again. No IPC, no clock: the `planner` binary
-//! binds it to iceoryx2 and `landing plan` calls it offline. See `docs/planning.md`.
+//! [`ReplanPolicy`] decides when to plan again. The B-spline itself is the `bspline`
+//! crate's, which the fsm samples without depending on the planner. No IPC, no clock:
+//! the `planner` binary binds it to iceoryx2 and `landing plan` calls it offline. See
+//! `docs/planning.md`.
 
 // `!(x > 0.0)` is how this crate rejects NaN along with the out-of-range values; index
 // loops over control points read like the formulas they implement.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
 pub mod astar;
-pub mod bspline;
 pub mod config;
 pub mod cost;
 pub mod fields;
@@ -23,6 +24,7 @@ pub mod plan;
 pub mod precond;
 pub mod replan;
 
+/// The curve every plan is (the `bspline` crate, shared with the fsm that samples it).
 pub use bspline::{BSpline, State};
 pub use config::PlannerConfig;
 pub use map::{Aabb, CellView, GridMap, MapError, OccupancyQuery};

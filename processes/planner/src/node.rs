@@ -6,11 +6,11 @@ use ipc_types::msg::{
 };
 use nalgebra::Vector3;
 
-use crate::bspline::{BSpline, State};
 use crate::config::PlannerConfig;
 use crate::map::OccupancyQuery;
 use crate::plan::{Goal, Planner, stop_trajectory};
 use crate::replan::{Decision, OnFailure, ReplanPolicy};
+use bspline::{BSpline, State};
 
 /// What one step asks the process to publish.
 #[derive(Debug, Clone, Default)]

@@ -5,12 +5,12 @@ use ipc_types::msg::MAX_CONTROL_POINTS;
 use nalgebra::Vector3;
 
 use crate::astar::{AStar, TIE_BREAK};
-use crate::bspline::{BSpline, Quintic, SegmentSampler, State, end_points, fit};
 use crate::config::PlannerConfig;
 use crate::cost::{Cost, Pair, Weights};
 use crate::lbfgs::{Lbfgs, LbfgsSettings, Objective, Stop};
 use crate::map::OccupancyQuery;
 use crate::precond::JerkPreconditioner;
+use bspline::{BSpline, Quintic, SegmentSampler, State, end_points, fit};
 
 /// Why no trajectory was produced. Nothing is ever returned that failed the final check.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

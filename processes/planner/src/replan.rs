@@ -2,8 +2,8 @@
 
 use nalgebra::Vector3;
 
-use crate::bspline::BSpline;
 use crate::map::OccupancyQuery;
+use bspline::BSpline;
 
 /// Why a new plan is wanted.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -14,6 +14,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use aruco_pnp::{Frame, PadEstimator};
+use bspline::State;
 use depth_map::{DepthMapper, DepthPixels, DepthView};
 use fsm::Fsm;
 use ipc_types::msg::{
@@ -23,7 +24,6 @@ use ipc_types::msg::{
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
 use planner::PlannerNode;
-use planner::bspline::State;
 use planner::map::CellView;
 use px4_link::LinkNode;
 use px4_protocol::codec::{decode_datagram, encode};

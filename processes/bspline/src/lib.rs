@@ -1,5 +1,12 @@
 //! Uniform cubic B-splines: evaluation, end-state control points, and the fit of a
-//! sampled curve to control points (the front end's initialization).
+//! sampled curve to control points (the planner front end's initialization).
+//!
+//! A crate of its own because two processes need it: the planner builds trajectories
+//! with it and the fsm samples them at 50 Hz; the fsm must not depend on the planner.
+
+// `!(x > 0.0)` is how this crate rejects NaN along with the out-of-range values; index
+// loops over control points read like the formulas they implement.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
 use nalgebra::Vector3;
 
@@ -313,5 +320,5 @@ impl Quintic {
 }
 
 #[cfg(test)]
-#[path = "bspline_test.rs"]
+#[path = "lib_test.rs"]
 mod tests;
