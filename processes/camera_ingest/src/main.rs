@@ -24,8 +24,8 @@ use ipc_types::services;
 use opencv::core::Mat;
 use optics::CameraCalibration;
 use runtime::{
-    Heartbeat, Ipc, IpcError, IpcPrefix, JOIN_TIMEOUT, PeriodicWait, SlicePublisher, StopFlag,
-    ThreadRole, Worker, monotonic_ns,
+    Heartbeat, Ipc, IpcPrefix, JOIN_TIMEOUT, LoanError, PeriodicWait, SendError, SlicePublisher,
+    StopFlag, ThreadRole, Worker, monotonic_ns,
 };
 use stack_config::{self as config, deploy_dir};
 
@@ -195,7 +195,8 @@ struct Output {
 enum Problem {
     Rejected(Rejection),
     Failed(IngestError),
-    Ipc(IpcError),
+    Loan(LoanError),
+    Send(SendError),
 }
 
 impl std::fmt::Display for Problem {
@@ -203,7 +204,8 @@ impl std::fmt::Display for Problem {
         match self {
             Self::Rejected(r) => r.fmt(f),
             Self::Failed(e) => e.fmt(f),
-            Self::Ipc(e) => e.fmt(f),
+            Self::Loan(e) => e.fmt(f),
+            Self::Send(e) => e.fmt(f),
         }
     }
 }
@@ -295,7 +297,7 @@ impl Output {
             Err(e) => {
                 // Every sample is held by consumers: drop this frame, never wait.
                 self.ingest.record(Dropped::NoBuffer);
-                self.log.last = Some(Problem::Ipc(e));
+                self.log.last = Some(Problem::Loan(e));
                 return None;
             }
         };
@@ -315,7 +317,7 @@ impl Output {
             Ok(_) => self.ingest.sent(),
             Err(e) => {
                 self.ingest.record(Dropped::SendFailed);
-                self.log.last = Some(Problem::Ipc(e));
+                self.log.last = Some(Problem::Send(e));
             }
         }
         None

@@ -16,7 +16,7 @@ use depth_map::{DepthError, DepthMapConfig, DepthMapper, DepthView, Input};
 use ipc_types::msg::{DepthFrameHeader, Header, OccupancyMapHeader, Stage, VehicleState};
 use ipc_types::services;
 use runtime::ipc::{Wake, run_wait_loop};
-use runtime::{Ipc, IpcError, IpcPrefix, SlicePublisher, Subscriber, monotonic_ns};
+use runtime::{Ipc, IpcPrefix, SendError, SlicePublisher, Subscriber, monotonic_ns};
 use stack_config::{IpcConfig, load_process_or_default};
 
 /// The iceoryx2 node and heartbeat name.
@@ -259,7 +259,7 @@ fn publish(
     upstream: &Header,
     enter_ns: u64,
     counts: &mut Counts,
-) -> Result<(), IpcError> {
+) -> Result<(), SendError> {
     let map = mapper.map();
     let Ok(mut sample) = maps.loan(map.cell_count()) else {
         counts.dropped_no_buffer += 1;

@@ -38,57 +38,177 @@ const MAX_SUBSCRIBERS: usize = 8;
 /// Processes that may publish one topic (a restarted process briefly overlaps its ghost).
 const MAX_PUBLISHERS: usize = 4;
 
-/// Errors of the IPC layer. Each names the service it concerns.
+// One error type per operation, as iceoryx2 itself does: a caller sees only what the
+// call it made can fail with. Each names the node or service it concerns; what iceoryx2
+// said is kept as text, as it was printed before.
+
+/// Why a prefix cannot be used ([`IpcPrefix::new`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("iceoryx2 prefix `{0}` is not allowed (allowed: 1 to 32 characters of A-Z a-z 0-9 _ - .)")]
+pub struct PrefixError(pub String);
+
+/// Why a process could not get its node ([`Ipc::open`]).
 #[derive(Debug, thiserror::Error)]
-pub enum IpcError {
+pub enum NodeError {
     /// The prefix is not a usable file-name fragment.
-    #[error(
-        "iceoryx2 prefix `{0}` is not allowed (allowed: 1 to 32 characters of A-Z a-z 0-9 _ - .)"
-    )]
-    BadPrefix(String),
-    /// The node could not be created.
+    #[error(transparent)]
+    Prefix(#[from] PrefixError),
+    /// The process name is not a valid node name.
     #[error("cannot create iceoryx2 node `{name}`: {reason}")]
-    Node {
+    Name {
         /// Node name.
         name: String,
         /// What iceoryx2 said.
         reason: String,
     },
-    /// A service or port could not be opened or created.
+    /// iceoryx2 could not create the node.
+    #[error("cannot create iceoryx2 node `{name}`: {reason}")]
+    Create {
+        /// Node name.
+        name: String,
+        /// What iceoryx2 said.
+        reason: String,
+    },
+}
+
+/// Why a port could not be opened: its service (publish-subscribe, event or heartbeat)
+/// could not be opened or created, or the port on it could not be created.
+#[derive(Debug, thiserror::Error)]
+pub enum ServiceError {
+    /// The service name is not valid for iceoryx2.
     #[error("iceoryx2 service `{service}`: {reason}")]
-    Service {
+    Name {
         /// Service name.
         service: String,
         /// What iceoryx2 said.
         reason: String,
     },
-    /// Sending, loaning or receiving failed.
-    #[error("iceoryx2 `{service}`: {op} failed: {reason}")]
+    /// The service could not be opened or created (another process created it with
+    /// another type or quality of service, or resources ran out).
+    #[error("iceoryx2 service `{service}`: {reason}")]
+    Open {
+        /// Service name.
+        service: String,
+        /// What iceoryx2 said.
+        reason: String,
+    },
+    /// The service exists but this port could not be created on it (too many ports).
+    #[error("iceoryx2 service `{service}`: {reason}")]
     Port {
         /// Service name.
         service: String,
-        /// The operation.
-        op: &'static str,
         /// What iceoryx2 said.
         reason: String,
     },
-    /// The wait set failed.
-    #[error("wait loop: {0}")]
-    WaitSet(String),
 }
 
-fn service_err(service: &str, e: impl Debug) -> IpcError {
-    IpcError::Service {
+/// Why no shared memory could be loaned for a sample (every sample is held by
+/// subscribers, or the payload is larger than the publisher's maximum).
+#[derive(Debug, thiserror::Error)]
+#[error("iceoryx2 `{service}`: loan failed: {reason}")]
+pub struct LoanError {
+    /// Service name.
+    pub service: String,
+    /// What iceoryx2 said.
+    pub reason: String,
+}
+
+/// Why a sample was not delivered.
+#[derive(Debug, thiserror::Error)]
+pub enum SendError {
+    /// No shared memory for it ([`Publisher::send`] loans and sends in one call).
+    #[error(transparent)]
+    Loan(#[from] LoanError),
+    /// iceoryx2 could not deliver the sample.
+    #[error("iceoryx2 `{service}`: send failed: {reason}")]
+    Send {
+        /// Service name.
+        service: String,
+        /// What iceoryx2 said.
+        reason: String,
+    },
+    /// The sample went out but subscribers could not be woken.
+    #[error("iceoryx2 `{service}`: notify failed: {reason}")]
+    Notify {
+        /// Service name.
+        service: String,
+        /// What iceoryx2 said.
+        reason: String,
+    },
+}
+
+/// Why a subscriber could not read its next sample.
+#[derive(Debug, thiserror::Error)]
+#[error("iceoryx2 `{service}`: receive failed: {reason}")]
+pub struct ReceiveError {
+    /// Service name.
+    pub service: String,
+    /// What iceoryx2 said.
+    pub reason: String,
+}
+
+/// Why a heartbeat could not be sent (a beat later than its deadline is not an error).
+#[derive(Debug, thiserror::Error)]
+#[error("iceoryx2 `{service}`: notify failed: {reason}")]
+pub struct HeartbeatError {
+    /// The heartbeat's event service.
+    pub service: String,
+    /// What iceoryx2 said.
+    pub reason: String,
+}
+
+/// Why the wait loop could not be set up or stopped waiting.
+#[derive(Debug, thiserror::Error)]
+pub enum WaitError {
+    /// The wait set could not be created.
+    #[error("wait loop: {reason}")]
+    Create {
+        /// What iceoryx2 said.
+        reason: String,
+    },
+    /// A listener, deadline or tick could not be attached.
+    #[error("wait loop: {reason}")]
+    Attach {
+        /// What iceoryx2 said.
+        reason: String,
+    },
+    /// Waiting failed.
+    #[error("wait loop: {reason}")]
+    Wait {
+        /// What iceoryx2 said.
+        reason: String,
+    },
+}
+
+fn reason(e: impl Debug) -> String {
+    format!("{e:?}")
+}
+
+fn open_err(service: &str, e: impl Debug) -> ServiceError {
+    ServiceError::Open {
         service: service.to_string(),
-        reason: format!("{e:?}"),
+        reason: reason(e),
     }
 }
 
-fn port_err(service: &str, op: &'static str, e: impl Debug) -> IpcError {
-    IpcError::Port {
+fn port_err(service: &str, e: impl Debug) -> ServiceError {
+    ServiceError::Port {
         service: service.to_string(),
-        op,
-        reason: format!("{e:?}"),
+        reason: reason(e),
+    }
+}
+
+fn loan_err(service: &str, e: impl Debug) -> LoanError {
+    LoanError {
+        service: service.to_string(),
+        reason: reason(e),
+    }
+}
+
+fn send_err(service: &str, e: impl Debug) -> SendError {
+    SendError::Send {
+        service: service.to_string(),
+        reason: reason(e),
     }
 }
 
@@ -98,16 +218,16 @@ pub struct IpcPrefix(String);
 
 impl IpcPrefix {
     /// Checks a prefix: 1 to 32 characters from `[A-Za-z0-9_.-]`.
-    pub fn new(s: &str) -> Result<Self, IpcError> {
+    pub fn new(s: &str) -> Result<Self, PrefixError> {
         if stack_config::is_valid_prefix(s) {
             Ok(Self(s.to_string()))
         } else {
-            Err(IpcError::BadPrefix(s.to_string()))
+            Err(PrefixError(s.to_string()))
         }
     }
 
     /// The flag if given, else `LANDING_IPC_PREFIX`, else [`DEFAULT_PREFIX`].
-    pub fn from_flag_or_env(flag: Option<&str>) -> Result<Self, IpcError> {
+    pub fn from_flag_or_env(flag: Option<&str>) -> Result<Self, PrefixError> {
         match flag {
             Some(f) => Self::new(f),
             None => match std::env::var(PREFIX_ENV) {
@@ -119,7 +239,7 @@ impl IpcPrefix {
 
     /// What a process with a stack config uses: the flag if given, else
     /// `LANDING_IPC_PREFIX`, else the config's `[ipc] prefix`.
-    pub fn resolve(flag: Option<&str>, config_prefix: &str) -> Result<Self, IpcError> {
+    pub fn resolve(flag: Option<&str>, config_prefix: &str) -> Result<Self, PrefixError> {
         match (flag, std::env::var(PREFIX_ENV)) {
             (Some(f), _) => Self::new(f),
             (None, Ok(v)) => Self::new(&v),
@@ -193,13 +313,13 @@ impl Debug for Ipc {
 impl Ipc {
     /// Creates the node of `process` under `prefix`, cleaning up what dead nodes of earlier
     /// runs left behind (systemd restarts processes; stale resources must not block them).
-    pub fn open(process: &str, prefix: &IpcPrefix) -> Result<Self, IpcError> {
+    pub fn open(process: &str, prefix: &IpcPrefix) -> Result<Self, NodeError> {
         let mut config = Config::default();
         config.global.prefix = FileName::new(prefix.as_str().as_bytes())
-            .map_err(|_| IpcError::BadPrefix(prefix.as_str().to_string()))?;
-        let name = NodeName::new(process).map_err(|e| IpcError::Node {
+            .map_err(|_| PrefixError(prefix.as_str().to_string()))?;
+        let name = NodeName::new(process).map_err(|e| NodeError::Name {
             name: process.to_string(),
-            reason: format!("{e:?}"),
+            reason: reason(e),
         })?;
         let node = NodeBuilder::new()
             .name(&name)
@@ -208,9 +328,9 @@ impl Ipc {
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .config(&config)
             .create::<Svc>()
-            .map_err(|e| IpcError::Node {
+            .map_err(|e| NodeError::Create {
                 name: process.to_string(),
-                reason: format!("{e:?}"),
+                reason: reason(e),
             })?;
         // For processes that do not start through `process_main` (tools, probes).
         crate::shutdown::install();
@@ -244,26 +364,33 @@ impl Ipc {
         &self.process
     }
 
-    fn service_name(service: &str) -> Result<ServiceName, IpcError> {
-        ServiceName::new(service).map_err(|e| service_err(service, e))
+    fn service_name(service: &str) -> Result<ServiceName, ServiceError> {
+        ServiceName::new(service).map_err(|e| ServiceError::Name {
+            service: service.to_string(),
+            reason: reason(e),
+        })
     }
 
     fn event_service(
         &self,
         service: &str,
-    ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, IpcError> {
+    ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, ServiceError> {
         self.node
             .service_builder(&Self::service_name(service)?)
             .event()
             .max_notifiers(MAX_PUBLISHERS)
             .max_listeners(MAX_SUBSCRIBERS)
             .open_or_create()
-            .map_err(|e| service_err(service, e))
+            .map_err(|e| open_err(service, e))
     }
 
     /// The publish-subscribe service `service` with this stack's quality of service; every
     /// port of a topic is opened through here, so publishers and subscribers always agree.
-    fn pubsub<P, H>(&self, service: &str, history: usize) -> Result<PubSubBuilder<P, H>, IpcError>
+    fn pubsub<P, H>(
+        &self,
+        service: &str,
+        history: usize,
+    ) -> Result<PubSubBuilder<P, H>, ServiceError>
     where
         P: Debug + IceoryxSend + ?Sized + 'static,
         H: Debug + ZeroCopySend + 'static,
@@ -282,23 +409,23 @@ impl Ipc {
     }
 
     /// A publisher of fixed-size messages `T` on `service`.
-    pub fn publisher<T>(&self, service: &str) -> Result<Publisher<T>, IpcError>
+    pub fn publisher<T>(&self, service: &str) -> Result<Publisher<T>, ServiceError>
     where
         T: Debug + ZeroCopySend + Copy + 'static,
     {
         let factory = self
             .pubsub::<T, Header>(service, 1)?
             .open_or_create()
-            .map_err(|e| service_err(service, e))?;
+            .map_err(|e| open_err(service, e))?;
         let port = factory
             .publisher_builder()
             .create()
-            .map_err(|e| service_err(service, e))?;
+            .map_err(|e| port_err(service, e))?;
         let notifier = self
             .event_service(service)?
             .notifier_builder()
             .create()
-            .map_err(|e| service_err(service, e))?;
+            .map_err(|e| port_err(service, e))?;
         Ok(Publisher {
             port,
             notifier,
@@ -308,24 +435,24 @@ impl Ipc {
     }
 
     /// A subscriber of fixed-size messages `T` on `service`.
-    pub fn subscriber<T>(&self, service: &str) -> Result<Subscriber<T>, IpcError>
+    pub fn subscriber<T>(&self, service: &str) -> Result<Subscriber<T>, ServiceError>
     where
         T: Debug + ZeroCopySend + Copy + 'static,
     {
         let factory = self
             .pubsub::<T, Header>(service, 1)?
             .open_or_create()
-            .map_err(|e| service_err(service, e))?;
+            .map_err(|e| open_err(service, e))?;
         let port = factory
             .subscriber_builder()
             .buffer_size(SUBSCRIBER_BUFFER)
             .create()
-            .map_err(|e| service_err(service, e))?;
+            .map_err(|e| port_err(service, e))?;
         let listener = self
             .event_service(service)?
             .listener_builder()
             .create()
-            .map_err(|e| service_err(service, e))?;
+            .map_err(|e| port_err(service, e))?;
         Ok(Subscriber {
             port,
             listener,
@@ -341,7 +468,7 @@ impl Ipc {
         &self,
         service: &str,
         max_len: usize,
-    ) -> Result<SlicePublisher<T, H>, IpcError>
+    ) -> Result<SlicePublisher<T, H>, ServiceError>
     where
         T: Debug + ZeroCopySend + Copy + 'static,
         H: MessageHeader,
@@ -349,18 +476,18 @@ impl Ipc {
         let factory = self
             .pubsub::<[T], H>(service, 0)?
             .open_or_create()
-            .map_err(|e| service_err(service, e))?;
+            .map_err(|e| open_err(service, e))?;
         let port = factory
             .publisher_builder()
             .initial_max_slice_len(max_len)
             .allocation_strategy(AllocationStrategy::Static)
             .create()
-            .map_err(|e| service_err(service, e))?;
+            .map_err(|e| port_err(service, e))?;
         let notifier = self
             .event_service(service)?
             .notifier_builder()
             .create()
-            .map_err(|e| service_err(service, e))?;
+            .map_err(|e| port_err(service, e))?;
         Ok(SlicePublisher {
             port,
             notifier,
@@ -371,7 +498,10 @@ impl Ipc {
     }
 
     /// A subscriber of variable-length `[T]` payloads with header `H`.
-    pub fn slice_subscriber<T, H>(&self, service: &str) -> Result<SliceSubscriber<T, H>, IpcError>
+    pub fn slice_subscriber<T, H>(
+        &self,
+        service: &str,
+    ) -> Result<SliceSubscriber<T, H>, ServiceError>
     where
         T: Debug + ZeroCopySend + Copy + 'static,
         H: MessageHeader,
@@ -379,17 +509,17 @@ impl Ipc {
         let factory = self
             .pubsub::<[T], H>(service, 0)?
             .open_or_create()
-            .map_err(|e| service_err(service, e))?;
+            .map_err(|e| open_err(service, e))?;
         let port = factory
             .subscriber_builder()
             .buffer_size(SUBSCRIBER_BUFFER)
             .create()
-            .map_err(|e| service_err(service, e))?;
+            .map_err(|e| port_err(service, e))?;
         let listener = self
             .event_service(service)?
             .listener_builder()
             .create()
-            .map_err(|e| service_err(service, e))?;
+            .map_err(|e| port_err(service, e))?;
         Ok(Subscriber {
             port,
             listener,
@@ -403,7 +533,7 @@ impl Ipc {
         &self,
         process: &str,
         deadline: Duration,
-    ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, IpcError> {
+    ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, ServiceError> {
         let name = ipc_types::services::heartbeat(process);
         self.node
             .service_builder(&Self::service_name(&name)?)
@@ -412,20 +542,22 @@ impl Ipc {
             .max_notifiers(MAX_PUBLISHERS)
             .max_listeners(MAX_SUBSCRIBERS)
             .open_or_create()
-            .map_err(|e| service_err(&name, e))
+            .map_err(|e| open_err(&name, e))
     }
 
     /// This process's heartbeat: an event with a deadline that the watchdog watches.
     /// Beat it at least once per `deadline`, from the loop that does the work, so that a
     /// hung loop misses it.
-    pub fn heartbeat(&self, deadline: Duration) -> Result<Heartbeat, IpcError> {
+    pub fn heartbeat(&self, deadline: Duration) -> Result<Heartbeat, ServiceError> {
+        let service = ipc_types::services::heartbeat(&self.process);
         let notifier = self
             .heartbeat_service(&self.process, deadline)?
             .notifier_builder()
             .create()
-            .map_err(|e| service_err(&ipc_types::services::heartbeat(&self.process), e))?;
+            .map_err(|e| port_err(&service, e))?;
         Ok(Heartbeat {
             notifier,
+            service,
             missed: 0,
         })
     }
@@ -436,11 +568,11 @@ impl Ipc {
         &self,
         process: &str,
         deadline: Duration,
-    ) -> Result<Listener<Svc>, IpcError> {
+    ) -> Result<Listener<Svc>, ServiceError> {
         self.heartbeat_service(process, deadline)?
             .listener_builder()
             .create()
-            .map_err(|e| service_err(&ipc_types::services::heartbeat(process), e))
+            .map_err(|e| port_err(&ipc_types::services::heartbeat(process), e))
     }
 }
 
@@ -455,20 +587,18 @@ pub struct Publisher<T: Debug + ZeroCopySend + Copy + 'static> {
 impl<T: Debug + ZeroCopySend + Copy + 'static> Publisher<T> {
     /// Writes `value` into a loaned shared-memory sample, stamps `header` with the next
     /// sequence number, sends it and notifies subscribers. Returns the sequence number.
-    pub fn send(&mut self, header: Header, value: &T) -> Result<u64, IpcError> {
+    pub fn send(&mut self, header: Header, value: &T) -> Result<u64, SendError> {
         let mut sample = self
             .port
             .loan_uninit()
-            .map_err(|e| port_err(&self.service, "loan", e))?;
+            .map_err(|e| loan_err(&self.service, e))?;
         self.seq += 1;
         *sample.user_header_mut() = Header {
             seq: self.seq,
             ..header
         };
         let sample = sample.write_payload(*value);
-        sample
-            .send()
-            .map_err(|e| port_err(&self.service, "send", e))?;
+        sample.send().map_err(|e| send_err(&self.service, e))?;
         notify(&self.notifier, &self.service)?;
         Ok(self.seq)
     }
@@ -501,31 +631,29 @@ impl<T: Debug + ZeroCopySend + Copy + 'static, H: MessageHeader> SlicePublisher<
 
     /// Loans `len` uninitialized elements of shared memory; the producer writes its data
     /// straight into them (a camera driver, a renderer), so nothing is copied afterwards.
-    pub fn loan_uninit(&mut self, len: usize) -> Result<SliceLoan<T, H>, IpcError> {
+    pub fn loan_uninit(&mut self, len: usize) -> Result<SliceLoan<T, H>, LoanError> {
         self.port
             .loan_slice_uninit(len)
-            .map_err(|e| port_err(&self.service, "loan", e))
+            .map_err(|e| loan_err(&self.service, e))
     }
 
     /// Loans `len` elements of shared memory, zero-initialized, for producers that write
     /// through a `&mut [T]` (a renderer): safe, at the cost of one memset.
-    pub fn loan(&mut self, len: usize) -> Result<SliceSample<T, H>, IpcError>
+    pub fn loan(&mut self, len: usize) -> Result<SliceSample<T, H>, LoanError>
     where
         T: Default,
     {
         self.port
             .loan_slice(len)
-            .map_err(|e| port_err(&self.service, "loan", e))
+            .map_err(|e| loan_err(&self.service, e))
     }
 
     /// Sends a written sample: stamps the next sequence number into its header, then
     /// notifies subscribers. Returns the sequence number.
-    pub fn send(&mut self, mut sample: SliceSample<T, H>) -> Result<u64, IpcError> {
+    pub fn send(&mut self, mut sample: SliceSample<T, H>) -> Result<u64, SendError> {
         self.seq += 1;
         sample.user_header_mut().msg_mut().seq = self.seq;
-        sample
-            .send()
-            .map_err(|e| port_err(&self.service, "send", e))?;
+        sample.send().map_err(|e| send_err(&self.service, e))?;
         notify(&self.notifier, &self.service)?;
         Ok(self.seq)
     }
@@ -536,10 +664,13 @@ impl<T: Debug + ZeroCopySend + Copy + 'static, H: MessageHeader> SlicePublisher<
     }
 }
 
-fn notify(notifier: &Notifier<Svc>, service: &str) -> Result<(), IpcError> {
+fn notify(notifier: &Notifier<Svc>, service: &str) -> Result<(), SendError> {
     match notifier.notify() {
         Ok(_) | Err(NotifierNotifyError::MissedDeadline) => Ok(()),
-        Err(e) => Err(port_err(service, "notify", e)),
+        Err(e) => Err(SendError::Notify {
+            service: service.to_string(),
+            reason: reason(e),
+        }),
     }
 }
 
@@ -586,11 +717,11 @@ where
     IoxSubscriber<Svc, P, H>: ReceivePort<P, H>,
 {
     /// The oldest unread sample, or `None`. The payload is the publisher's memory: no copy.
-    pub fn receive(&self) -> Result<Option<Sample<Svc, P, H>>, IpcError> {
-        let s = self
-            .port
-            .receive_sample()
-            .map_err(|e| port_err(&self.service, "receive", e))?;
+    pub fn receive(&self) -> Result<Option<Sample<Svc, P, H>>, ReceiveError> {
+        let s = self.port.receive_sample().map_err(|e| ReceiveError {
+            service: self.service.clone(),
+            reason: reason(e),
+        })?;
         if let Some(s) = &s {
             track_seq(&self.last_seq, &self.gaps, s.user_header().msg().seq);
         }
@@ -599,7 +730,7 @@ where
 
     /// The newest unread sample, dropping (and counting) older ones, so that a slow
     /// consumer always works on the freshest data.
-    pub fn latest(&self) -> Result<Option<Sample<Svc, P, H>>, IpcError> {
+    pub fn latest(&self) -> Result<Option<Sample<Svc, P, H>>, ReceiveError> {
         let mut newest = None;
         while let Some(s) = self.receive()? {
             newest = Some(s);
@@ -629,19 +760,24 @@ fn track_seq(last: &Cell<u64>, gaps: &Cell<u64>, seq: u64) {
 /// This process's heartbeat notifier.
 pub struct Heartbeat {
     notifier: Notifier<Svc>,
+    /// The heartbeat's event service, for errors.
+    service: String,
     missed: u64,
 }
 
 impl Heartbeat {
     /// Signals "alive". A beat later than the deadline still goes out; it is counted.
-    pub fn beat(&mut self) -> Result<(), IpcError> {
+    pub fn beat(&mut self) -> Result<(), HeartbeatError> {
         match self.notifier.notify() {
             Ok(_) => Ok(()),
             Err(NotifierNotifyError::MissedDeadline) => {
                 self.missed += 1;
                 Ok(())
             }
-            Err(e) => Err(port_err("heartbeat", "notify", e)),
+            Err(e) => Err(HeartbeatError {
+                service: self.service.clone(),
+                reason: reason(e),
+            }),
         }
     }
 
@@ -825,17 +961,17 @@ pub fn run_wait_loop(
     deadlines: &[(&Listener<Svc>, Duration)],
     tick: Option<Duration>,
     mut on_wake: impl FnMut(Wake) -> bool,
-) -> Result<LoopExit, IpcError> {
+) -> Result<LoopExit, WaitError> {
     let waitset = WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<Svc>()
-        .map_err(|e| IpcError::WaitSet(format!("{e:?}")))?;
+        .map_err(|e| WaitError::Create { reason: reason(e) })?;
     let mut data_guards = Vec::with_capacity(listeners.len());
     for l in listeners {
         data_guards.push(
             waitset
                 .attach_notification(*l)
-                .map_err(|e| IpcError::WaitSet(format!("{e:?}")))?,
+                .map_err(|e| WaitError::Attach { reason: reason(e) })?,
         );
     }
     let mut deadline_guards = Vec::with_capacity(deadlines.len());
@@ -843,14 +979,14 @@ pub fn run_wait_loop(
         deadline_guards.push(
             waitset
                 .attach_deadline(*l, *d)
-                .map_err(|e| IpcError::WaitSet(format!("{e:?}")))?,
+                .map_err(|e| WaitError::Attach { reason: reason(e) })?,
         );
     }
     let tick_guard = match tick {
         Some(t) => Some(
             waitset
                 .attach_interval(t)
-                .map_err(|e| IpcError::WaitSet(format!("{e:?}")))?,
+                .map_err(|e| WaitError::Attach { reason: reason(e) })?,
         ),
         None => None,
     };
@@ -905,7 +1041,7 @@ pub fn run_wait_loop(
                 | WaitSetRunResult::Interrupt
                 | WaitSetRunResult::AllEventsHandled,
             ) => {}
-            Err(e) => return Err(IpcError::WaitSet(format!("{e:?}"))),
+            Err(e) => return Err(WaitError::Wait { reason: reason(e) }),
         }
     }
 }

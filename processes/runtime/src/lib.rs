@@ -19,8 +19,9 @@ pub use iceoryx2;
 
 pub use clock::{Clock, MonotonicClock, SimClock, monotonic_ns};
 pub use ipc::{
-    Heartbeat, Ipc, IpcError, IpcPrefix, LoopExit, MessageHeader, PeriodicWait, Publisher,
-    SlicePublisher, SliceSubscriber, Subscriber, Wake, run_wait_loop,
+    Heartbeat, HeartbeatError, Ipc, IpcPrefix, LoanError, LoopExit, MessageHeader, NodeError,
+    PeriodicWait, PrefixError, Publisher, ReceiveError, SendError, ServiceError, SlicePublisher,
+    SliceSubscriber, Subscriber, WaitError, Wake, run_wait_loop,
 };
 pub use process_main::process_main;
 pub use threads::{JOIN_TIMEOUT, JoinError, StopFlag, ThreadRole, Worker};

@@ -130,13 +130,14 @@ fn run(args: &Args) -> Result<()> {
     let until = Instant::now() + Duration::from_secs_f64(duration_s / args.speed + 1.0);
     let end_ns = (duration_s * 1e9) as u64;
     let mut steps: u64 = 0;
-    let mut failure = None;
+    // The first publishing error (a sample or a heartbeat), reported after the loop.
+    let mut failure: Option<anyhow::Error> = None;
     vehicle
         .run_realtime(until, &stop, args.speed, |sim, report| {
             for t in &report.truth {
                 tracing::info!(kind = ?TruthKind::from_raw(t.kind), on_pad = t.on_pad, "ground truth");
                 if let Err(e) = truth.send(t.msg, t) {
-                    failure = Some(e);
+                    failure = Some(e.into());
                     return false;
                 }
                 truth_events += 1;
@@ -202,13 +203,13 @@ fn run(args: &Args) -> Result<()> {
             if steps.is_multiple_of(TRUTH_STATE_PERIOD_NS / PHYSICS_STEP_NS) {
                 let s = sim::lockstep::truth_state(sim, now);
                 if let Err(e) = truth_state.send(s.msg, &s) {
-                    failure = Some(e);
+                    failure = Some(e.into());
                     return false;
                 }
             }
             if steps.is_multiple_of(50) {
                 if let Err(e) = heartbeat.beat() {
-                    failure = Some(e);
+                    failure = Some(e.into());
                     return false;
                 }
                 // SIGINT/SIGTERM end the run cleanly.
