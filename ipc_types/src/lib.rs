@@ -5,3 +5,4 @@
 
 pub mod msg;
 pub mod services;
+pub mod topics;

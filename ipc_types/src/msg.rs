@@ -152,6 +152,18 @@ impl Header {
         }
     }
 
+    /// Closes the newest stamp if it is still open (exit = enter: a stage pushes its stamp
+    /// with the time it was called, and cannot know when the message leaves; the driver
+    /// that sends it does). A closed stamp is left alone.
+    pub fn close_stage(&mut self, exit_ns: u64) {
+        let n = (self.stage_count as usize).min(MAX_STAGES);
+        if let Some(s) = n.checked_sub(1).and_then(|i| self.stages.get_mut(i))
+            && s.exit_ns == s.enter_ns
+        {
+            s.exit_ns = exit_ns.max(s.enter_ns);
+        }
+    }
+
     /// The valid stamps.
     pub fn stages(&self) -> &[StageStamp] {
         &self.stages[..(self.stage_count as usize).min(MAX_STAGES)]
@@ -650,9 +662,10 @@ impl Setpoint {
 
 /// States of the landing mission.
 #[repr(u32)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum MissionState {
     /// On the ground, disarmed, waiting for the start.
+    #[default]
     Idle = 0,
     /// Arming and climbing.
     Takeoff = 1,

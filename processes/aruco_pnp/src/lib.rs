@@ -11,6 +11,7 @@ pub mod config;
 pub mod detect;
 pub mod edges;
 pub mod pose;
+pub mod stage;
 
 use ipc_types::msg::{Header, MAX_MARKERS, PadObservation, PixelEncoding, Pose};
 use nalgebra::{Isometry3, Matrix6, Point3};
@@ -23,6 +24,7 @@ use thiserror::Error;
 pub use config::ArucoConfig;
 pub use detect::{DetectSettings, Detector, Marker};
 pub use pose::{LevelPrior, MarkerCorners, PoseSettings, PoseSolution};
+pub use stage::ArucoStage;
 
 /// Why a frame gave no answer (as opposed to "no pad in view", which is `Ok(None)`).
 #[derive(Debug, Error)]

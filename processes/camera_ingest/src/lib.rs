@@ -12,6 +12,7 @@ pub mod config;
 pub mod ingest;
 pub mod pacing;
 pub mod source;
+pub mod stage;
 pub mod undistort;
 
 pub use config::CameraIngestConfig;
@@ -20,4 +21,5 @@ pub use pacing::{Backoff, Pacer, RateLimit};
 pub use source::{
     FrameSource, ImageDir, SourceError, SourceSpec, VideoSource, header_for_mat, mat_bytes,
 };
+pub use stage::{IngestStage, Problem};
 pub use undistort::Undistorter;

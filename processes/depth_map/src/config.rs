@@ -26,6 +26,14 @@ impl Input {
         }
     }
 
+    /// The topic (`ipc_types::topics`) it names.
+    pub fn topic(self) -> &'static str {
+        match self {
+            Self::Sim => ipc_types::topics::SIM_DEPTH,
+            Self::DepthFrame => ipc_types::topics::DEPTH_FRAME,
+        }
+    }
+
     /// Parses the `--input` flag's text.
     pub fn parse(s: &str) -> Option<Self> {
         match s {

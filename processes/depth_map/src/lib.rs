@@ -27,9 +27,12 @@ pub mod frame;
 mod inflate;
 pub mod map;
 pub mod raycast;
+pub mod stage;
+
+pub use stage::DepthStage;
 
 use ipc_types::msg::VehicleState;
-use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use state_history::{HistoryError, StateHistory, TimedPose};
 use thiserror::Error;
 
@@ -112,26 +115,7 @@ pub fn body_from_forward_camera(position_m: [f64; 3], rpy_deg: [f64; 3]) -> Isom
     )
 }
 
-/// The vehicle state message as a history entry; `None` when a number is not finite or
-/// the quaternion is far from unit length (a writer's bug, not a pose).
-pub fn timed_pose_of(v: &VehicleState) -> Option<TimedPose> {
-    let t = v.world_from_body.translation;
-    let [x, y, z, w] = v.world_from_body.rotation_xyzw;
-    let q = Quaternion::new(w, x, y, z);
-    let finite = t.iter().chain(&v.velocity).all(|c| c.is_finite())
-        && q.coords.iter().all(|c| c.is_finite());
-    if !finite || (q.norm() - 1.0).abs() > 0.01 {
-        return None;
-    }
-    Some(TimedPose {
-        time_ns: v.msg.capture_ns,
-        world_from_body: Isometry3::from_parts(
-            Translation3::new(t[0], t[1], t[2]),
-            UnitQuaternion::from_quaternion(q),
-        ),
-        velocity: Vector3::from(v.velocity),
-    })
-}
+pub use state_history::timed_pose_of;
 
 /// What [`DepthMapper`] has seen since it was built.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

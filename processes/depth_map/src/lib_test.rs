@@ -1,5 +1,6 @@
 use super::*;
 use ipc_types::msg::{Header, Intrinsics, Pose};
+use nalgebra::Vector3;
 
 #[test]
 fn the_default_mount_is_the_simulators_forward_depth_camera() {

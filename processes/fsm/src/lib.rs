@@ -8,7 +8,9 @@
 pub mod config;
 pub mod mission;
 pub mod pad_filter;
+pub mod stage;
 
 pub use config::{FsmConfig, PadFilterConfig};
 pub use mission::{Fsm, Outputs, Transition};
 pub use pad_filter::{PadEstimate, PadFilter, Update};
+pub use stage::FsmStage;

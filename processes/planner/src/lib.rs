@@ -22,6 +22,7 @@ pub mod node;
 pub mod plan;
 pub mod precond;
 pub mod replan;
+pub mod stage;
 
 /// The curve every plan is (the `bspline` crate, shared with the fsm that samples it).
 pub use bspline::{BSpline, State};
@@ -33,3 +34,4 @@ pub use plan::{
     stop_trajectory,
 };
 pub use replan::{Decision, OnFailure, Reason, ReplanPolicy, predicted_collision};
+pub use stage::PlannerStage;

@@ -10,6 +10,8 @@
 pub mod config;
 pub mod link;
 pub mod node;
+pub mod stage;
 
 pub use link::{LinkSettings, Outcome, Px4Link, Request, Status};
 pub use node::LinkNode;
+pub use stage::{Framing, LinkStage};

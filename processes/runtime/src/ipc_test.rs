@@ -110,7 +110,7 @@ fn the_wait_loop_wakes_on_data_and_reports_a_missed_heartbeat() {
 
 #[test]
 fn a_bad_prefix_is_a_prefix_error_that_says_what_is_allowed() {
-    let e = IpcPrefix::new("../x").err().expect("rejected");
+    let e = IpcPrefix::new("../x").expect_err("rejected");
     assert_eq!(e, PrefixError("../x".into()));
     assert!(e.to_string().contains("allowed: 1 to 32 characters"), "{e}");
 }
@@ -120,10 +120,9 @@ fn a_service_opened_with_another_type_is_an_open_error_naming_the_service() {
     let prefix = IpcPrefix::unique("types");
     let a = Ipc::open("a", &prefix).expect("node");
     let _publisher = a.publisher::<u64>("t/typed").expect("publisher");
-    let e = a
-        .subscriber::<u32>("t/typed")
-        .err()
-        .expect("a type mismatch");
+    let Err(e) = a.subscriber::<u32>("t/typed") else {
+        panic!("a type mismatch must be refused")
+    };
     assert!(matches!(e, ServiceError::Open { .. }), "{e:?}");
     assert!(
         e.to_string().starts_with("iceoryx2 service `t/typed`: "),
@@ -138,7 +137,9 @@ fn a_loan_beyond_the_maximum_is_a_loan_error_naming_the_service() {
     let mut frames = a
         .slice_publisher::<u8, ipc_types::msg::CameraFrameHeader>("t/frames", 4)
         .expect("publisher");
-    let e = frames.loan(8).err().expect("too large a loan");
+    let Err(e) = frames.loan(8) else {
+        panic!("too large a loan must be refused")
+    };
     assert!(
         e.to_string()
             .starts_with("iceoryx2 `t/frames`: loan failed: "),

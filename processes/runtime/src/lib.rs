@@ -7,6 +7,7 @@
 //! to it.
 
 pub mod clock;
+pub mod driver;
 pub mod ipc;
 pub mod logging;
 pub mod process_main;
@@ -18,6 +19,7 @@ pub mod threads;
 pub use iceoryx2;
 
 pub use clock::{Clock, MonotonicClock, SimClock, monotonic_ns};
+pub use driver::{Beat, DriverError};
 pub use ipc::{
     Heartbeat, HeartbeatError, Ipc, IpcPrefix, LoanError, LoopExit, MessageHeader, NodeError,
     PeriodicWait, PrefixError, Publisher, ReceiveError, SendError, ServiceError, SlicePublisher,

@@ -32,5 +32,6 @@ pub mod px4;
 pub mod quadrotor;
 pub mod rng;
 pub mod scenario;
+pub mod stage;
 pub mod wind;
 pub mod world;

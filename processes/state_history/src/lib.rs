@@ -9,7 +9,8 @@
 
 use std::collections::VecDeque;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use ipc_types::msg::VehicleState;
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use thiserror::Error;
 
 /// One state of the stream: a pose and a velocity at a time.
@@ -21,6 +22,29 @@ pub struct TimedPose {
     pub world_from_body: Isometry3<f64>,
     /// Velocity in the world frame, m/s (used only to extrapolate a little).
     pub velocity: Vector3<f64>,
+}
+
+/// The vehicle state message as a history entry; `None` when a number is not finite or
+/// the quaternion is far from unit length (a writer's bug, not a pose).
+/// Every reader of the state stream (aruco-pnp, depth-map) validates it with this one
+/// function.
+pub fn timed_pose_of(v: &VehicleState) -> Option<TimedPose> {
+    let t = v.world_from_body.translation;
+    let [x, y, z, w] = v.world_from_body.rotation_xyzw;
+    let q = Quaternion::new(w, x, y, z);
+    let finite = t.iter().chain(&v.velocity).all(|c| c.is_finite())
+        && q.coords.iter().all(|c| c.is_finite());
+    if !finite || (q.norm() - 1.0).abs() > 0.01 {
+        return None;
+    }
+    Some(TimedPose {
+        time_ns: v.msg.capture_ns,
+        world_from_body: Isometry3::from_parts(
+            Translation3::new(t[0], t[1], t[2]),
+            UnitQuaternion::from_quaternion(q),
+        ),
+        velocity: Vector3::from(v.velocity),
+    })
 }
 
 /// Why no pose could be given for a capture time.

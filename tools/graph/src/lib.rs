@@ -138,6 +138,25 @@ impl Node {
         self.args.iter().map(|a| expand(a, values)).collect()
     }
 
+    /// What a driver needs of it: inputs with their policy and delay, outputs, the
+    /// modelled processing time.
+    pub fn spec(&self) -> stage::lockstep::NodeSpec {
+        stage::lockstep::NodeSpec {
+            name: self.name.clone(),
+            inputs: self
+                .inputs
+                .iter()
+                .map(|i| stage::lockstep::InputSpec {
+                    topic: i.topic.clone(),
+                    newest: i.policy == Policy::Newest,
+                    delay: i.delay,
+                })
+                .collect(),
+            outputs: self.outputs.clone(),
+            latency_ns: (self.latency_ms * 1e6).round() as u64,
+        }
+    }
+
     /// Whether it reads `topic`.
     pub fn reads(&self, topic: &str) -> bool {
         self.inputs.iter().any(|i| i.topic == topic)

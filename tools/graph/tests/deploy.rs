@@ -274,3 +274,18 @@ fn landing_run_processes_starts_the_stack_as_it_did_before_the_graph() {
         .collect();
     assert_eq!(now, before);
 }
+
+#[test]
+fn every_topic_of_the_graph_is_the_topic_tables_with_its_service_and_type() {
+    let g = shipped();
+    for t in &g.topics {
+        let row = ipc_types::topics::find(&t.name)
+            .unwrap_or_else(|| panic!("`{}` is not in ipc_types::topics", t.name));
+        assert_eq!(t.service.as_deref(), row.service, "{}", t.name);
+        if row.service.is_some() {
+            assert_eq!(t.type_name, row.payload.type_name(), "{}", t.name);
+            assert_eq!(t.elements.as_deref(), row.payload.elements(), "{}", t.name);
+        }
+        assert_eq!(t.evaluator_only, row.evaluator_only, "{}", t.name);
+    }
+}

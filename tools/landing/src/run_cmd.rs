@@ -5,23 +5,16 @@ use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use aruco_pnp::PadEstimator;
 use clap::Args;
-use depth_map::DepthMapper;
-use fsm::Fsm;
 use ipc_types::msg::MissionState;
-use optics::mount::down_camera_from_body;
-use optics::{CameraCalibration, PadModel};
-use planner::PlannerNode;
-use sim::lockstep::Simulator;
 use stack_config::{self as cfgload, Validate, deploy_dir};
 
 use crate::config_cmd::StackConfig;
 use crate::flight_log::{FlightLog, FlightSample, Outcome, RunSummary, Touchdown};
 use crate::plot;
 use crate::record::Recorder;
-use crate::run_eval::Evaluator;
-use crate::run_lockstep::{self, End, Pipeline, Recording};
+use crate::run_eval::{End, Evaluator, Referee};
+use crate::run_lockstep::{self, Recording};
 use crate::run_processes;
 
 /// Arguments of `landing run`.
@@ -124,13 +117,9 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         .unwrap_or_else(|| deploy.join("config").join("landing.toml"));
     let cfg: StackConfig = cfgload::load(&cfg_path)?;
     let scn = sim::scenario::load(&args.scenario, &deploy)?;
-    // --processes starts what the deploy directory's graph declares; checked before
-    // anything starts.
-    let graph = if args.processes {
-        Some(graph::Graph::load(&graph::default_path(&deploy))?)
-    } else {
-        None
-    };
+    // Both modes run what the deploy directory's graph declares; checked before anything
+    // starts.
+    let graph = graph::Graph::load(&graph::default_path(&deploy))?;
     let seed = args.seed.unwrap_or(scn.scenario.seed);
     let mut fsm_cfg = cfg.fsm.clone();
     fsm_cfg.preset_m = scn.scenario.mission.preset_m;
@@ -154,7 +143,6 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         }
         None => None,
     };
-    let mut eval = Evaluator::default();
     let tty = std::io::stderr().is_terminal();
     eprintln!(
         "run: {} (seed {seed}, {}): {}",
@@ -176,7 +164,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             eprintln!("{line}");
         }
     };
-    let (end, stats, transitions) = if let Some(graph) = &graph {
+    let (end, referee) = if args.processes {
         let log_dir = args.log_dir.clone().unwrap_or_else(|| {
             std::env::temp_dir().join(format!("landing-run-{}", std::process::id()))
         });
@@ -187,37 +175,28 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             deploy: &deploy,
             log_dir: &log_dir,
             ipc_prefix,
-            graph,
+            graph: &graph,
         };
-        let r = run_processes::run(&launch, &mut eval, &mut recorder, progress)?;
+        let r = run_processes::run(&launch, &mut recorder, progress)?;
         if tty {
             eprintln!();
         }
         eprintln!("  process logs: {}", log_dir.display());
         r
     } else {
-        let mut sim = Simulator::new(&scn, seed).context("building the simulator")?;
-        let calibration = CameraCalibration::load(scn.calibration_path())?;
-        let pad = PadModel::load(scn.pad_path())?;
-        let estimator = PadEstimator::new(
-            calibration,
-            pad,
-            down_camera_from_body(cfg.aruco_pnp.camera_position_in_body_m),
-            cfg.aruco_pnp.settings(),
-        )?;
-        let mut pipe = Pipeline {
-            estimator,
-            mapper: DepthMapper::from_config(&cfg.depth_map)?,
-            planner: PlannerNode::new(cfg.planner.clone()),
-            fsm: Fsm::new(fsm_cfg),
-            link: px4_link::LinkNode::new(cfg.px4_link.settings()),
+        let setup = run_lockstep::Setup {
+            scenario: &scn,
+            seed,
+            config: &cfg,
+            fsm: fsm_cfg,
         };
+        let mut driver = run_lockstep::driver(&graph, &setup, |_| None)?;
+        let mut referee = Referee::new(0);
         let mut rec = Recording(recorder.take());
-        let (end, stats) = run_lockstep::run(
-            &mut sim,
-            &mut pipe,
+        let end = run_lockstep::run(
+            &mut driver,
             scn.scenario.duration_s,
-            &mut eval,
+            &mut referee,
             &mut rec,
             progress,
         )?;
@@ -225,8 +204,14 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         if tty {
             eprintln!();
         }
-        (end, stats, pipe.fsm.transitions().to_vec())
+        (end, referee)
     };
+    let Referee {
+        eval,
+        stats,
+        transitions,
+        ..
+    } = referee;
     for t in &transitions {
         eprintln!(
             "  {:7.2} s  {:>13} -> {:<13} {}",

@@ -1,8 +1,7 @@
 //! The evaluator of `landing run`: the only part that reads the simulator's ground
 //! truth (where the vehicle and the pad really are, touchdowns, collisions, crashes).
 
-use ipc_types::msg::{MissionState, TruthEvent, TruthKind, TruthState};
-use sim::lockstep::Simulator;
+use ipc_types::msg::{FsmStatus, MissionState, PlannerStats, TruthEvent, TruthKind, TruthState};
 
 /// The world at one instant, for the flight log and the plots.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -22,11 +21,6 @@ pub struct Sample {
 }
 
 impl Sample {
-    /// The truth now, from the simulator in this process.
-    pub fn of(sim: &Simulator, phase: MissionState) -> Self {
-        Self::from_truth(&sim::lockstep::truth_state(sim, sim.time_ns()), phase)
-    }
-
     /// The truth the `sim` process published (`landing/sim/truth_state`).
     pub fn from_truth(s: &TruthState, phase: MissionState) -> Self {
         let pad = s.pad_valid != 0;
@@ -117,4 +111,145 @@ impl Evaluator {
             .rfind(|t| flown(t) && t.on_pad)
             .or_else(|| self.touchdowns.iter().rfind(flown))
     }
+}
+
+/// How the run ended, as the referee saw it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum End {
+    /// The fsm reached Landed.
+    Landed,
+    /// The fsm stopped in SafeLand or Abort and the vehicle is down and disarmed.
+    SafeLanded,
+    /// The simulator reported a crash.
+    Crashed,
+    /// The scenario's time ran out.
+    Timeout,
+}
+
+impl End {
+    /// The end a mission state means: Landed, or SafeLand / Abort once the vehicle is
+    /// `down` (disarmed); `None` while the mission goes on.
+    pub fn reached(phase: MissionState, down: bool) -> Option<End> {
+        match phase {
+            MissionState::Landed => Some(End::Landed),
+            MissionState::SafeLand | MissionState::Abort if down => Some(End::SafeLanded),
+            _ => None,
+        }
+    }
+}
+
+/// What the run measured besides the flight log.
+#[derive(Debug, Clone, Default)]
+pub struct RunStats {
+    /// Compute time of every planning call, ms.
+    pub planning_ms: Vec<f64>,
+    /// Successful plans (the first included).
+    pub plans: u64,
+}
+
+/// The referee of both run modes: it reads the fsm's status, the planner's statistics
+/// and the simulator's evaluator-only truth, exactly as `landing run` and `landing run
+/// --processes` receive them, and decides when and how the run ended by one rule: the
+/// fsm reached Landed, or SafeLand/Abort with the vehicle disarmed (the truth's armed
+/// flag), or the simulator reported a crash; the run goes on one simulated second after
+/// that so the touchdown settles in the log.
+#[derive(Debug, Default)]
+pub struct Referee {
+    /// The truth collected.
+    pub eval: Evaluator,
+    /// Planning statistics.
+    pub stats: RunStats,
+    /// The fsm's transitions, from its status messages.
+    pub transitions: Vec<fsm::Transition>,
+    /// The fsm's state as its last status said.
+    pub phase: MissionState,
+    last_state: Option<TruthState>,
+    ended: Option<(End, u64)>,
+    /// The clock origin of the status messages' `since_ns` (0 in lockstep).
+    start_ns: u64,
+}
+
+/// One simulated second: how long the run goes on after its end.
+const SETTLE_NS: u64 = 1_000_000_000;
+
+impl Referee {
+    /// A referee whose status times count from `start_ns` (the status's clock).
+    pub fn new(start_ns: u64) -> Self {
+        Self {
+            start_ns,
+            ..Self::default()
+        }
+    }
+
+    /// The fsm's status.
+    pub fn on_status(&mut self, st: &FsmStatus) {
+        let state = MissionState::from_raw(st.state).unwrap_or(MissionState::Idle);
+        if state != self.phase {
+            self.transitions.push(fsm::Transition {
+                at_ns: st.since_ns.saturating_sub(self.start_ns),
+                from: MissionState::from_raw(st.previous).unwrap_or(self.phase),
+                to: state,
+                reason: st.reason.as_str().to_string(),
+            });
+            self.phase = state;
+        }
+        self.check_end();
+    }
+
+    /// The planner's statistics of one call that took `planning_ms` of compute.
+    pub fn on_planner_stats(&mut self, s: &PlannerStats, planning_ms: f64) {
+        self.stats.planning_ms.push(planning_ms);
+        if s.success != 0 {
+            self.stats.plans += 1;
+        }
+    }
+
+    /// A truth event (touchdown, collision, crash).
+    pub fn on_truth(&mut self, t: &TruthEvent) {
+        self.eval.on_truth(t, self.phase);
+        if is_crash(t) && self.ended.is_none() {
+            self.ended = Some((End::Crashed, self.sim_time_ns()));
+        }
+    }
+
+    /// The truth state (20 Hz): a flight-log sample.
+    pub fn on_truth_state(&mut self, s: &TruthState) {
+        self.eval.sample(Sample::from_truth(s, self.phase));
+        self.last_state = Some(*s);
+        self.check_end();
+    }
+
+    fn check_end(&mut self) {
+        if self.ended.is_none() {
+            let down = self.last_state.is_some_and(|s| s.armed == 0);
+            self.ended = End::reached(self.phase, down).map(|e| (e, self.sim_time_ns()));
+        }
+    }
+
+    /// Simulated time of the newest truth state, ns.
+    pub fn sim_time_ns(&self) -> u64 {
+        self.last_state.map_or(0, |s| s.sim_time_ns)
+    }
+
+    /// Horizontal distance to the pad now, m.
+    pub fn distance_to_pad(&self) -> Option<f64> {
+        self.last_state.as_ref().and_then(distance_to_pad)
+    }
+
+    /// The end, once the run has gone on a second past it.
+    pub fn finished(&self) -> Option<End> {
+        self.ended
+            .filter(|(_, at)| self.sim_time_ns() >= at + SETTLE_NS)
+            .map(|(e, _)| e)
+    }
+}
+
+/// A stage's compute time from the stamp it closed last: exit - enter of the newest
+/// stamp of `stage` in `h`, ms.
+pub fn stage_ms(h: &ipc_types::msg::Header, stage: ipc_types::msg::Stage) -> Option<f64> {
+    h.stages()
+        .iter()
+        .rev()
+        .find(|s| s.stage == stage as u32)
+        .map(|s| s.exit_ns.saturating_sub(s.enter_ns) as f64 * 1e-6)
 }

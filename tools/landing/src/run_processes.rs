@@ -11,14 +11,13 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use fsm::Transition;
 use graph::{Graph, RunValues};
 use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::msg::{
     FsmStatus, LinkOutcome, LinkRequest, MissionState, PadObservation, PlannerGoal, PlannerStats,
-    Setpoint, Trajectory, TruthEvent, TruthState, VehicleState,
+    Setpoint, Stage, Trajectory, TruthEvent, TruthState, VehicleState,
 };
-use ipc_types::services;
+use ipc_types::{services, topics};
 use runtime::ipc::Subscriber;
 use runtime::ipc::{Wake, run_wait_loop};
 use runtime::{Ipc, IpcPrefix, monotonic_ns};
@@ -26,8 +25,7 @@ use sim::scenario::LoadedScenario;
 
 use crate::procs::{Children, binary, free_udp_port};
 use crate::record::{Recordable, Recorder};
-use crate::run_eval::{Evaluator, Sample, distance_to_pad, is_crash};
-use crate::run_lockstep::{End, RunStats};
+use crate::run_eval::{End, Referee, stage_ms};
 
 /// What `--processes` needs to start the stack.
 pub struct Launch<'a> {
@@ -48,14 +46,13 @@ pub struct Launch<'a> {
     pub graph: &'a Graph,
 }
 
-/// Runs the mission with every stage as a process; returns how it ended, the statistics
-/// and the fsm's transitions (from its status topic).
+/// Runs the mission with every stage as a process; returns how it ended and the
+/// referee's record (the same referee as the lockstep run).
 pub fn run(
     launch: &Launch<'_>,
-    eval: &mut Evaluator,
     recorder: &mut Option<Recorder>,
     mut progress: impl FnMut(f64, MissionState, Option<f64>),
-) -> Result<(End, RunStats, Vec<Transition>)> {
+) -> Result<(End, Referee)> {
     let prefix = match launch.ipc_prefix {
         Some(p) => IpcPrefix::new(p)?,
         None => IpcPrefix::unique("run"),
@@ -113,16 +110,11 @@ pub fn run(
         }
     }
 
-    let mut stats = RunStats::default();
-    let mut transitions: Vec<Transition> = Vec::new();
-    let mut phase = MissionState::Idle;
-    let mut last_state: Option<TruthState> = None;
-    let mut ended: Option<(End, Instant)> = None;
+    let mut referee = Referee::new(monotonic_ns());
     let mut result: Option<End> = None;
     let mut failure: Option<anyhow::Error> = None;
     let mut next_progress = 0.0f64;
     let wall_limit = Instant::now() + Duration::from_secs_f64(scn.scenario.duration_s + 15.0);
-    let start_ns = monotonic_ns();
     // A recording wakes on every recorded topic: subscriber queues are short.
     let mut listeners = vec![truth_state.listener(), status.listener(), truth.listener()];
     if let Some(t) = &taps {
@@ -136,6 +128,8 @@ pub fn run(
             t.outcomes.listener(),
         ]);
     }
+    let name =
+        |topic: &str| topics::find(topic).map_or_else(|| topic.to_string(), |t| t.recording_name());
     run_wait_loop(
         &listeners,
         &[],
@@ -145,45 +139,30 @@ pub fn run(
                 while let Some(s) = status.receive()? {
                     let st = *s.payload();
                     if let Some(r) = recorder.as_mut() {
-                        r.write_message("/fsm/status", monotonic_ns(), &st)?;
+                        r.write_message(&name(topics::FSM_STATUS), monotonic_ns(), &st)?;
                     }
-                    let state = MissionState::from_raw(st.state).unwrap_or(MissionState::Idle);
-                    if state != phase {
-                        transitions.push(Transition {
-                            at_ns: st.since_ns.saturating_sub(start_ns),
-                            from: MissionState::from_raw(st.previous).unwrap_or(phase),
-                            to: state,
-                            reason: st.reason.as_str().to_string(),
-                        });
-                        phase = state;
-                    }
+                    referee.on_status(&st);
                 }
                 if let (Some(t), Some(r)) = (&taps, recorder.as_mut()) {
                     t.record(r, monotonic_ns())?;
                 }
                 while let Some(p) = planner_stats.receive()? {
                     if let Some(r) = recorder.as_mut() {
-                        r.write_message("/planner/stats", monotonic_ns(), p.payload())?;
+                        r.write_message(&name(topics::PLANNER_STATS), monotonic_ns(), p.payload())?;
                     }
-                    stats.planning_ms.push(p.planning_ms);
-                    if p.success != 0 {
-                        stats.plans += 1;
-                    }
+                    // The planner's stamp: from the call to the statistics leaving.
+                    let ms = stage_ms(&p.payload().msg, Stage::Planner).unwrap_or(0.0);
+                    referee.on_planner_stats(p.payload(), ms);
                 }
                 while let Some(t) = truth.receive()? {
                     let t = *t.payload();
                     if let Some(r) = recorder.as_mut() {
-                        r.write_message("/sim/truth", monotonic_ns(), &t)?;
+                        r.write_message(&name(topics::SIM_TRUTH), monotonic_ns(), &t)?;
                     }
-                    eval.on_truth(&t, phase);
-                    if is_crash(&t) && ended.is_none() {
-                        ended = Some((End::Crashed, Instant::now()));
-                    }
+                    referee.on_truth(&t);
                 }
                 while let Some(s) = truth_state.receive()? {
-                    let s = *s.payload();
-                    eval.sample(Sample::from_truth(&s, phase));
-                    last_state = Some(s);
+                    referee.on_truth_state(s.payload());
                 }
                 Ok(())
             })();
@@ -191,19 +170,12 @@ pub fn run(
                 failure = Some(e);
                 return false;
             }
-            let t_s = last_state.map_or(0.0, |s| s.sim_time_ns as f64 * 1e-9);
+            let t_s = referee.sim_time_ns() as f64 * 1e-9;
             if t_s >= next_progress {
                 next_progress = t_s.floor() + 1.0;
-                let d = last_state.as_ref().and_then(distance_to_pad);
-                progress(t_s, phase, d);
+                progress(t_s, referee.phase, referee.distance_to_pad());
             }
-            if ended.is_none() {
-                let down = last_state.is_some_and(|s| s.armed == 0);
-                ended = End::reached(phase, down).map(|e| (e, Instant::now()));
-            }
-            if let Some((end, at)) = ended
-                && at.elapsed() >= Duration::from_secs(1)
-            {
+            if let Some(end) = referee.finished() {
                 result = Some(end);
                 return false;
             }
@@ -225,7 +197,7 @@ pub fn run(
     if let Some(e) = failure {
         return Err(e);
     }
-    Ok((result.unwrap_or(End::Timeout), stats, transitions))
+    Ok((result.unwrap_or(End::Timeout), referee))
 }
 
 /// Subscribers to the pipeline topics a recording keeps (besides those the run watches).
@@ -265,13 +237,24 @@ impl Taps {
             }
             Ok(())
         }
-        drain(&self.states, r, "/vehicle/state", now_ns)?;
-        drain(&self.observations, r, "/pad/observation", now_ns)?;
-        drain(&self.trajectories, r, "/planner/trajectory", now_ns)?;
-        drain(&self.setpoints, r, "/fsm/setpoint", now_ns)?;
-        drain(&self.goals, r, "/planner/goal", now_ns)?;
-        drain(&self.requests, r, "/px4/request", now_ns)?;
-        drain(&self.outcomes, r, "/px4/outcome", now_ns)?;
+        let name = |t: &str| format!("/{t}");
+        drain(&self.states, r, &name(topics::VEHICLE_STATE), now_ns)?;
+        drain(
+            &self.observations,
+            r,
+            &name(topics::PAD_OBSERVATION),
+            now_ns,
+        )?;
+        drain(
+            &self.trajectories,
+            r,
+            &name(topics::PLANNER_TRAJECTORY),
+            now_ns,
+        )?;
+        drain(&self.setpoints, r, &name(topics::FSM_SETPOINT), now_ns)?;
+        drain(&self.goals, r, &name(topics::PLANNER_GOAL), now_ns)?;
+        drain(&self.requests, r, &name(topics::PX4_REQUEST), now_ns)?;
+        drain(&self.outcomes, r, &name(topics::PX4_OUTCOME), now_ns)?;
         Ok(())
     }
 }

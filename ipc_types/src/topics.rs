@@ -1,0 +1,220 @@
+//! The topic table: every topic's short name (what the graph, the stages and the
+//! recordings call it), its iceoryx2 service and the payload it carries. The one place
+//! that names a topic; `deploy/graph.toml` is checked against it by a test.
+
+use crate::services;
+
+/// What a topic carries: one payload type (slices: the header type, with elements).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Payload {
+    /// [`crate::msg::CameraFrameHeader`] with `u8` pixels.
+    CameraFrame,
+    /// [`crate::msg::DepthFrameHeader`] with `u16` depths.
+    DepthFrame,
+    /// [`crate::msg::OccupancyMapHeader`] with `u8` cells.
+    OccupancyMap,
+    /// [`crate::msg::VehicleState`].
+    VehicleState,
+    /// [`crate::msg::PadObservation`].
+    PadObservation,
+    /// [`crate::msg::PlannerGoal`].
+    PlannerGoal,
+    /// [`crate::msg::Trajectory`].
+    Trajectory,
+    /// [`crate::msg::PlannerStats`].
+    PlannerStats,
+    /// [`crate::msg::Setpoint`].
+    Setpoint,
+    /// [`crate::msg::LinkRequest`].
+    LinkRequest,
+    /// [`crate::msg::LinkOutcome`].
+    LinkOutcome,
+    /// [`crate::msg::SafetyCommand`].
+    SafetyCommand,
+    /// [`crate::msg::FsmStatus`].
+    FsmStatus,
+    /// [`crate::msg::TruthEvent`] (evaluator only).
+    TruthEvent,
+    /// [`crate::msg::TruthState`] (evaluator only).
+    TruthState,
+    /// MAVLink 2 bytes: one datagram, or a chunk of a serial byte stream.
+    Mavlink,
+}
+
+impl Payload {
+    /// The versioned type name (for slices, the header's), as the graph file writes it.
+    pub fn type_name(self) -> &'static str {
+        match self {
+            Self::CameraFrame => "landing::CameraFrameHeader/v1",
+            Self::DepthFrame => "landing::DepthFrameHeader/v1",
+            Self::OccupancyMap => "landing::OccupancyMapHeader/v1",
+            Self::VehicleState => "landing::VehicleState/v1",
+            Self::PadObservation => "landing::PadObservation/v1",
+            Self::PlannerGoal => "landing::PlannerGoal/v1",
+            Self::Trajectory => "landing::Trajectory/v1",
+            Self::PlannerStats => "landing::PlannerStats/v1",
+            Self::Setpoint => "landing::Setpoint/v1",
+            Self::LinkRequest => "landing::LinkRequest/v1",
+            Self::LinkOutcome => "landing::LinkOutcome/v1",
+            Self::SafetyCommand => "landing::SafetyCommand/v1",
+            Self::FsmStatus => "landing::FsmStatus/v1",
+            Self::TruthEvent => "landing::TruthEvent/v1",
+            Self::TruthState => "landing::TruthState/v1",
+            Self::Mavlink => "MAVLink 2",
+        }
+    }
+
+    /// The slice element type, for payloads that are a header plus a slice.
+    pub fn elements(self) -> Option<&'static str> {
+        match self {
+            Self::CameraFrame | Self::OccupancyMap => Some("u8"),
+            Self::DepthFrame => Some("u16"),
+            _ => None,
+        }
+    }
+}
+
+/// One row of the table.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TopicInfo {
+    /// Short name: `camera/frame`.
+    pub name: &'static str,
+    /// The iceoryx2 service (`None`: MAVLink, not iceoryx2).
+    pub service: Option<&'static str>,
+    /// What it carries.
+    pub payload: Payload,
+    /// Ground truth: the evaluator reads it, no pipeline stage may.
+    pub evaluator_only: bool,
+}
+
+impl TopicInfo {
+    /// The channel name in recordings: `/camera/frame`.
+    pub fn recording_name(&self) -> String {
+        format!("/{}", self.name)
+    }
+}
+
+/// Simulator camera frames.
+pub const SIM_CAMERA: &str = "sim/camera";
+/// Simulator depth frames.
+pub const SIM_DEPTH: &str = "sim/depth";
+/// Ground-truth events (evaluator only).
+pub const SIM_TRUTH: &str = "sim/truth";
+/// Ground-truth state (evaluator only).
+pub const SIM_TRUTH_STATE: &str = "sim/truth_state";
+/// MAVLink from the autopilot.
+pub const MAVLINK_FROM_PX4: &str = "mavlink/from-px4";
+/// MAVLink to the autopilot.
+pub const MAVLINK_TO_PX4: &str = "mavlink/to-px4";
+/// Camera frames as the pipeline sees them.
+pub const CAMERA_FRAME: &str = "camera/frame";
+/// Depth frames from a real depth camera driver (depth-map `--input depth-frame`).
+pub const DEPTH_FRAME: &str = "depth/frame";
+/// Pad observations.
+pub const PAD_OBSERVATION: &str = "pad/observation";
+/// The estimated vehicle state.
+pub const VEHICLE_STATE: &str = "vehicle/state";
+/// The occupancy window.
+pub const MAP_OCCUPANCY: &str = "map/occupancy";
+/// Planner goals.
+pub const PLANNER_GOAL: &str = "planner/goal";
+/// Planned trajectories.
+pub const PLANNER_TRAJECTORY: &str = "planner/trajectory";
+/// Planning statistics.
+pub const PLANNER_STATS: &str = "planner/stats";
+/// Requests to the autopilot.
+pub const PX4_REQUEST: &str = "px4/request";
+/// Outcomes of requests.
+pub const PX4_OUTCOME: &str = "px4/outcome";
+/// Setpoints.
+pub const FSM_SETPOINT: &str = "fsm/setpoint";
+/// Mission status.
+pub const FSM_STATUS: &str = "fsm/status";
+/// Safety orders.
+pub const SAFETY_COMMAND: &str = "safety/command";
+
+const fn row(name: &'static str, service: &'static str, payload: Payload) -> TopicInfo {
+    TopicInfo {
+        name,
+        service: Some(service),
+        payload,
+        evaluator_only: false,
+    }
+}
+
+/// Every topic of the stack.
+pub const TABLE: &[TopicInfo] = &[
+    row(SIM_CAMERA, services::SIM_CAMERA, Payload::CameraFrame),
+    row(SIM_DEPTH, services::SIM_DEPTH, Payload::DepthFrame),
+    TopicInfo {
+        evaluator_only: true,
+        ..row(SIM_TRUTH, services::SIM_TRUTH, Payload::TruthEvent)
+    },
+    TopicInfo {
+        evaluator_only: true,
+        ..row(
+            SIM_TRUTH_STATE,
+            services::SIM_TRUTH_STATE,
+            Payload::TruthState,
+        )
+    },
+    TopicInfo {
+        name: MAVLINK_FROM_PX4,
+        service: None,
+        payload: Payload::Mavlink,
+        evaluator_only: false,
+    },
+    TopicInfo {
+        name: MAVLINK_TO_PX4,
+        service: None,
+        payload: Payload::Mavlink,
+        evaluator_only: false,
+    },
+    row(CAMERA_FRAME, services::CAMERA_FRAME, Payload::CameraFrame),
+    row(DEPTH_FRAME, services::DEPTH_FRAME, Payload::DepthFrame),
+    row(
+        PAD_OBSERVATION,
+        services::PAD_OBSERVATION,
+        Payload::PadObservation,
+    ),
+    row(
+        VEHICLE_STATE,
+        services::VEHICLE_STATE,
+        Payload::VehicleState,
+    ),
+    row(
+        MAP_OCCUPANCY,
+        services::MAP_OCCUPANCY,
+        Payload::OccupancyMap,
+    ),
+    row(PLANNER_GOAL, services::PLANNER_GOAL, Payload::PlannerGoal),
+    row(
+        PLANNER_TRAJECTORY,
+        services::PLANNER_TRAJECTORY,
+        Payload::Trajectory,
+    ),
+    row(
+        PLANNER_STATS,
+        services::PLANNER_STATS,
+        Payload::PlannerStats,
+    ),
+    row(PX4_REQUEST, services::PX4_REQUEST, Payload::LinkRequest),
+    row(PX4_OUTCOME, services::PX4_OUTCOME, Payload::LinkOutcome),
+    row(FSM_SETPOINT, services::FSM_SETPOINT, Payload::Setpoint),
+    row(FSM_STATUS, services::FSM_STATUS, Payload::FsmStatus),
+    row(
+        SAFETY_COMMAND,
+        services::SAFETY_COMMAND,
+        Payload::SafetyCommand,
+    ),
+];
+
+/// The row of `name`, if the stack has such a topic.
+pub fn find(name: &str) -> Option<&'static TopicInfo> {
+    TABLE.iter().find(|t| t.name == name)
+}
+
+/// The row whose iceoryx2 service is `service`.
+pub fn by_service(service: &str) -> Option<&'static TopicInfo> {
+    TABLE.iter().find(|t| t.service == Some(service))
+}

@@ -1,0 +1,158 @@
+//! px4-link as a pipeline stage: MAVLink bytes from the autopilot in (datagrams or a
+//! serial byte stream), the fsm's setpoints and requests and the safety orders in;
+//! MAVLink bytes to the autopilot, the vehicle state and request outcomes out. The
+//! socket or serial port is the binary's; the bytes go through their wire encoding in
+//! both drivers.
+
+use ipc_types::topics;
+use mavlink::MavHeader;
+use mavlink::dialects::common::MavMessage;
+use px4_protocol::codec::{StreamDecoder, decode_datagram, encode};
+use stage::{Counter, Input, Message, Outbox, Stage, StageError};
+
+use crate::{LinkNode, LinkSettings};
+
+/// How often the link is serviced when nothing arrives (resends, timeouts, setpoint
+/// stream), ns.
+pub const SERVICE_PERIOD_NS: u64 = 2_000_000;
+
+/// How the autopilot's bytes are framed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Framing {
+    /// Each input is one UDP datagram of whole frames.
+    Datagram,
+    /// Inputs are chunks of a byte stream (serial); frames may span chunks.
+    Stream,
+}
+
+/// The `px4-link` node.
+pub struct LinkStage {
+    node: LinkNode,
+    framing: Framing,
+    decoder: StreamDecoder,
+    decoded: Vec<(MavHeader, MavMessage)>,
+    frame: Vec<u8>,
+    counts: Counts,
+    last_link: ipc_types::msg::LinkHealth,
+}
+
+#[derive(Debug, Default, Clone, Copy)]
+struct Counts {
+    received: u64,
+    sent: u64,
+    states: u64,
+    outcomes: u64,
+    setpoints: u64,
+    requests: u64,
+    safety: u64,
+}
+
+impl LinkStage {
+    /// The stage of a link with `settings`, reading `framing`.
+    pub fn new(settings: LinkSettings, framing: Framing) -> Self {
+        Self {
+            node: LinkNode::new(settings),
+            framing,
+            decoder: StreamDecoder::new(),
+            decoded: Vec::with_capacity(8),
+            frame: Vec::with_capacity(280),
+            counts: Counts::default(),
+            last_link: ipc_types::msg::LinkHealth::default(),
+        }
+    }
+
+    /// The node, to read the link's status.
+    pub fn node(&self) -> &LinkNode {
+        &self.node
+    }
+
+    /// Sends what is due, then publishes outcomes and the vehicle state when due.
+    fn service(&mut self, now_ns: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
+        let (frame, counts) = (&mut self.frame, &mut self.counts);
+        self.node.send_due(now_ns, |header, m| {
+            frame.clear();
+            encode(frame, header, m).map_err(|e| StageError::Transport(e.to_string()))?;
+            counts.sent += 1;
+            out.publish(topics::MAVLINK_TO_PX4, Message::Mavlink(frame))
+        })?;
+        for o in self.node.take_outcomes() {
+            out.publish(topics::PX4_OUTCOME, Message::LinkOutcome(&o))?;
+            self.counts.outcomes += 1;
+        }
+        if let Some(state) = self.node.vehicle_state(now_ns) {
+            out.publish(topics::VEHICLE_STATE, Message::VehicleState(&state))?;
+            self.counts.states += 1;
+            self.last_link = state.link;
+        }
+        Ok(())
+    }
+}
+
+impl Stage for LinkStage {
+    fn name(&self) -> &'static str {
+        "px4-link"
+    }
+
+    fn tick_period_ns(&self) -> Option<u64> {
+        Some(SERVICE_PERIOD_NS)
+    }
+
+    fn on_input(
+        &mut self,
+        now_ns: u64,
+        input: Input<'_>,
+        _out: &mut dyn Outbox,
+    ) -> Result<(), StageError> {
+        match input.msg {
+            Message::Mavlink(bytes) => {
+                self.decoded.clear();
+                let errors = match self.framing {
+                    Framing::Datagram => decode_datagram(bytes, &mut self.decoded),
+                    Framing::Stream => self.decoder.push(bytes, &mut self.decoded),
+                };
+                self.node.on_parse_errors(errors);
+                for (h, m) in &self.decoded {
+                    self.node.on_message(now_ns, h, m);
+                }
+                self.counts.received += self.decoded.len() as u64;
+            }
+            Message::Setpoint(s) => {
+                self.counts.setpoints += 1;
+                self.node.on_setpoint(now_ns, s);
+            }
+            Message::LinkRequest(r) => {
+                self.counts.requests += 1;
+                self.node.on_request(now_ns, r);
+            }
+            Message::SafetyCommand(c) => {
+                self.counts.safety += 1;
+                self.node.on_safety(now_ns, c);
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn on_inputs_done(&mut self, now_ns: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
+        self.service(now_ns, out)
+    }
+
+    fn on_tick(&mut self, now_ns: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
+        self.service(now_ns, out)
+    }
+
+    fn counters(&self) -> Vec<Counter> {
+        let c = self.counts;
+        vec![
+            ("received", c.received),
+            ("sent", c.sent),
+            ("parse_errors", u64::from(self.last_link.parse_errors)),
+            ("messages_lost", self.last_link.messages_lost),
+            ("states", c.states),
+            ("outcomes", c.outcomes),
+            ("setpoints", c.setpoints),
+            ("requests", c.requests),
+            ("safety", c.safety),
+        ]
+    }
+}

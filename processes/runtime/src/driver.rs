@@ -1,0 +1,672 @@
+//! The iceoryx2 driver: runs any [`Stage`] as its own process. It opens the ports its
+//! node declares (one subscriber per input, one publisher per output, types from the
+//! topic table), hands over every input in the order the node lists them (a `newest`
+//! input: only the newest waiting sample, older ones skipped and counted), calls the
+//! stage's tick on its period, beats the heartbeat, stamps each output's stage exit
+//! with the monotonic clock, and stops cleanly on SIGTERM/SIGINT. A stage that needs
+//! I/O besides iceoryx2 (a socket, a camera thread) brings it as an [`External`], which
+//! the driver then waits on instead of its wait set.
+
+use std::time::Duration;
+
+use iceoryx2::prelude::IceoryxSend;
+
+use ipc_types::msg::{
+    CameraFrameHeader, DepthFrameHeader, FsmStatus, LinkOutcome, LinkRequest, OccupancyMapHeader,
+    PadObservation, PlannerGoal, PlannerStats, SafetyCommand, Setpoint, Trajectory, TruthEvent,
+    TruthState, VehicleState,
+};
+use ipc_types::topics::{self, Payload};
+use stage::lockstep::NodeSpec;
+use stage::{
+    External, Flow, Input, Message, Outbox, OwnedMessage, SliceHeader, SliceMut, Stage, StageError,
+    stop_line,
+};
+
+use crate::clock::monotonic_ns;
+use crate::ipc::{
+    HeartbeatError, Ipc, Publisher, ReceiveError, ServiceError, SlicePublisher, SliceSubscriber,
+    Subscriber, WaitError, Wake, run_wait_loop,
+};
+
+/// How often a running stage logs its counters, ns.
+const REPORT_PERIOD_NS: u64 = 10_000_000_000;
+
+/// Why the driver stopped with an error. Each names the topic or node it concerns.
+#[derive(Debug, thiserror::Error)]
+pub enum DriverError {
+    /// A topic of the node is not in the topic table.
+    #[error("node `{node}`: unknown topic `{topic}` (see ipc_types::topics)")]
+    UnknownTopic {
+        /// The node.
+        node: String,
+        /// The topic.
+        topic: String,
+    },
+    /// A topic is not carried by iceoryx2 and the stage brought no I/O that serves it.
+    #[error("node `{node}`: `{topic}` is not an iceoryx2 topic and nothing else serves it")]
+    NoTransport {
+        /// The node.
+        node: String,
+        /// The topic.
+        topic: String,
+    },
+    /// A pipeline node reads an evaluator-only topic.
+    #[error("node `{node}` reads `{topic}`, which only the evaluator may read")]
+    EvaluatorOnly {
+        /// The node.
+        node: String,
+        /// The topic.
+        topic: String,
+    },
+    /// A port could not be opened.
+    #[error("`{topic}`: {source}")]
+    Open {
+        /// The topic.
+        topic: String,
+        /// What went wrong.
+        source: ServiceError,
+    },
+    /// Receiving failed.
+    #[error(transparent)]
+    Receive(#[from] ReceiveError),
+    /// The stage failed (publishing, or its own work).
+    #[error(transparent)]
+    Stage(#[from] StageError),
+    /// The wait loop failed.
+    #[error(transparent)]
+    Wait(#[from] WaitError),
+    /// The heartbeat could not be sent.
+    #[error(transparent)]
+    Heartbeat(#[from] HeartbeatError),
+}
+
+/// The heartbeat: how often the process beats, and the deadline it declares.
+#[derive(Debug, Clone, Copy)]
+pub struct Beat {
+    /// Beat period.
+    pub period: Duration,
+    /// Declared deadline (the watchdog calls the process hung after it).
+    pub deadline: Duration,
+}
+
+/// One input port.
+enum InPort {
+    CameraFrame(SliceSubscriber<u8, CameraFrameHeader>),
+    DepthFrame(SliceSubscriber<u16, DepthFrameHeader>),
+    OccupancyMap(SliceSubscriber<u8, OccupancyMapHeader>),
+    VehicleState(Subscriber<VehicleState>),
+    PadObservation(Subscriber<PadObservation>),
+    PlannerGoal(Subscriber<PlannerGoal>),
+    Trajectory(Subscriber<Trajectory>),
+    PlannerStats(Subscriber<PlannerStats>),
+    Setpoint(Subscriber<Setpoint>),
+    LinkRequest(Subscriber<LinkRequest>),
+    LinkOutcome(Subscriber<LinkOutcome>),
+    SafetyCommand(Subscriber<SafetyCommand>),
+    FsmStatus(Subscriber<FsmStatus>),
+}
+
+/// One output port.
+enum OutPort {
+    CameraFrame(SlicePublisher<u8, CameraFrameHeader>),
+    DepthFrame(SlicePublisher<u16, DepthFrameHeader>),
+    OccupancyMap(SlicePublisher<u8, OccupancyMapHeader>),
+    VehicleState(Publisher<VehicleState>),
+    PadObservation(Publisher<PadObservation>),
+    PlannerGoal(Publisher<PlannerGoal>),
+    Trajectory(Publisher<Trajectory>),
+    PlannerStats(Publisher<PlannerStats>),
+    Setpoint(Publisher<Setpoint>),
+    LinkRequest(Publisher<LinkRequest>),
+    LinkOutcome(Publisher<LinkOutcome>),
+    SafetyCommand(Publisher<SafetyCommand>),
+    FsmStatus(Publisher<FsmStatus>),
+    TruthEvent(Publisher<TruthEvent>),
+    TruthState(Publisher<TruthState>),
+    /// Served by the stage's [`External`].
+    External,
+}
+
+struct InSpec {
+    topic: &'static str,
+    newest: bool,
+    port: InPort,
+}
+
+fn open_in(ipc: &Ipc, service: &str, payload: Payload) -> Result<Option<InPort>, ServiceError> {
+    Ok(Some(match payload {
+        Payload::CameraFrame => InPort::CameraFrame(ipc.slice_subscriber(service)?),
+        Payload::DepthFrame => InPort::DepthFrame(ipc.slice_subscriber(service)?),
+        Payload::OccupancyMap => InPort::OccupancyMap(ipc.slice_subscriber(service)?),
+        Payload::VehicleState => InPort::VehicleState(ipc.subscriber(service)?),
+        Payload::PadObservation => InPort::PadObservation(ipc.subscriber(service)?),
+        Payload::PlannerGoal => InPort::PlannerGoal(ipc.subscriber(service)?),
+        Payload::Trajectory => InPort::Trajectory(ipc.subscriber(service)?),
+        Payload::PlannerStats => InPort::PlannerStats(ipc.subscriber(service)?),
+        Payload::Setpoint => InPort::Setpoint(ipc.subscriber(service)?),
+        Payload::LinkRequest => InPort::LinkRequest(ipc.subscriber(service)?),
+        Payload::LinkOutcome => InPort::LinkOutcome(ipc.subscriber(service)?),
+        Payload::SafetyCommand => InPort::SafetyCommand(ipc.subscriber(service)?),
+        Payload::FsmStatus => InPort::FsmStatus(ipc.subscriber(service)?),
+        Payload::TruthEvent | Payload::TruthState | Payload::Mavlink => return Ok(None),
+    }))
+}
+
+fn open_out(
+    ipc: &Ipc,
+    service: &str,
+    payload: Payload,
+    max_len: usize,
+) -> Result<Option<OutPort>, ServiceError> {
+    let len = max_len.max(1);
+    Ok(Some(match payload {
+        Payload::CameraFrame => OutPort::CameraFrame(ipc.slice_publisher(service, len)?),
+        Payload::DepthFrame => OutPort::DepthFrame(ipc.slice_publisher(service, len)?),
+        Payload::OccupancyMap => OutPort::OccupancyMap(ipc.slice_publisher(service, len)?),
+        Payload::VehicleState => OutPort::VehicleState(ipc.publisher(service)?),
+        Payload::PadObservation => OutPort::PadObservation(ipc.publisher(service)?),
+        Payload::PlannerGoal => OutPort::PlannerGoal(ipc.publisher(service)?),
+        Payload::Trajectory => OutPort::Trajectory(ipc.publisher(service)?),
+        Payload::PlannerStats => OutPort::PlannerStats(ipc.publisher(service)?),
+        Payload::Setpoint => OutPort::Setpoint(ipc.publisher(service)?),
+        Payload::LinkRequest => OutPort::LinkRequest(ipc.publisher(service)?),
+        Payload::LinkOutcome => OutPort::LinkOutcome(ipc.publisher(service)?),
+        Payload::SafetyCommand => OutPort::SafetyCommand(ipc.publisher(service)?),
+        Payload::FsmStatus => OutPort::FsmStatus(ipc.publisher(service)?),
+        Payload::TruthEvent => OutPort::TruthEvent(ipc.publisher(service)?),
+        Payload::TruthState => OutPort::TruthState(ipc.publisher(service)?),
+        Payload::Mavlink => return Ok(None),
+    }))
+}
+
+/// Takes what waits on `sub`: every sample in order, or only the newest. Returns how
+/// many were handed over; `skipped` counts the older ones a `newest` input passed over.
+fn drain<P, H>(
+    sub: &Subscriber<P, H>,
+    newest: bool,
+    skipped: &mut u64,
+    mut take: impl FnMut(&iceoryx2::sample::Sample<crate::ipc::Svc, P, H>) -> Result<(), StageError>,
+) -> Result<u64, DriverError>
+where
+    P: ?Sized + std::fmt::Debug + IceoryxSend + 'static,
+    H: crate::MessageHeader,
+    iceoryx2::port::subscriber::Subscriber<crate::ipc::Svc, P, H>: crate::ipc::ReceivePort<P, H>,
+{
+    if newest {
+        let mut last = None;
+        while let Some(s) = sub.receive()? {
+            if last.replace(s).is_some() {
+                *skipped += 1;
+            }
+        }
+        match last {
+            Some(s) => {
+                take(&s)?;
+                Ok(1)
+            }
+            None => Ok(0),
+        }
+    } else {
+        let mut n = 0;
+        while let Some(s) = sub.receive()? {
+            take(&s)?;
+            n += 1;
+        }
+        Ok(n)
+    }
+}
+
+impl InPort {
+    fn listener(&self) -> &iceoryx2::port::listener::Listener<crate::ipc::Svc> {
+        match self {
+            Self::CameraFrame(s) => s.listener(),
+            Self::DepthFrame(s) => s.listener(),
+            Self::OccupancyMap(s) => s.listener(),
+            Self::VehicleState(s) => s.listener(),
+            Self::PadObservation(s) => s.listener(),
+            Self::PlannerGoal(s) => s.listener(),
+            Self::Trajectory(s) => s.listener(),
+            Self::PlannerStats(s) => s.listener(),
+            Self::Setpoint(s) => s.listener(),
+            Self::LinkRequest(s) => s.listener(),
+            Self::LinkOutcome(s) => s.listener(),
+            Self::SafetyCommand(s) => s.listener(),
+            Self::FsmStatus(s) => s.listener(),
+        }
+    }
+
+    fn gaps(&self) -> u64 {
+        match self {
+            Self::CameraFrame(s) => s.gaps(),
+            Self::DepthFrame(s) => s.gaps(),
+            Self::OccupancyMap(s) => s.gaps(),
+            Self::VehicleState(s) => s.gaps(),
+            Self::PadObservation(s) => s.gaps(),
+            Self::PlannerGoal(s) => s.gaps(),
+            Self::Trajectory(s) => s.gaps(),
+            Self::PlannerStats(s) => s.gaps(),
+            Self::Setpoint(s) => s.gaps(),
+            Self::LinkRequest(s) => s.gaps(),
+            Self::LinkOutcome(s) => s.gaps(),
+            Self::SafetyCommand(s) => s.gaps(),
+            Self::FsmStatus(s) => s.gaps(),
+        }
+    }
+
+    /// Hands what waits to `stage`; returns how many messages that was.
+    fn deliver(
+        &self,
+        topic: &str,
+        newest: bool,
+        now: u64,
+        stage: &mut dyn Stage,
+        out: &mut dyn Outbox,
+        skipped: &mut u64,
+    ) -> Result<u64, DriverError> {
+        let mut call = |msg: Message<'_>| stage.on_input(now, Input { topic, msg }, out);
+        match self {
+            Self::CameraFrame(s) => drain(s, newest, skipped, |x| {
+                call(Message::CameraFrame(x.user_header(), x.payload()))
+            }),
+            Self::DepthFrame(s) => drain(s, newest, skipped, |x| {
+                call(Message::DepthFrame(x.user_header(), x.payload()))
+            }),
+            Self::OccupancyMap(s) => drain(s, newest, skipped, |x| {
+                call(Message::OccupancyMap(x.user_header(), x.payload()))
+            }),
+            Self::VehicleState(s) => drain(s, newest, skipped, |x| {
+                call(Message::VehicleState(x.payload()))
+            }),
+            Self::PadObservation(s) => drain(s, newest, skipped, |x| {
+                call(Message::PadObservation(x.payload()))
+            }),
+            Self::PlannerGoal(s) => drain(s, newest, skipped, |x| {
+                call(Message::PlannerGoal(x.payload()))
+            }),
+            Self::Trajectory(s) => drain(s, newest, skipped, |x| {
+                call(Message::Trajectory(x.payload()))
+            }),
+            Self::PlannerStats(s) => drain(s, newest, skipped, |x| {
+                call(Message::PlannerStats(x.payload()))
+            }),
+            Self::Setpoint(s) => {
+                drain(s, newest, skipped, |x| call(Message::Setpoint(x.payload())))
+            }
+            Self::LinkRequest(s) => drain(s, newest, skipped, |x| {
+                call(Message::LinkRequest(x.payload()))
+            }),
+            Self::LinkOutcome(s) => drain(s, newest, skipped, |x| {
+                call(Message::LinkOutcome(x.payload()))
+            }),
+            Self::SafetyCommand(s) => drain(s, newest, skipped, |x| {
+                call(Message::SafetyCommand(x.payload()))
+            }),
+            Self::FsmStatus(s) => drain(s, newest, skipped, |x| {
+                call(Message::FsmStatus(x.payload()))
+            }),
+        }
+    }
+}
+
+/// The stage's outbox: its output ports and its external I/O.
+struct Ports<'a, 'e> {
+    outputs: &'a mut [(&'static str, OutPort)],
+    external: Option<&'a mut (dyn External + 'e)>,
+}
+
+fn transport(e: impl std::fmt::Display) -> StageError {
+    StageError::Transport(e.to_string())
+}
+
+macro_rules! send_plain {
+    ($port:expr, $m:expr) => {{
+        let mut v = *$m;
+        v.msg.close_stage(monotonic_ns());
+        $port.send(v.msg, &v).map(|_| ()).map_err(transport)
+    }};
+}
+
+impl Outbox for Ports<'_, '_> {
+    fn publish(&mut self, topic: &str, msg: Message<'_>) -> Result<(), StageError> {
+        let Some((_, port)) = self.outputs.iter_mut().find(|(t, _)| *t == topic) else {
+            return Err(StageError::NotAnOutput {
+                stage: String::new(),
+                topic: topic.to_string(),
+            });
+        };
+        match (port, msg) {
+            (OutPort::External, m) => match self.external.as_deref_mut() {
+                Some(ext) => ext.send(topic, m),
+                None => Err(StageError::Transport(format!("nothing serves `{topic}`"))),
+            },
+            (OutPort::VehicleState(p), Message::VehicleState(m)) => send_plain!(p, m),
+            (OutPort::PadObservation(p), Message::PadObservation(m)) => send_plain!(p, m),
+            (OutPort::PlannerGoal(p), Message::PlannerGoal(m)) => send_plain!(p, m),
+            (OutPort::Trajectory(p), Message::Trajectory(m)) => send_plain!(p, m),
+            (OutPort::PlannerStats(p), Message::PlannerStats(m)) => send_plain!(p, m),
+            (OutPort::Setpoint(p), Message::Setpoint(m)) => send_plain!(p, m),
+            (OutPort::LinkRequest(p), Message::LinkRequest(m)) => send_plain!(p, m),
+            (OutPort::LinkOutcome(p), Message::LinkOutcome(m)) => send_plain!(p, m),
+            (OutPort::SafetyCommand(p), Message::SafetyCommand(m)) => send_plain!(p, m),
+            (OutPort::FsmStatus(p), Message::FsmStatus(m)) => send_plain!(p, m),
+            (OutPort::TruthEvent(p), Message::TruthEvent(m)) => send_plain!(p, m),
+            (OutPort::TruthState(p), Message::TruthState(m)) => send_plain!(p, m),
+            (_, m) => Err(StageError::WrongType {
+                topic: topic.to_string(),
+                expected: topics::find(topic).map_or("?", |t| t.payload.type_name()),
+                got: m.payload().type_name(),
+            }),
+        }
+    }
+
+    fn publish_slice(
+        &mut self,
+        topic: &str,
+        len: usize,
+        fill: &mut dyn FnMut(SliceMut<'_>) -> Option<SliceHeader>,
+    ) -> Result<bool, StageError> {
+        let Some((_, port)) = self.outputs.iter_mut().find(|(t, _)| *t == topic) else {
+            return Err(StageError::NotAnOutput {
+                stage: String::new(),
+                topic: topic.to_string(),
+            });
+        };
+        // A loan that fails (every sample held by subscribers) drops this message: the
+        // stage counts it, the process never waits.
+        match port {
+            OutPort::CameraFrame(p) => {
+                let Ok(mut sample) = p.loan(len) else {
+                    return Ok(false);
+                };
+                let Some(SliceHeader::CameraFrame(mut h)) =
+                    fill(SliceMut::U8(sample.payload_mut()))
+                else {
+                    return Ok(false);
+                };
+                h.msg.close_stage(monotonic_ns());
+                *sample.user_header_mut() = h;
+                p.send(sample).map_err(transport)?;
+            }
+            OutPort::OccupancyMap(p) => {
+                let Ok(mut sample) = p.loan(len) else {
+                    return Ok(false);
+                };
+                let Some(SliceHeader::OccupancyMap(mut h)) =
+                    fill(SliceMut::U8(sample.payload_mut()))
+                else {
+                    return Ok(false);
+                };
+                h.msg.close_stage(monotonic_ns());
+                *sample.user_header_mut() = h;
+                p.send(sample).map_err(transport)?;
+            }
+            OutPort::DepthFrame(p) => {
+                let Ok(mut sample) = p.loan(len) else {
+                    return Ok(false);
+                };
+                let Some(SliceHeader::DepthFrame(mut h)) =
+                    fill(SliceMut::U16(sample.payload_mut()))
+                else {
+                    return Ok(false);
+                };
+                h.msg.close_stage(monotonic_ns());
+                *sample.user_header_mut() = h;
+                p.send(sample).map_err(transport)?;
+            }
+            _ => {
+                return Err(StageError::WrongType {
+                    topic: topic.to_string(),
+                    expected: topics::find(topic).map_or("?", |t| t.payload.type_name()),
+                    got: "a slice",
+                });
+            }
+        }
+        Ok(true)
+    }
+}
+
+/// The running node: ports, schedule and counters.
+struct Node<'a> {
+    outputs: Vec<(&'static str, OutPort)>,
+    external: Option<&'a mut dyn External>,
+    heartbeat: crate::Heartbeat,
+    beat_ns: u64,
+    next_beat_ns: u64,
+    tick_ns: Option<u64>,
+    next_tick_ns: u64,
+    next_report_ns: u64,
+    skipped: u64,
+}
+
+impl Node<'_> {
+    /// One wake-up: every iceoryx2 input, then `inputs_done`, the tick and the beat
+    /// when due.
+    fn round(
+        &mut self,
+        inputs: &[InSpec],
+        stage: &mut dyn Stage,
+        external_inputs: u64,
+    ) -> Result<(), DriverError> {
+        let now = monotonic_ns();
+        let mut taken = external_inputs;
+        let mut out = Ports {
+            outputs: &mut self.outputs,
+            external: self.external.as_deref_mut(),
+        };
+        for i in inputs {
+            taken += i
+                .port
+                .deliver(i.topic, i.newest, now, stage, &mut out, &mut self.skipped)?;
+        }
+        if taken > 0 {
+            stage.on_inputs_done(now, &mut out)?;
+        }
+        if let Some(p) = self.tick_ns
+            && now >= self.next_tick_ns
+        {
+            stage.on_tick(now, &mut out)?;
+            // Keep the grid; a late wake-up skips ticks rather than bursting.
+            self.next_tick_ns += p;
+            if self.next_tick_ns <= now {
+                self.next_tick_ns = now + p;
+            }
+        }
+        if now >= self.next_beat_ns {
+            self.heartbeat.beat()?;
+            self.next_beat_ns = now + self.beat_ns;
+        }
+        if now >= self.next_report_ns {
+            self.next_report_ns = now + REPORT_PERIOD_NS;
+            tracing::info!("{}", self.line(inputs, stage, "running"));
+        }
+        Ok(())
+    }
+
+    /// How long the next wait may last, ns.
+    fn until_due(&self) -> u64 {
+        let now = monotonic_ns();
+        let mut due = self.next_beat_ns;
+        if self.tick_ns.is_some() {
+            due = due.min(self.next_tick_ns);
+        }
+        due.saturating_sub(now)
+    }
+
+    fn line(&self, inputs: &[InSpec], stage: &dyn Stage, what: &str) -> String {
+        let lost: u64 = inputs.iter().map(|i| i.port.gaps()).sum();
+        let line = stop_line(stage).replacen(" stopped", &format!(" {what}"), 1);
+        format!("{line} skipped={} lost_upstream={lost}", self.skipped)
+    }
+}
+
+/// Runs `stage` as the node `spec` on `ipc` until SIGTERM/SIGINT (or its external source
+/// ends); logs `<name> stopped k=v ...` at the end.
+pub fn run(
+    ipc: &Ipc,
+    spec: &NodeSpec,
+    stage: &mut dyn Stage,
+    mut external: Option<&mut dyn External>,
+    beat: Beat,
+) -> Result<(), DriverError> {
+    let node_err = |topic: &str| DriverError::UnknownTopic {
+        node: spec.name.clone(),
+        topic: topic.to_string(),
+    };
+    let served = |topic: &str| {
+        external
+            .as_deref()
+            .is_some_and(|e| e.topics().contains(&topic))
+    };
+    let mut inputs = Vec::new();
+    for i in &spec.inputs {
+        let info = topics::find(&i.topic).ok_or_else(|| node_err(&i.topic))?;
+        if info.evaluator_only {
+            return Err(DriverError::EvaluatorOnly {
+                node: spec.name.clone(),
+                topic: i.topic.clone(),
+            });
+        }
+        if served(info.name) {
+            continue;
+        }
+        let port = match info.service {
+            Some(service) => {
+                open_in(ipc, service, info.payload).map_err(|source| DriverError::Open {
+                    topic: i.topic.clone(),
+                    source,
+                })?
+            }
+            None => None,
+        };
+        let Some(port) = port else {
+            return Err(DriverError::NoTransport {
+                node: spec.name.clone(),
+                topic: i.topic.clone(),
+            });
+        };
+        inputs.push(InSpec {
+            topic: info.name,
+            newest: i.newest,
+            port,
+        });
+    }
+    let mut outputs = Vec::new();
+    for o in &spec.outputs {
+        let info = topics::find(o).ok_or_else(|| node_err(o))?;
+        let port = if served(info.name) {
+            Some(OutPort::External)
+        } else {
+            match info.service {
+                Some(service) => open_out(ipc, service, info.payload, stage.max_slice_len(o))
+                    .map_err(|source| DriverError::Open {
+                        topic: o.clone(),
+                        source,
+                    })?,
+                None => None,
+            }
+        };
+        let Some(port) = port else {
+            return Err(DriverError::NoTransport {
+                node: spec.name.clone(),
+                topic: o.clone(),
+            });
+        };
+        outputs.push((info.name, port));
+    }
+    let heartbeat = ipc
+        .heartbeat(beat.deadline)
+        .map_err(|source| DriverError::Open {
+            topic: format!("heartbeat/{}", spec.name),
+            source,
+        })?;
+    let now = monotonic_ns();
+    let tick_ns = stage.tick_period_ns().filter(|p| *p > 0);
+    let beat_ns = u64::try_from(beat.period.as_nanos())
+        .unwrap_or(u64::MAX)
+        .max(1);
+    let has_external = external.is_some();
+    let mut node = Node {
+        outputs,
+        external: external.take(),
+        heartbeat,
+        beat_ns,
+        next_beat_ns: now,
+        tick_ns,
+        next_tick_ns: now,
+        next_report_ns: now + REPORT_PERIOD_NS,
+        skipped: 0,
+    };
+    tracing::info!(node = spec.name.as_str(), "running");
+    let result = if has_external {
+        run_external(ipc, &inputs, &mut node, stage)
+    } else {
+        let wake = Duration::from_nanos(tick_ns.map_or(beat_ns, |t| t.min(beat_ns)));
+        let listeners: Vec<_> = inputs.iter().map(|i| i.port.listener()).collect();
+        let mut failure = None;
+        let exit = run_wait_loop(&listeners, &[], Some(wake), |_wake: Wake| {
+            match node.round(&inputs, stage, 0) {
+                Ok(()) => true,
+                Err(e) => {
+                    failure = Some(e);
+                    false
+                }
+            }
+        });
+        match (exit, failure) {
+            (_, Some(e)) => Err(e),
+            (Err(e), None) => Err(e.into()),
+            (Ok(_), None) => Ok(()),
+        }
+    };
+    tracing::info!("{}", node.line(&inputs, stage, "stopped"));
+    result
+}
+
+/// The loop of a stage with external I/O: wait on it (at most until the next tick or
+/// beat), hand over what it delivered, then a round over the iceoryx2 inputs.
+fn run_external(
+    ipc: &Ipc,
+    inputs: &[InSpec],
+    node: &mut Node<'_>,
+    stage: &mut dyn Stage,
+) -> Result<(), DriverError> {
+    let mut inbox: Vec<(&'static str, OwnedMessage, u64)> = Vec::new();
+    let mut done = Vec::new();
+    while !ipc.shutdown_requested() {
+        let timeout = node.until_due();
+        let flow = match node.external.as_deref_mut() {
+            Some(ext) => ext.wait(timeout, &monotonic_ns, &mut inbox)?,
+            None => Flow::Ended,
+        };
+        let n = inbox.len() as u64;
+        {
+            let mut out = Ports {
+                outputs: &mut node.outputs,
+                external: node.external.as_deref_mut(),
+            };
+            for (topic, msg, at) in inbox.drain(..) {
+                stage.on_input(
+                    at,
+                    Input {
+                        topic,
+                        msg: msg.as_message(),
+                    },
+                    &mut out,
+                )?;
+                done.push(msg);
+            }
+        }
+        if let Some(ext) = node.external.as_deref_mut() {
+            for m in done.drain(..) {
+                ext.recycle(m);
+            }
+        }
+        node.round(inputs, stage, n)?;
+        if flow == Flow::Ended {
+            tracing::info!("the source ended");
+            break;
+        }
+    }
+    Ok(())
+}
