@@ -11,6 +11,7 @@ pub mod driver;
 pub mod ipc;
 pub mod logging;
 pub mod process_main;
+pub mod serve;
 pub mod shutdown;
 pub mod threads;
 
@@ -26,4 +27,5 @@ pub use ipc::{
     SliceSubscriber, Subscriber, WaitError, Wake, run_wait_loop,
 };
 pub use process_main::process_main;
+pub use serve::{ServeError, StageArgs, serve};
 pub use threads::{JOIN_TIMEOUT, JoinError, StopFlag, ThreadRole, Worker};
