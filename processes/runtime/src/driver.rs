@@ -478,7 +478,7 @@ impl Node<'_> {
         }
         if now >= self.next_report_ns {
             self.next_report_ns = now + REPORT_PERIOD_NS;
-            tracing::info!("{}", self.line(inputs, stage, "running"));
+            tracing::info!("{}", self.line(inputs, stage, "counters"));
         }
         Ok(())
     }
@@ -597,7 +597,13 @@ pub fn run(
         next_report_ns: now + REPORT_PERIOD_NS,
         skipped: 0,
     };
-    tracing::info!(node = spec.name.as_str(), "running");
+    // `<name> running` is what launchers and tests wait for before they go on.
+    tracing::info!(
+        inputs = inputs.len(),
+        outputs = node.outputs.len(),
+        "{} running",
+        spec.name
+    );
     let result = if has_external {
         run_external(ipc, &inputs, &mut node, stage)
     } else {
