@@ -1,0 +1,240 @@
+//! The autopilot's end of px4-link: a UDP socket or a serial port, as the iceoryx2
+//! driver's [`External`] I/O. It delivers what the autopilot sent as `mavlink/from-px4`
+//! (one datagram, or one chunk of the serial byte stream) and writes `mavlink/to-px4`;
+//! everything those bytes mean is `px4_link::LinkStage`'s.
+
+use std::io::ErrorKind;
+use std::net::{SocketAddr, UdpSocket};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use ipc_types::topics;
+use px4_link::Framing;
+use px4_link::config::LinkAddress;
+use runtime::monotonic_ns;
+use stage::{External, Flow, Message, OwnedMessage, StageError};
+
+use crate::serial_port::{Readiness, SerialPort};
+
+/// The longest wait for the autopilot in one call: the loop's period when it is quiet
+/// (the driver asks for less when a tick or a beat is due sooner).
+const RECV_TIMEOUT: Duration = Duration::from_millis(2);
+/// How long a write may wait for room in a full serial output buffer.
+const WRITE_STALL: Duration = Duration::from_millis(5);
+/// How often a serial port that failed is reopened (a USB adapter unplugged and back).
+const REOPEN_PERIOD_NS: u64 = 1_000_000_000;
+/// The largest UDP datagram.
+const DATAGRAM_MAX: usize = 65_536;
+
+/// Where MAVLink frames go and come from.
+pub enum Transport {
+    /// Datagrams; replies go to whoever spoke last.
+    Udp {
+        /// The bound socket.
+        socket: UdpSocket,
+        /// Where replies go.
+        peer: SocketAddr,
+        /// The receive buffer.
+        buf: Vec<u8>,
+        /// Byte vectors handed back by the driver, reused for the next datagrams.
+        spare: Vec<Vec<u8>>,
+    },
+    /// A byte stream; `port` is `None` while it is being reopened after a failure.
+    Serial {
+        /// The device.
+        path: PathBuf,
+        /// Its speed.
+        baud: u32,
+        /// The open port.
+        port: Option<SerialPort>,
+        /// When it last failed.
+        failed_at_ns: u64,
+        /// The read buffer.
+        buf: Vec<u8>,
+    },
+}
+
+impl Transport {
+    /// Opens `address`; `remote` is where UDP sends before the autopilot is heard.
+    pub fn open(address: &LinkAddress, remote: SocketAddr) -> Result<Self> {
+        Ok(match address {
+            LinkAddress::Udp(listen) => {
+                let socket =
+                    UdpSocket::bind(listen).with_context(|| format!("binding {listen}"))?;
+                Self::Udp {
+                    socket,
+                    peer: remote,
+                    buf: vec![0; DATAGRAM_MAX],
+                    spare: Vec::new(),
+                }
+            }
+            LinkAddress::Serial { path, baud } => Self::Serial {
+                path: path.clone(),
+                baud: *baud,
+                port: Some(open_serial(path, *baud)?),
+                failed_at_ns: 0,
+                buf: vec![0; 4096],
+            },
+        })
+    }
+
+    /// How the stage must frame what this delivers.
+    pub fn framing(&self) -> Framing {
+        match self {
+            Self::Udp { .. } => Framing::Datagram,
+            Self::Serial { .. } => Framing::Stream,
+        }
+    }
+}
+
+fn open_serial(path: &Path, baud: u32) -> Result<SerialPort> {
+    SerialPort::open(path, baud).with_context(|| {
+        format!(
+            "serial port {}: cannot open at {baud} baud (allowed: an existing serial device, e.g. serial:/dev/ttyTHS1:921600)",
+            path.display()
+        )
+    })
+}
+
+fn transport_error(e: std::io::Error) -> StageError {
+    StageError::Transport(e.to_string())
+}
+
+impl External for Transport {
+    fn topics(&self) -> &[&'static str] {
+        &[topics::MAVLINK_FROM_PX4, topics::MAVLINK_TO_PX4]
+    }
+
+    fn wait(
+        &mut self,
+        timeout_ns: u64,
+        clock: &dyn Fn() -> u64,
+        inbox: &mut Vec<(&'static str, OwnedMessage, u64)>,
+    ) -> Result<Flow, StageError> {
+        let timeout = Duration::from_nanos(timeout_ns)
+            .min(RECV_TIMEOUT)
+            .max(Duration::from_micros(1));
+        match self {
+            Self::Udp {
+                socket,
+                peer,
+                buf,
+                spare,
+            } => {
+                // The first read may wait; the rest only drain what is already there.
+                socket.set_read_timeout(Some(timeout)).map_err(transport_error)?;
+                loop {
+                    match socket.recv_from(buf) {
+                        Ok((n, from)) => {
+                            *peer = from;
+                            let mut bytes = spare.pop().unwrap_or_default();
+                            bytes.clear();
+                            bytes.extend_from_slice(buf.get(..n).unwrap_or(&[]));
+                            inbox.push((
+                                topics::MAVLINK_FROM_PX4,
+                                OwnedMessage::Mavlink(bytes),
+                                clock(),
+                            ));
+                            socket
+                                .set_read_timeout(Some(Duration::from_micros(1)))
+                                .map_err(transport_error)?;
+                        }
+                        Err(e)
+                            if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) =>
+                        {
+                            break;
+                        }
+                        Err(e) if e.kind() == ErrorKind::Interrupted => break,
+                        Err(e) => {
+                            tracing::warn!(error = %e, "UDP receive failed");
+                            break;
+                        }
+                    }
+                }
+            }
+            Self::Serial {
+                path,
+                baud,
+                port,
+                failed_at_ns,
+                buf,
+            } => {
+                let Some(p) = port else {
+                    std::thread::sleep(timeout);
+                    let now = monotonic_ns();
+                    if now.saturating_sub(*failed_at_ns) >= REOPEN_PERIOD_NS {
+                        *failed_at_ns = now;
+                        match SerialPort::open(path, *baud) {
+                            Ok(reopened) => {
+                                tracing::info!(path = %path.display(), "serial port reopened");
+                                *port = Some(reopened);
+                            }
+                            Err(e) => tracing::debug!(error = %e, "serial port still unavailable"),
+                        }
+                    }
+                    return Ok(Flow::Open);
+                };
+                let failure = match p.wait_readable(timeout) {
+                    Ok(Readiness::Nothing) => None,
+                    Ok(Readiness::HungUp) => Some("hung up".to_string()),
+                    Ok(Readiness::Readable) => loop {
+                        match p.read(buf) {
+                            Ok(0) => break None,
+                            Ok(n) => inbox.push((
+                                topics::MAVLINK_FROM_PX4,
+                                OwnedMessage::Mavlink(buf.get(..n).unwrap_or(&[]).to_vec()),
+                                clock(),
+                            )),
+                            Err(e) if e.kind() == ErrorKind::WouldBlock => break None,
+                            Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                            Err(e) => break Some(e.to_string()),
+                        }
+                    },
+                    Err(e) if e.kind() == ErrorKind::Interrupted => None,
+                    Err(e) => Some(e.to_string()),
+                };
+                if let Some(why) = failure {
+                    tracing::warn!(path = %path.display(), %why, "serial port failed; reopening every second");
+                    *port = None;
+                    *failed_at_ns = monotonic_ns();
+                }
+            }
+        }
+        Ok(Flow::Open)
+    }
+
+    fn send(&mut self, _topic: &str, msg: Message<'_>) -> Result<(), StageError> {
+        let Message::Mavlink(frame) = msg else {
+            return Err(StageError::WrongType {
+                topic: topics::MAVLINK_TO_PX4.to_string(),
+                expected: "MAVLink bytes",
+                got: msg.payload().type_name(),
+            });
+        };
+        // A lost datagram or a failed write is the link's business (PX4 times out,
+        // px4-link resends commands), never the process's end.
+        match self {
+            Self::Udp { socket, peer, .. } => {
+                if let Err(e) = socket.send_to(frame, *peer) {
+                    tracing::debug!(error = %e, "UDP send failed");
+                }
+            }
+            Self::Serial { port: Some(p), .. } => {
+                if let Err(e) = p.write_all(frame, WRITE_STALL) {
+                    tracing::debug!(error = %e, "serial write failed");
+                }
+            }
+            Self::Serial { port: None, .. } => {}
+        }
+        Ok(())
+    }
+
+    fn recycle(&mut self, msg: OwnedMessage) {
+        if let (Self::Udp { spare, .. }, OwnedMessage::Mavlink(bytes)) = (self, msg)
+            && spare.len() < 64
+        {
+            spare.push(bytes);
+        }
+    }
+}
