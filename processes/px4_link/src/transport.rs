@@ -13,7 +13,7 @@ use ipc_types::topics;
 use px4_link::Framing;
 use px4_link::config::LinkAddress;
 use runtime::monotonic_ns;
-use stage::{External, Flow, Message, OwnedMessage, StageError};
+use stage::{External, Flow, Input, Message, StageError};
 
 use crate::serial_port::{Readiness, SerialPort};
 
@@ -37,8 +37,6 @@ pub enum Transport {
         peer: SocketAddr,
         /// The receive buffer.
         buf: Vec<u8>,
-        /// Byte vectors handed back by the driver, reused for the next datagrams.
-        spare: Vec<Vec<u8>>,
     },
     /// A byte stream; `port` is `None` while it is being reopened after a failure.
     Serial {
@@ -66,7 +64,6 @@ impl Transport {
                     socket,
                     peer: remote,
                     buf: vec![0; DATAGRAM_MAX],
-                    spare: Vec::new(),
                 }
             }
             LinkAddress::Serial { path, baud } => Self::Serial {
@@ -97,6 +94,14 @@ fn open_serial(path: &Path, baud: u32) -> Result<SerialPort> {
     })
 }
 
+/// What the autopilot sent, as the stage's input.
+fn from_px4(bytes: &[u8]) -> Input<'_> {
+    Input {
+        topic: topics::MAVLINK_FROM_PX4,
+        msg: Message::Mavlink(bytes),
+    }
+}
+
 fn transport_error(e: std::io::Error) -> StageError {
     StageError::Transport(e.to_string())
 }
@@ -110,32 +115,23 @@ impl External for Transport {
         &mut self,
         timeout_ns: u64,
         clock: &dyn Fn() -> u64,
-        inbox: &mut Vec<(&'static str, OwnedMessage, u64)>,
+        deliver: &mut dyn FnMut(Input<'_>, u64) -> Result<(), StageError>,
     ) -> Result<Flow, StageError> {
         let timeout = Duration::from_nanos(timeout_ns)
             .min(RECV_TIMEOUT)
             .max(Duration::from_micros(1));
         match self {
-            Self::Udp {
-                socket,
-                peer,
-                buf,
-                spare,
-            } => {
+            Self::Udp { socket, peer, buf } => {
                 // The first read may wait; the rest only drain what is already there.
-                socket.set_read_timeout(Some(timeout)).map_err(transport_error)?;
+                socket
+                    .set_read_timeout(Some(timeout))
+                    .map_err(transport_error)?;
                 loop {
                     match socket.recv_from(buf) {
                         Ok((n, from)) => {
                             *peer = from;
-                            let mut bytes = spare.pop().unwrap_or_default();
-                            bytes.clear();
-                            bytes.extend_from_slice(buf.get(..n).unwrap_or(&[]));
-                            inbox.push((
-                                topics::MAVLINK_FROM_PX4,
-                                OwnedMessage::Mavlink(bytes),
-                                clock(),
-                            ));
+                            let bytes = buf.get(..n).unwrap_or(&[]);
+                            deliver(from_px4(bytes), clock())?;
                             socket
                                 .set_read_timeout(Some(Duration::from_micros(1)))
                                 .map_err(transport_error)?;
@@ -181,11 +177,7 @@ impl External for Transport {
                     Ok(Readiness::Readable) => loop {
                         match p.read(buf) {
                             Ok(0) => break None,
-                            Ok(n) => inbox.push((
-                                topics::MAVLINK_FROM_PX4,
-                                OwnedMessage::Mavlink(buf.get(..n).unwrap_or(&[]).to_vec()),
-                                clock(),
-                            )),
+                            Ok(n) => deliver(from_px4(buf.get(..n).unwrap_or(&[])), clock())?,
                             Err(e) if e.kind() == ErrorKind::WouldBlock => break None,
                             Err(e) if e.kind() == ErrorKind::Interrupted => {}
                             Err(e) => break Some(e.to_string()),
@@ -228,13 +220,5 @@ impl External for Transport {
             Self::Serial { port: None, .. } => {}
         }
         Ok(())
-    }
-
-    fn recycle(&mut self, msg: OwnedMessage) {
-        if let (Self::Udp { spare, .. }, OwnedMessage::Mavlink(bytes)) = (self, msg)
-            && spare.len() < 64
-        {
-            spare.push(bytes);
-        }
     }
 }

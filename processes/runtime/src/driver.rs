@@ -313,6 +313,9 @@ impl InPort {
 struct Ports<'a, 'e> {
     outputs: &'a mut [(&'static str, OutPort)],
     external: Option<&'a mut (dyn External + 'e)>,
+    /// While the external source delivers (it is busy), what the stage publishes on its
+    /// topics waits here and is sent when the source's `wait` returns.
+    deferred: Option<&'a mut Vec<(&'static str, OwnedMessage)>>,
 }
 
 fn transport(e: impl std::fmt::Display) -> StageError {
@@ -329,16 +332,20 @@ macro_rules! send_plain {
 
 impl Outbox for Ports<'_, '_> {
     fn publish(&mut self, topic: &str, msg: Message<'_>) -> Result<(), StageError> {
-        let Some((_, port)) = self.outputs.iter_mut().find(|(t, _)| *t == topic) else {
+        let Some((name, port)) = self.outputs.iter_mut().find(|(t, _)| *t == topic) else {
             return Err(StageError::NotAnOutput {
                 stage: String::new(),
                 topic: topic.to_string(),
             });
         };
         match (port, msg) {
-            (OutPort::External, m) => match self.external.as_deref_mut() {
-                Some(ext) => ext.send(topic, m),
-                None => Err(StageError::Transport(format!("nothing serves `{topic}`"))),
+            (OutPort::External, m) => match (self.external.as_deref_mut(), &mut self.deferred) {
+                (Some(ext), _) => ext.send(topic, m),
+                (None, Some(later)) => {
+                    later.push((*name, m.to_owned()));
+                    Ok(())
+                }
+                (None, None) => Err(StageError::Transport(format!("nothing serves `{topic}`"))),
             },
             (OutPort::VehicleState(p), Message::VehicleState(m)) => send_plain!(p, m),
             (OutPort::PadObservation(p), Message::PadObservation(m)) => send_plain!(p, m),
@@ -453,6 +460,7 @@ impl Node<'_> {
         let mut out = Ports {
             outputs: &mut self.outputs,
             external: self.external.as_deref_mut(),
+            deferred: None,
         };
         for i in inputs {
             taken += i
@@ -630,45 +638,38 @@ pub fn run(
 }
 
 /// The loop of a stage with external I/O: wait on it (at most until the next tick or
-/// beat), hand over what it delivered, then a round over the iceoryx2 inputs.
+/// beat), hand each arrival to the stage as it comes, send what the stage published on
+/// the source's topics meanwhile, then a round over the iceoryx2 inputs.
 fn run_external(
     ipc: &Ipc,
     inputs: &[InSpec],
     node: &mut Node<'_>,
     stage: &mut dyn Stage,
 ) -> Result<(), DriverError> {
-    let mut inbox: Vec<(&'static str, OwnedMessage, u64)> = Vec::new();
-    let mut done = Vec::new();
+    let mut deferred: Vec<(&'static str, OwnedMessage)> = Vec::new();
     while !ipc.shutdown_requested() {
         let timeout = node.until_due();
+        let mut delivered = 0u64;
         let flow = match node.external.as_deref_mut() {
-            Some(ext) => ext.wait(timeout, &monotonic_ns, &mut inbox)?,
+            Some(ext) => {
+                let mut out = Ports {
+                    outputs: &mut node.outputs,
+                    external: None,
+                    deferred: Some(&mut deferred),
+                };
+                ext.wait(timeout, &monotonic_ns, &mut |input, at| {
+                    delivered += 1;
+                    stage.on_input(at, input, &mut out)
+                })?
+            }
             None => Flow::Ended,
         };
-        let n = inbox.len() as u64;
-        {
-            let mut out = Ports {
-                outputs: &mut node.outputs,
-                external: node.external.as_deref_mut(),
-            };
-            for (topic, msg, at) in inbox.drain(..) {
-                stage.on_input(
-                    at,
-                    Input {
-                        topic,
-                        msg: msg.as_message(),
-                    },
-                    &mut out,
-                )?;
-                done.push(msg);
-            }
-        }
         if let Some(ext) = node.external.as_deref_mut() {
-            for m in done.drain(..) {
-                ext.recycle(m);
+            for (topic, msg) in deferred.drain(..) {
+                ext.send(topic, msg.as_message())?;
             }
         }
-        node.round(inputs, stage, n)?;
+        node.round(inputs, stage, delivered)?;
         if flow == Flow::Ended {
             tracing::info!("the source ended");
             break;

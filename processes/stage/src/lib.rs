@@ -132,27 +132,28 @@ pub fn stop_line(stage: &dyn Stage) -> String {
 }
 
 /// I/O a stage needs besides the graph's iceoryx2 topics: the MAVLink socket or serial
-/// port of px4-link, a camera read on its own thread. The iceoryx2 driver waits on it
-/// instead of on its wait set and hands what arrived to the stage like any input; the
-/// lockstep driver needs none (its stages exchange those messages in memory).
+/// port of px4-link, a camera read on its own thread, the simulator's MAVLink endpoint.
+/// The iceoryx2 driver waits on it instead of on its wait set and hands what arrived to
+/// the stage like any input; the lockstep driver needs none (its stages exchange those
+/// messages in memory).
 pub trait External {
     /// The topics it delivers (inputs) and takes (outputs), by short name.
     fn topics(&self) -> &[&'static str];
 
-    /// Waits at most `timeout_ns` for input and appends what arrived to `inbox` as
-    /// (topic, message, time of arrival on the driver's clock read by `clock`).
+    /// Waits at most `timeout_ns` for input and hands each arrival to `deliver`, borrowed
+    /// from the source's own buffer (a datagram, a decoded image: nothing is copied on
+    /// the way to the stage), with its time of arrival on the driver's clock `clock`.
+    /// What the stage publishes on this source's topics meanwhile is sent after `wait`
+    /// returns.
     fn wait(
         &mut self,
         timeout_ns: u64,
         clock: &dyn Fn() -> u64,
-        inbox: &mut Vec<(&'static str, OwnedMessage, u64)>,
+        deliver: &mut dyn FnMut(Input<'_>, u64) -> Result<(), StageError>,
     ) -> Result<Flow, StageError>;
 
     /// Sends an output on one of its topics.
     fn send(&mut self, topic: &str, msg: Message<'_>) -> Result<(), StageError>;
-
-    /// Takes back a delivered message, to reuse its buffer.
-    fn recycle(&mut self, _msg: OwnedMessage) {}
 }
 
 /// Whether an [`External`] source goes on.
