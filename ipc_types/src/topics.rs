@@ -79,7 +79,8 @@ impl Payload {
 pub struct TopicInfo {
     /// Short name: `camera/frame`.
     pub name: &'static str,
-    /// The iceoryx2 service (`None`: MAVLink, not iceoryx2).
+    /// The iceoryx2 service (`None`: not iceoryx2: MAVLink, or a camera device read by
+    /// camera-ingest itself).
     pub service: Option<&'static str>,
     /// What it carries.
     pub payload: Payload,
@@ -106,6 +107,10 @@ pub const SIM_TRUTH_STATE: &str = "sim/truth_state";
 pub const MAVLINK_FROM_PX4: &str = "mavlink/from-px4";
 /// MAVLink to the autopilot.
 pub const MAVLINK_TO_PX4: &str = "mavlink/to-px4";
+/// Frames from a camera device, a GStreamer pipeline or a recording, read by
+/// camera-ingest itself (OpenCV, on its capture thread): not iceoryx2. camera-ingest
+/// reads this instead of `sim/camera` when its source is not the simulator.
+pub const CAMERA_DEVICE: &str = "camera/device";
 /// Camera frames as the pipeline sees them.
 pub const CAMERA_FRAME: &str = "camera/frame";
 /// Depth frames from a real depth camera driver (depth-map `--input depth-frame`).
@@ -168,6 +173,12 @@ pub const TABLE: &[TopicInfo] = &[
         name: MAVLINK_TO_PX4,
         service: None,
         payload: Payload::Mavlink,
+        evaluator_only: false,
+    },
+    TopicInfo {
+        name: CAMERA_DEVICE,
+        service: None,
+        payload: Payload::CameraFrame,
         evaluator_only: false,
     },
     row(CAMERA_FRAME, services::CAMERA_FRAME, Payload::CameraFrame),

@@ -86,6 +86,90 @@ impl Validate for IngestFileConfig {
     }
 }
 
+/// camera-ingest's source flags; each overrides its `[camera_ingest]` key.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct SourceFlags {
+    /// Where frames come from: `sim`, `v4l2:/dev/videoN`, `gst:<pipeline ending in
+    /// appsink>`, or `file:<video file or image directory>` [default: [camera_ingest]
+    /// source, else sim].
+    #[arg(long)]
+    pub source: Option<String>,
+    /// Camera calibration, OpenCV YAML [default: [camera_ingest] camera, relative to the
+    /// config file, else deploy/config/camera_down_640x480.yaml].
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
+    /// Publish undistorted frames (pinhole with the calibration's camera matrix).
+    #[arg(long)]
+    pub undistort: bool,
+    /// file: playback rate (default: the video's recorded rate; required for an image
+    /// directory); v4l2: the frame rate asked of the camera.
+    #[arg(long)]
+    pub rate_hz: Option<f64>,
+    /// file: start again from the beginning at the end instead of exiting.
+    #[arg(long = "loop")]
+    pub looping: bool,
+}
+
+/// The source flags and the `[camera_ingest]` section, resolved and checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Source {
+    /// Where frames come from.
+    pub spec: SourceSpec,
+    /// The calibration file.
+    pub camera: PathBuf,
+    /// Publish undistorted frames.
+    pub undistort: bool,
+    /// Playback or camera rate.
+    pub rate_hz: Option<f64>,
+    /// Play a file again at its end.
+    pub looping: bool,
+}
+
+impl SourceFlags {
+    /// Resolves the flags over `cfg` (relative calibration paths against `config_dir`)
+    /// and checks them: `--rate-hz` within 0.1 to 1000 Hz and only for file and v4l2
+    /// sources, `--loop` only for files. The error is the line to print.
+    pub fn resolve(&self, cfg: &CameraIngestConfig, config_dir: &Path) -> Result<Source, String> {
+        let spec: SourceSpec = self
+            .source
+            .as_deref()
+            .unwrap_or(&cfg.source)
+            .parse()
+            .map_err(|e: crate::SourceError| e.to_string())?;
+        if let Some(r) = self.rate_hz
+            && !(r.is_finite() && (0.1..=1000.0).contains(&r))
+        {
+            return Err(format!(
+                "--rate-hz {r} is not allowed (allowed: 0.1 to 1000)"
+            ));
+        }
+        match &spec {
+            SourceSpec::Sim | SourceSpec::Gst(_) if self.rate_hz.is_some() => {
+                return Err(format!(
+                    "--rate-hz does not apply to --source {spec} (allowed with file: and v4l2: sources)"
+                ));
+            }
+            SourceSpec::File(_) => {}
+            _ if self.looping => {
+                return Err(format!(
+                    "--loop does not apply to --source {spec} (allowed with file: sources)"
+                ));
+            }
+            _ => {}
+        }
+        Ok(Source {
+            camera: self
+                .camera
+                .clone()
+                .unwrap_or_else(|| cfg.camera_path(config_dir)),
+            undistort: self.undistort || cfg.undistort,
+            rate_hz: self.rate_hz,
+            looping: self.looping,
+            spec,
+        })
+    }
+}
+
 #[cfg(test)]
 #[path = "config_test.rs"]
 mod tests;

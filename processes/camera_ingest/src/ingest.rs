@@ -114,14 +114,6 @@ pub enum Dropped {
     /// No buffer could be loaned: consumers hold every sample. Dropping the frame, rather
     /// than waiting, is what keeps latency from queueing up.
     NoBuffer,
-    /// Frames read but superseded by a newer one before they were processed.
-    Stale(u64),
-    /// Frames the upstream topic lost before this process read them (sequence gaps).
-    LostUpstream(u64),
-    /// Image files that could not be decoded.
-    Unreadable(u64),
-    /// A capture read that failed (a camera that disconnected).
-    SourceError,
     /// A written frame whose send failed.
     SendFailed,
 }
@@ -135,29 +127,18 @@ pub struct Counters {
     pub dropped_bad_header: u64,
     /// Frames whose size was not the calibration's.
     pub dropped_size: u64,
-    /// Image files that could not be decoded.
-    pub dropped_unreadable: u64,
     /// Frames dropped because consumers held every buffer.
     pub dropped_no_buffer: u64,
     /// Frames lost to an OpenCV or send failure.
     pub dropped_error: u64,
-    /// Frames superseded by a newer one before processing (latest-only reading).
-    pub skipped_stale: u64,
-    /// Frames the upstream topic lost before this process read them.
-    pub lost_upstream: u64,
-    /// Capture reads that failed (disconnections), each followed by a reopen.
-    pub source_errors: u64,
 }
 
 impl Counters {
-    /// Frames that reached this process but were not published (stale skips and upstream
-    /// losses excluded: those are the latest-only policy working, not faults).
+    /// Frames that reached the stage but were not published. (Frames a newer one
+    /// replaced before the stage saw them are the driver's `skipped`; a capture
+    /// source counts its own losses.)
     pub fn dropped(&self) -> u64 {
-        self.dropped_bad_header
-            + self.dropped_size
-            + self.dropped_unreadable
-            + self.dropped_no_buffer
-            + self.dropped_error
+        self.dropped_bad_header + self.dropped_size + self.dropped_no_buffer + self.dropped_error
     }
 }
 
@@ -381,10 +362,6 @@ impl Ingest {
         let c = &mut self.counters;
         match dropped {
             Dropped::NoBuffer => c.dropped_no_buffer += 1,
-            Dropped::Stale(n) => c.skipped_stale += n,
-            Dropped::LostUpstream(n) => c.lost_upstream += n,
-            Dropped::Unreadable(n) => c.dropped_unreadable += n,
-            Dropped::SourceError => c.source_errors += 1,
             Dropped::SendFailed => c.dropped_error += 1,
         }
     }

@@ -7,7 +7,9 @@ use ipc_types::msg::{CameraFrameHeader, Stage as StageId};
 use ipc_types::topics;
 use stage::{Counter, Input, Message, Outbox, SliceHeader, SliceMut, Stage, StageError};
 
-use crate::{Dropped, Ingest, IngestError, Rejection};
+use std::time::Duration;
+
+use crate::{Dropped, Ingest, IngestError, RateLimit, Rejection};
 
 /// Why the newest frame was lost, kept unformatted until a log line is due.
 #[derive(Debug)]
@@ -34,27 +36,47 @@ impl std::fmt::Display for Problem {
 pub struct IngestStage {
     ingest: Ingest,
     last: Option<Problem>,
+    log: RateLimit,
+    logged_drops: u64,
 }
+
+/// At most one `frames dropped` line per this long (driver time).
+const DROP_LOG_PERIOD: Duration = Duration::from_secs(1);
 
 impl IngestStage {
     /// The stage of `ingest`.
     pub fn new(ingest: Ingest) -> Self {
-        Self { ingest, last: None }
+        Self {
+            ingest,
+            last: None,
+            log: RateLimit::new(DROP_LOG_PERIOD),
+            logged_drops: 0,
+        }
+    }
+
+    /// Logs new losses, at most once per [`DROP_LOG_PERIOD`], with every counter and
+    /// the latest reason (formatted only when a line goes out).
+    fn log_drops(&mut self, now_ns: u64) {
+        let c = *self.ingest.counters();
+        if c.dropped() == self.logged_drops || !self.log.ready(now_ns) {
+            return;
+        }
+        self.logged_drops = c.dropped();
+        let last = self.last.take();
+        tracing::warn!(
+            published = c.published,
+            dropped_bad_header = c.dropped_bad_header,
+            dropped_size = c.dropped_size,
+            dropped_no_buffer = c.dropped_no_buffer,
+            dropped_error = c.dropped_error,
+            last = %last.as_ref().map_or(String::new(), ToString::to_string),
+            "frames dropped"
+        );
     }
 
     /// The per-frame logic, to read its counters.
     pub fn ingest(&self) -> &Ingest {
         &self.ingest
-    }
-
-    /// Counts frames lost outside the stage (the capture thread's losses).
-    pub fn record(&mut self, dropped: Dropped) {
-        self.ingest.record(dropped);
-    }
-
-    /// Why the newest lost frame was lost, once.
-    pub fn take_problem(&mut self) -> Option<Problem> {
-        self.last.take()
     }
 
     /// Publishes one source frame; returns its rejection when it was unusable (a
@@ -115,6 +137,7 @@ impl Stage for IngestStage {
     ) -> Result<(), StageError> {
         if let Message::CameraFrame(h, pixels) = input.msg {
             self.frame(now_ns, h, pixels, out)?;
+            self.log_drops(now_ns);
         }
         Ok(())
     }
@@ -133,12 +156,8 @@ impl Stage for IngestStage {
             ("published", c.published),
             ("dropped_bad_header", c.dropped_bad_header),
             ("dropped_size", c.dropped_size),
-            ("dropped_unreadable", c.dropped_unreadable),
             ("dropped_no_buffer", c.dropped_no_buffer),
             ("dropped_error", c.dropped_error),
-            ("skipped_stale", c.skipped_stale),
-            ("lost_upstream", c.lost_upstream),
-            ("source_errors", c.source_errors),
         ]
     }
 }

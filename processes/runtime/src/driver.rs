@@ -25,8 +25,8 @@ use stage::{
 
 use crate::clock::monotonic_ns;
 use crate::ipc::{
-    HeartbeatError, Ipc, Publisher, ReceiveError, ServiceError, SlicePublisher, SliceSubscriber,
-    Subscriber, WaitError, Wake, run_wait_loop,
+    HeartbeatError, Ipc, PeriodicWait, Publisher, ReceiveError, ServiceError, SlicePublisher,
+    SliceSubscriber, Subscriber, WaitError, Wake, run_wait_loop,
 };
 
 /// How often a running stage logs its counters, ns.
@@ -217,41 +217,38 @@ where
     }
 }
 
+/// `$body` with `$s` bound to the subscriber of whatever type `$port` holds.
+macro_rules! on_port {
+    ($port:expr, $s:ident => $body:expr) => {
+        match $port {
+            InPort::CameraFrame($s) => $body,
+            InPort::DepthFrame($s) => $body,
+            InPort::OccupancyMap($s) => $body,
+            InPort::VehicleState($s) => $body,
+            InPort::PadObservation($s) => $body,
+            InPort::PlannerGoal($s) => $body,
+            InPort::Trajectory($s) => $body,
+            InPort::PlannerStats($s) => $body,
+            InPort::Setpoint($s) => $body,
+            InPort::LinkRequest($s) => $body,
+            InPort::LinkOutcome($s) => $body,
+            InPort::SafetyCommand($s) => $body,
+            InPort::FsmStatus($s) => $body,
+        }
+    };
+}
+
 impl InPort {
     fn listener(&self) -> &iceoryx2::port::listener::Listener<crate::ipc::Svc> {
-        match self {
-            Self::CameraFrame(s) => s.listener(),
-            Self::DepthFrame(s) => s.listener(),
-            Self::OccupancyMap(s) => s.listener(),
-            Self::VehicleState(s) => s.listener(),
-            Self::PadObservation(s) => s.listener(),
-            Self::PlannerGoal(s) => s.listener(),
-            Self::Trajectory(s) => s.listener(),
-            Self::PlannerStats(s) => s.listener(),
-            Self::Setpoint(s) => s.listener(),
-            Self::LinkRequest(s) => s.listener(),
-            Self::LinkOutcome(s) => s.listener(),
-            Self::SafetyCommand(s) => s.listener(),
-            Self::FsmStatus(s) => s.listener(),
-        }
+        on_port!(self, s => s.listener())
     }
 
     fn gaps(&self) -> u64 {
-        match self {
-            Self::CameraFrame(s) => s.gaps(),
-            Self::DepthFrame(s) => s.gaps(),
-            Self::OccupancyMap(s) => s.gaps(),
-            Self::VehicleState(s) => s.gaps(),
-            Self::PadObservation(s) => s.gaps(),
-            Self::PlannerGoal(s) => s.gaps(),
-            Self::Trajectory(s) => s.gaps(),
-            Self::PlannerStats(s) => s.gaps(),
-            Self::Setpoint(s) => s.gaps(),
-            Self::LinkRequest(s) => s.gaps(),
-            Self::LinkOutcome(s) => s.gaps(),
-            Self::SafetyCommand(s) => s.gaps(),
-            Self::FsmStatus(s) => s.gaps(),
-        }
+        on_port!(self, s => s.gaps())
+    }
+
+    fn has_samples(&self) -> bool {
+        on_port!(self, s => s.has_samples())
     }
 
     /// Hands what waits to `stage`; returns how many messages that was.
@@ -503,7 +500,15 @@ impl Node<'_> {
 
     fn line(&self, inputs: &[InSpec], stage: &dyn Stage, what: &str) -> String {
         let lost: u64 = inputs.iter().map(|i| i.port.gaps()).sum();
-        let line = stop_line(stage).replacen(" stopped", &format!(" {what}"), 1);
+        let mut line = stop_line(stage).replacen(" stopped", &format!(" {what}"), 1);
+        for (k, v) in self
+            .external
+            .as_deref()
+            .map(|e| e.counters())
+            .unwrap_or_default()
+        {
+            line.push_str(&format!(" {k}={v}"));
+        }
         format!("{line} skipped={} lost_upstream={lost}", self.skipped)
     }
 }
@@ -612,8 +617,14 @@ pub fn run(
         "{} running",
         spec.name
     );
+    let periodic = spec
+        .periodic
+        .as_deref()
+        .and_then(|t| inputs.iter().position(|i| i.topic == t));
     let result = if has_external {
         run_external(ipc, &inputs, &mut node, stage)
+    } else if let Some(trigger) = periodic {
+        run_periodic(ipc, &inputs, trigger, &mut node, stage)
     } else {
         let wake = Duration::from_nanos(tick_ns.map_or(beat_ns, |t| t.min(beat_ns)));
         let listeners: Vec<_> = inputs.iter().map(|i| i.port.listener()).collect();
@@ -635,6 +646,35 @@ pub fn run(
     };
     tracing::info!("{}", node.line(&inputs, stage, "stopped"));
     result
+}
+
+/// How long before a periodic trigger's next sample is due the wait starts polling.
+const PERIODIC_GUARD: Duration = Duration::from_micros(500);
+/// How long after it was due the wait polls before it sleeps on the event again.
+const PERIODIC_MAX_SPIN: Duration = Duration::from_millis(2);
+
+/// The loop of a node that waits for its trigger by the stream's period
+/// ([`PeriodicWait`]): a round when the trigger has a sample, or when a tick or beat is
+/// due.
+fn run_periodic(
+    ipc: &Ipc,
+    inputs: &[InSpec],
+    trigger: usize,
+    node: &mut Node<'_>,
+    stage: &mut dyn Stage,
+) -> Result<(), DriverError> {
+    let mut wait = PeriodicWait::new(PERIODIC_GUARD, PERIODIC_MAX_SPIN);
+    let Some(port) = inputs.get(trigger).map(|i| &i.port) else {
+        return Ok(());
+    };
+    while !ipc.shutdown_requested() {
+        let timeout = Duration::from_nanos(node.until_due());
+        wait.wait(port.listener(), timeout, || {
+            port.has_samples().then_some(())
+        });
+        node.round(inputs, stage, 0)?;
+    }
+    Ok(())
 }
 
 /// The loop of a stage with external I/O: wait on it (at most until the next tick or

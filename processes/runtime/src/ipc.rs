@@ -743,6 +743,11 @@ where
         &self.listener
     }
 
+    /// Whether a sample waits (a failed look says yes: the next receive reports it).
+    pub fn has_samples(&self) -> bool {
+        self.port.has_samples().unwrap_or(true)
+    }
+
     /// Samples lost to overflow or a publisher restart, counted from sequence gaps.
     pub fn gaps(&self) -> u64 {
         self.gaps.get()

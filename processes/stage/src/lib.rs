@@ -154,6 +154,12 @@ pub trait External {
 
     /// Sends an output on one of its topics.
     fn send(&mut self, topic: &str, msg: Message<'_>) -> Result<(), StageError>;
+
+    /// What the source itself counts (frames a camera thread overwrote, unreadable
+    /// files, reconnects), for the process's counter lines after the stage's own.
+    fn counters(&self) -> Vec<Counter> {
+        Vec::new()
+    }
 }
 
 /// Whether an [`External`] source goes on.

@@ -40,6 +40,9 @@ pub struct NodeSpec {
     pub outputs: Vec<String>,
     /// Modelled processing time: outputs are delivered this long after the call, ns.
     pub latency_ns: u64,
+    /// The input a process waits on by its learned period rather than by event
+    /// (`wake = "periodic"` in the graph); the lockstep driver has no waiting to do.
+    pub periodic: Option<String>,
 }
 
 /// Why the driver could not be built or stopped.

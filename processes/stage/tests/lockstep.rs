@@ -82,6 +82,7 @@ fn spec(name: &str, inputs: &[(&str, bool, bool)], outputs: &[&str], latency_ns:
             .collect(),
         outputs: outputs.iter().map(|o| (*o).into()).collect(),
         latency_ns,
+        periodic: None,
     }
 }
 

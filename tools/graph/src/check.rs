@@ -9,7 +9,7 @@ use ipc_types::services;
 
 use crate::{
     CLOCK, Graph, GraphError, GraphFile, Input, InputFile, Node, NodeFile, PLACEHOLDERS,
-    STACK_BINARIES, Topic, TopicFile, Transport,
+    STACK_BINARIES, Topic, TopicFile, Transport, Wake,
 };
 
 /// Highest rate a node may declare, Hz (the simulator's physics runs at 500).
@@ -268,6 +268,25 @@ fn node(n: &NodeFile, topics: &[Topic], path: &Path) -> Result<Node, GraphError>
         }
         Some(t) => t.to_string(),
     };
+    let wake = match n.wake.as_deref() {
+        None | Some("event") => Wake::Event,
+        Some("periodic") => {
+            let iceoryx2 = topics
+                .iter()
+                .any(|t| t.name == trigger && t.transport == Transport::Iceoryx2);
+            if !iceoryx2 {
+                return Err(err(&format!(
+                    "wake = \"periodic\" needs an iceoryx2 input as the trigger, not {trigger} (allowed: wake = \"event\", or a trigger among its iceoryx2 inputs)"
+                )));
+            }
+            Wake::Periodic
+        }
+        Some(w) => {
+            return Err(err(&format!(
+                "wake {w} is not allowed (allowed: event, periodic)"
+            )));
+        }
+    };
     for a in &n.args {
         placeholders(a).map_err(|m| err(&format!("argument `{a}`: {m}")))?;
     }
@@ -278,6 +297,7 @@ fn node(n: &NodeFile, topics: &[Topic], path: &Path) -> Result<Node, GraphError>
         start_last: n.start_last,
         rate_hz,
         trigger,
+        wake,
         heartbeat_deadline_ms,
         latency_ms,
         inputs,

@@ -334,6 +334,35 @@ fn a_trigger_is_the_clock_or_one_of_the_inputs() {
 }
 
 #[test]
+fn a_periodic_wake_needs_an_iceoryx2_trigger_and_is_handed_to_the_driver() {
+    let clock = with(
+        "rate_hz = 50.0\ntrigger = \"clock\"",
+        "rate_hz = 50.0\ntrigger = \"clock\"\nwake = \"periodic\"",
+    );
+    let e = error(&clock);
+    assert!(
+        e.contains("node fsm: wake = \"periodic\" needs an iceoryx2 input as the trigger, not clock"),
+        "{e}"
+    );
+    let e = error(&with(
+        "rate_hz = 50.0\ntrigger = \"clock\"",
+        "rate_hz = 50.0\ntrigger = \"clock\"\nwake = \"often\"",
+    ));
+    assert!(
+        e.contains("node fsm: wake often is not allowed (allowed: event, periodic)"),
+        "{e}"
+    );
+    let ok = with(
+        "rate_hz = 50.0\ntrigger = \"clock\"",
+        "rate_hz = 50.0\ntrigger = \"pad/observation\"\nwake = \"periodic\"",
+    );
+    let g = Graph::parse(&ok, Path::new("g.toml")).unwrap();
+    let spec = g.node("fsm").unwrap().spec();
+    assert_eq!(spec.periodic.as_deref(), Some("pad/observation"));
+    assert_eq!(g.node("aruco-pnp").unwrap().spec().periodic, None);
+}
+
+#[test]
 fn a_heartbeat_deadline_or_latency_out_of_range_is_refused() {
     let e = error(&with(
         "heartbeat_deadline_ms = 500\nlatency_ms = 0.0\ninputs = [\n",
