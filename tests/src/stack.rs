@@ -152,12 +152,7 @@ impl Stack {
     /// until it says it runs.
     pub fn spawn(&self, name: &'static str) -> Running {
         let running = Running::start(name, &mut self.command(name));
-        let said = if name == "sim" {
-            "simulator running".to_string()
-        } else {
-            format!("{name} running")
-        };
-        running.wait_for(&said, Duration::from_secs(30));
+        running.wait_for(&format!("{name} running"), Duration::from_secs(30));
         running
     }
 

@@ -55,7 +55,7 @@ fn start_sim(prefix: &IpcPrefix) -> Running {
             .arg("--deploy-dir")
             .arg(workspace().join("deploy")),
     );
-    sim.wait_for("simulator running", Duration::from_secs(30));
+    sim.wait_for("sim running", Duration::from_secs(30));
     sim
 }
 

@@ -60,7 +60,7 @@ fn maps_of_the_simulators_box_arrive_at_ten_hertz_or_more_with_the_documented_wi
             .arg("--deploy-dir")
             .arg(workspace().join("deploy")),
     );
-    sim.wait_for("simulator running", Duration::from_secs(30));
+    sim.wait_for("sim running", Duration::from_secs(30));
     let mut mapper = Running::start(
         "depth-map",
         Command::new(env!("CARGO_BIN_EXE_depth-map"))

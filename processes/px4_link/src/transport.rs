@@ -4,7 +4,7 @@
 //! everything those bytes mean is `px4_link::LinkStage`'s.
 
 use std::io::ErrorKind;
-use std::net::{SocketAddr, UdpSocket};
+use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -12,8 +12,8 @@ use anyhow::{Context, Result};
 use ipc_types::topics;
 use px4_link::Framing;
 use px4_link::config::LinkAddress;
-use runtime::monotonic_ns;
-use stage::{External, Flow, Input, Message, StageError};
+use runtime::{Reply, UdpLink, monotonic_ns};
+use stage::{Counter, External, Flow, Input, Message, StageError};
 
 use crate::serial_port::{Readiness, SerialPort};
 
@@ -24,20 +24,11 @@ const RECV_TIMEOUT: Duration = Duration::from_millis(2);
 const WRITE_STALL: Duration = Duration::from_millis(5);
 /// How often a serial port that failed is reopened (a USB adapter unplugged and back).
 const REOPEN_PERIOD_NS: u64 = 1_000_000_000;
-/// The largest UDP datagram.
-const DATAGRAM_MAX: usize = 65_536;
 
 /// Where MAVLink frames go and come from.
 pub enum Transport {
-    /// Datagrams; replies go to whoever spoke last.
-    Udp {
-        /// The bound socket.
-        socket: UdpSocket,
-        /// Where replies go.
-        peer: SocketAddr,
-        /// The receive buffer.
-        buf: Vec<u8>,
-    },
+    /// Datagrams (runtime's UDP link); replies go to whoever spoke last.
+    Udp(UdpLink),
     /// A byte stream; `port` is `None` while it is being reopened after a failure.
     Serial {
         /// The device.
@@ -57,15 +48,13 @@ impl Transport {
     /// Opens `address`; `remote` is where UDP sends before the autopilot is heard.
     pub fn open(address: &LinkAddress, remote: SocketAddr) -> Result<Self> {
         Ok(match address {
-            LinkAddress::Udp(listen) => {
-                let socket =
-                    UdpSocket::bind(listen).with_context(|| format!("binding {listen}"))?;
-                Self::Udp {
-                    socket,
-                    peer: remote,
-                    buf: vec![0; DATAGRAM_MAX],
-                }
-            }
+            LinkAddress::Udp(listen) => Self::Udp(UdpLink::bind(
+                *listen,
+                Some(remote),
+                Reply::PeerElseRemote,
+                topics::MAVLINK_FROM_PX4,
+                topics::MAVLINK_TO_PX4,
+            )?),
             LinkAddress::Serial { path, baud } => Self::Serial {
                 path: path.clone(),
                 baud: *baud,
@@ -79,7 +68,7 @@ impl Transport {
     /// How the stage must frame what this delivers.
     pub fn framing(&self) -> Framing {
         match self {
-            Self::Udp { .. } => Framing::Datagram,
+            Self::Udp(_) => Framing::Datagram,
             Self::Serial { .. } => Framing::Stream,
         }
     }
@@ -102,13 +91,16 @@ fn from_px4(bytes: &[u8]) -> Input<'_> {
     }
 }
 
-fn transport_error(e: std::io::Error) -> StageError {
-    StageError::Transport(e.to_string())
-}
-
 impl External for Transport {
     fn topics(&self) -> &[&'static str] {
         &[topics::MAVLINK_FROM_PX4, topics::MAVLINK_TO_PX4]
+    }
+
+    fn counters(&self) -> Vec<Counter> {
+        match self {
+            Self::Udp(link) => link.counters(),
+            Self::Serial { .. } => Vec::new(),
+        }
     }
 
     fn wait(
@@ -121,34 +113,7 @@ impl External for Transport {
             .min(RECV_TIMEOUT)
             .max(Duration::from_micros(1));
         match self {
-            Self::Udp { socket, peer, buf } => {
-                // The first read may wait; the rest only drain what is already there.
-                socket
-                    .set_read_timeout(Some(timeout))
-                    .map_err(transport_error)?;
-                loop {
-                    match socket.recv_from(buf) {
-                        Ok((n, from)) => {
-                            *peer = from;
-                            let bytes = buf.get(..n).unwrap_or(&[]);
-                            deliver(from_px4(bytes), clock())?;
-                            socket
-                                .set_read_timeout(Some(Duration::from_micros(1)))
-                                .map_err(transport_error)?;
-                        }
-                        Err(e)
-                            if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) =>
-                        {
-                            break;
-                        }
-                        Err(e) if e.kind() == ErrorKind::Interrupted => break,
-                        Err(e) => {
-                            tracing::warn!(error = %e, "UDP receive failed");
-                            break;
-                        }
-                    }
-                }
-            }
+            Self::Udp(link) => return link.wait(timeout_ns, clock, deliver),
             Self::Serial {
                 path,
                 baud,
@@ -196,7 +161,7 @@ impl External for Transport {
         Ok(Flow::Open)
     }
 
-    fn send(&mut self, _topic: &str, msg: Message<'_>) -> Result<(), StageError> {
+    fn send(&mut self, topic: &str, msg: Message<'_>) -> Result<(), StageError> {
         let Message::Mavlink(frame) = msg else {
             return Err(StageError::WrongType {
                 topic: topics::MAVLINK_TO_PX4.to_string(),
@@ -207,11 +172,7 @@ impl External for Transport {
         // A lost datagram or a failed write is the link's business (PX4 times out,
         // px4-link resends commands), never the process's end.
         match self {
-            Self::Udp { socket, peer, .. } => {
-                if let Err(e) = socket.send_to(frame, *peer) {
-                    tracing::debug!(error = %e, "UDP send failed");
-                }
-            }
+            Self::Udp(link) => return link.send(topic, msg),
             Self::Serial { port: Some(p), .. } => {
                 if let Err(e) = p.write_all(frame, WRITE_STALL) {
                     tracing::debug!(error = %e, "serial write failed");

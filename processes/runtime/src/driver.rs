@@ -631,7 +631,7 @@ pub fn run(
         let mut failure = None;
         let exit = run_wait_loop(&listeners, &[], Some(wake), |_wake: Wake| {
             match node.round(&inputs, stage, 0) {
-                Ok(()) => true,
+                Ok(()) => !stage.finished(),
                 Err(e) => {
                     failure = Some(e);
                     false
@@ -644,6 +644,9 @@ pub fn run(
             (Ok(_), None) => Ok(()),
         }
     };
+    if stage.finished() {
+        tracing::info!("{} finished", spec.name);
+    }
     tracing::info!("{}", node.line(&inputs, stage, "stopped"));
     result
 }
@@ -667,7 +670,7 @@ fn run_periodic(
     let Some(port) = inputs.get(trigger).map(|i| &i.port) else {
         return Ok(());
     };
-    while !ipc.shutdown_requested() {
+    while !ipc.shutdown_requested() && !stage.finished() {
         let timeout = Duration::from_nanos(node.until_due());
         wait.wait(port.listener(), timeout, || {
             port.has_samples().then_some(())
@@ -687,7 +690,7 @@ fn run_external(
     stage: &mut dyn Stage,
 ) -> Result<(), DriverError> {
     let mut deferred: Vec<(&'static str, OwnedMessage)> = Vec::new();
-    while !ipc.shutdown_requested() {
+    while !ipc.shutdown_requested() && !stage.finished() {
         let timeout = node.until_due();
         let mut delivered = 0u64;
         let flow = match node.external.as_deref_mut() {

@@ -14,6 +14,7 @@ pub mod process_main;
 pub mod serve;
 pub mod shutdown;
 pub mod threads;
+pub mod udp;
 
 /// The iceoryx2 this runtime is built on, for the few binaries that name its types
 /// (a sample, the `ZeroCopySend` bound of a generic port helper).
@@ -29,3 +30,4 @@ pub use ipc::{
 pub use process_main::process_main;
 pub use serve::{ServeError, StageArgs, serve};
 pub use threads::{JOIN_TIMEOUT, JoinError, StopFlag, ThreadRole, Worker};
+pub use udp::{Reply, UdpLink, UdpStats};

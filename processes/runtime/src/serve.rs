@@ -62,6 +62,12 @@ impl StageArgs {
         self.deploy_dir.clone().unwrap_or_else(deploy_dir)
     }
 
+    /// `[ipc]` of the config (defaults without `--config`), for a binary with no section
+    /// of its own.
+    pub fn ipc(&self) -> Result<IpcConfig, ConfigError> {
+        load_process_or_default::<IpcConfig>(self.config.as_deref(), "ipc").map(|(ipc, _)| ipc)
+    }
+
     /// `[ipc]` and the stage's `[section]` of the config (defaults without `--config`).
     pub fn load<T>(&self, section: &str) -> Result<(IpcConfig, T), ConfigError>
     where

@@ -10,10 +10,11 @@
 //!
 //! Everything here is pure: inputs and time in, outputs out. There are no clock
 //! reads, sleeps, threads, IPC or printing; the caller drives fixed-step
-//! integration, so lockstep runs are deterministic for a given seed. The one
-//! exception is [`px4::endpoint`], the MAVLink UDP endpoint that makes the
-//! simulator look like PX4 to px4-link; its stepping still takes time as an
-//! argument.
+//! integration, so lockstep runs are deterministic for a given seed. The
+//! `sim` binary puts the same stage ([`stage::SimStage`]) behind a UDP socket
+//! on the wall clock; its [`camera_worker`] thread is a benchmark's and the
+//! lockstep runner's option. Reading a scenario file ([`scenario::load`]) is
+//! the one I/O.
 //!
 //! Frames: world ENU (x east, y north, z up, origin at the take-off point),
 //! body FLU (x forward, y left, z up); transforms are named by what they map

@@ -1,9 +1,14 @@
-//! The simulator as a stage of the lockstep driver: the world and the PX4-like
-//! autopilot advance to the driver's time on each tick (one physics step of
-//! [`PHYSICS_STEP_NS`]), MAVLink leaves and arrives as wire bytes, camera and depth
-//! frames are rendered at capture and handed over after the sensor's latency, and the
-//! ground truth goes out on the evaluator-only topics (no pipeline stage may read them;
-//! the graph check refuses a node that does).
+//! The simulator as a stage, for both drivers: the world and the PX4-like autopilot
+//! advance to the driver's time on each tick (physics steps of [`PHYSICS_STEP_NS`]),
+//! MAVLink leaves and arrives as wire bytes (a command number the dialect lacks is
+//! answered UNSUPPORTED, as PX4's commander does), camera and depth frames are rendered
+//! at capture and handed over after the sensor's latency, and the ground truth goes out
+//! on the evaluator-only topics (no pipeline stage may read them; the graph check
+//! refuses a node that does).
+//!
+//! [`Pace`] says how simulated time follows the driver's: equal to it in lockstep, the
+//! wall clock times a speed in the `sim` process, whose messages then carry the driver's
+//! (monotonic) times like every other process's.
 
 use std::collections::VecDeque;
 
@@ -13,12 +18,70 @@ use ipc_types::msg::{
 use ipc_types::topics;
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
+use mavlink::dialects::common::MavResult;
 use px4_protocol::codec::{decode_datagram, encode};
+use px4_protocol::raw::{command_ack_frame, unknown_commands};
 use stage::{Counter, Input, Message, Outbox, SliceHeader, SliceMut, Stage, StageError};
 
 use crate::camera::PixelFormat;
 use crate::depth::DEPTH_SCALE_M;
 use crate::lockstep::{PHYSICS_STEP_NS, Simulator, TRUTH_STATE_PERIOD_NS, truth_state};
+
+/// What the `sim` process flies, as its flags say.
+#[derive(Debug, Clone, clap::Args)]
+pub struct SimFlags {
+    /// Scenario name (from deploy/scenarios/) or TOML file.
+    #[arg(long, default_value = "paper-sim")]
+    pub scenario: String,
+    /// Seed of every random process (default: the scenario's).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Simulated seconds per wall-clock second.
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Stop after this many simulated seconds (default: the scenario's duration).
+    #[arg(long)]
+    pub duration_s: Option<f64>,
+}
+
+/// Why the flags make no simulator.
+#[derive(Debug, thiserror::Error)]
+pub enum SimFlagsError {
+    /// `--speed` out of range.
+    #[error("--speed {0} is not allowed (allowed: above 0, at most 100)")]
+    Speed(f64),
+    /// `--duration-s` out of range.
+    #[error("--duration-s {0} is not allowed (allowed: above 0, at most 86400)")]
+    Duration(f64),
+    /// The scenario.
+    #[error(transparent)]
+    Scenario(#[from] crate::scenario::ScenarioError),
+    /// The simulator.
+    #[error(transparent)]
+    Sim(#[from] crate::lockstep::SimError),
+}
+
+impl SimFlags {
+    /// The stage: the scenario's world (shipped scenarios from `deploy`), paced by the
+    /// wall clock at `--speed`, ending at `--duration-s` or the scenario's duration.
+    pub fn stage(&self, deploy: &std::path::Path) -> Result<SimStage, SimFlagsError> {
+        if !(self.speed.is_finite() && self.speed > 0.0 && self.speed <= 100.0) {
+            return Err(SimFlagsError::Speed(self.speed));
+        }
+        let scenario = crate::scenario::load(&self.scenario, deploy)?;
+        let end_s = self.duration_s.unwrap_or(scenario.scenario.duration_s);
+        if !(end_s.is_finite() && end_s > 0.0 && end_s <= 86_400.0) {
+            return Err(SimFlagsError::Duration(end_s));
+        }
+        let sim = Simulator::new(&scenario, self.seed.unwrap_or(scenario.scenario.seed))?;
+        tracing::info!(scenario = %scenario.scenario.name, seed = sim.seed(), end_s, "sim");
+        Ok(SimStage::paced(
+            sim,
+            Pace::realtime(self.speed),
+            Some((end_s * 1e9) as u64),
+        ))
+    }
+}
 
 /// A rendered frame waiting for its sensor latency.
 struct Held<T> {
@@ -27,10 +90,100 @@ struct Held<T> {
     publish_ns: u64,
 }
 
-/// The `sim` node in lockstep.
+/// The autopilot's MAVLink system and component ids (PX4: 1, 1).
+const SYSTEM_ID: u8 = 1;
+const COMPONENT_ID: u8 = 1;
+
+/// How far the wall clock may run ahead of simulated time before the simulator skips
+/// ahead instead of racing to catch up (a loaded machine).
+pub const MAX_LAG_NS: u64 = 100_000_000;
+
+/// How simulated time follows the driver's clock.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Pace {
+    /// The driver's time is simulated time (the lockstep driver).
+    Lockstep,
+    /// The driver's time is the wall clock: simulated time runs `speed` times as fast
+    /// from the first tick, and skips ahead when it falls more than [`MAX_LAG_NS`]
+    /// behind.
+    Realtime {
+        /// Simulated seconds per wall-clock second.
+        speed: f64,
+        /// The driver time at which simulated time was 0 (set on the first tick).
+        start_ns: Option<u64>,
+        /// Simulated time skipped so far.
+        skipped_ns: u64,
+    },
+}
+
+impl Pace {
+    /// Wall-clock pacing at `speed` (a speed that is not a positive number is 1).
+    pub fn realtime(speed: f64) -> Self {
+        Self::Realtime {
+            speed: if speed.is_finite() && speed > 0.0 {
+                speed
+            } else {
+                1.0
+            },
+            start_ns: None,
+            skipped_ns: 0,
+        }
+    }
+
+    /// The simulated time to step to at driver time `now_ns`, the world being at
+    /// `sim_ns`.
+    fn target(&mut self, now_ns: u64, sim_ns: u64) -> u64 {
+        match self {
+            Self::Lockstep => now_ns,
+            Self::Realtime {
+                speed,
+                start_ns,
+                skipped_ns,
+            } => {
+                let start = *start_ns.get_or_insert(now_ns);
+                let elapsed = (now_ns.saturating_sub(start) as f64 * *speed) as u64;
+                let target = elapsed.saturating_sub(*skipped_ns);
+                if target > sim_ns + MAX_LAG_NS {
+                    *skipped_ns += target - sim_ns - PHYSICS_STEP_NS;
+                    tracing::debug!(
+                        behind_ms = (target - sim_ns) / 1_000_000,
+                        "the simulator fell behind the wall clock; skipping ahead"
+                    );
+                    return sim_ns + PHYSICS_STEP_NS;
+                }
+                target
+            }
+        }
+    }
+
+    /// The driver time of simulated time `sim_ns` (what the messages carry).
+    fn to_driver(&self, sim_ns: u64) -> u64 {
+        match self {
+            Self::Lockstep => sim_ns,
+            Self::Realtime {
+                speed,
+                start_ns,
+                skipped_ns,
+            } => start_ns.unwrap_or(0) + ((sim_ns + skipped_ns) as f64 / speed) as u64,
+        }
+    }
+
+    /// The tick period on the driver's clock: one physics step.
+    fn tick_ns(&self) -> u64 {
+        match self {
+            Self::Lockstep => PHYSICS_STEP_NS,
+            Self::Realtime { speed, .. } => ((PHYSICS_STEP_NS as f64 / speed) as u64).max(1),
+        }
+    }
+}
+
+/// The `sim` node.
 pub struct SimStage {
     sim: Simulator,
-    /// The autopilot's own MAVLink sequence, as its UDP endpoint keeps it.
+    pace: Pace,
+    /// Simulated time at which the scenario ends (the process stops there).
+    end_ns: Option<u64>,
+    /// The autopilot's own MAVLink sequence.
     sequence: u8,
     wire: Vec<u8>,
     decoded: Vec<(MavHeader, MavMessage)>,
@@ -50,13 +203,18 @@ struct Counts {
     truth_events: u64,
     mavlink_in: u64,
     mavlink_out: u64,
+    parse_errors: u64,
+    unsupported: u64,
+    dropped: u64,
 }
 
 impl SimStage {
-    /// The stage of `sim`.
+    /// The stage of `sim`, in lockstep.
     pub fn new(sim: Simulator) -> Self {
         Self {
             sim,
+            pace: Pace::Lockstep,
+            end_ns: None,
             sequence: 0,
             wire: Vec::with_capacity(280),
             decoded: Vec::with_capacity(8),
@@ -67,6 +225,43 @@ impl SimStage {
             next_truth_state_ns: 0,
             counts: Counts::default(),
         }
+    }
+
+    /// The same, paced by `pace` and finished at simulated time `end_ns`.
+    pub fn paced(sim: Simulator, pace: Pace, end_ns: Option<u64>) -> Self {
+        Self {
+            pace,
+            end_ns,
+            ..Self::new(sim)
+        }
+    }
+
+    /// Answers each COMMAND_LONG of `datagram` whose number the dialect lacks and
+    /// that is addressed to this autopilot (its system, component its own or 0)
+    /// MAV_RESULT_UNSUPPORTED, as PX4's commander does; others are ignored, as PX4's
+    /// receiver does.
+    fn answer_unknown(&mut self, datagram: &[u8], out: &mut dyn Outbox) -> Result<(), StageError> {
+        if self.sim.autopilot_silent() {
+            return Ok(());
+        }
+        for cmd in unknown_commands(datagram) {
+            let ours = cmd.target_system == SYSTEM_ID
+                && (cmd.target_component == 0 || cmd.target_component == COMPONENT_ID);
+            if !ours {
+                continue;
+            }
+            let frame = command_ack_frame(
+                self.sequence,
+                SYSTEM_ID,
+                COMPONENT_ID,
+                &cmd,
+                MavResult::MAV_RESULT_UNSUPPORTED as u8,
+            );
+            self.sequence = self.sequence.wrapping_add(1);
+            self.counts.unsupported += 1;
+            out.publish(topics::MAVLINK_FROM_PX4, Message::Mavlink(&frame))?;
+        }
+        Ok(())
     }
 
     /// The simulator (the evaluator and the tests read the world through it).
@@ -125,8 +320,12 @@ impl SimStage {
                 PixelFormat::Mono8 => (PixelEncoding::Mono8, 1),
                 PixelFormat::Bgr8 => (PixelEncoding::Bgr8, 3),
             };
-            let mut msg = Header::captured_at(f.capture_ns);
-            msg.push_stage(StageId::Sensor, f.capture_ns, f.publish_ns);
+            let (capture, publish) = (
+                self.pace.to_driver(f.capture_ns),
+                self.pace.to_driver(f.publish_ns),
+            );
+            let mut msg = Header::captured_at(capture);
+            msg.push_stage(StageId::Sensor, capture, publish);
             let header = CameraFrameHeader {
                 msg,
                 width,
@@ -146,6 +345,9 @@ impl SimStage {
                 SliceMut::U16(_) => None,
             })? {
                 self.counts.camera_frames += 1;
+            } else {
+                // Every sample held by consumers: dropped rather than queued.
+                self.counts.dropped += 1;
             }
             self.spare_u8.push(f.pixels);
         }
@@ -159,8 +361,12 @@ impl SimStage {
             let p = cam.params();
             let (fx, fy) = p.focal_px();
             let (cx, cy) = p.principal_point_px();
-            let mut msg = Header::captured_at(f.capture_ns);
-            msg.push_stage(StageId::Sensor, f.capture_ns, f.publish_ns);
+            let (capture, publish) = (
+                self.pace.to_driver(f.capture_ns),
+                self.pace.to_driver(f.publish_ns),
+            );
+            let mut msg = Header::captured_at(capture);
+            msg.push_stage(StageId::Sensor, capture, publish);
             let header = DepthFrameHeader {
                 msg,
                 width: p.width,
@@ -179,6 +385,8 @@ impl SimStage {
                 SliceMut::U8(_) => None,
             })? {
                 self.counts.depth_frames += 1;
+            } else {
+                self.counts.dropped += 1;
             }
             self.spare_u16.push(f.pixels);
         }
@@ -192,28 +400,40 @@ impl Stage for SimStage {
     }
 
     fn tick_period_ns(&self) -> Option<u64> {
-        Some(PHYSICS_STEP_NS)
+        Some(self.pace.tick_ns())
     }
 
     fn on_input(
         &mut self,
         _now_ns: u64,
         input: Input<'_>,
-        _out: &mut dyn Outbox,
+        out: &mut dyn Outbox,
     ) -> Result<(), StageError> {
         if let Message::Mavlink(bytes) = input.msg {
             self.decoded.clear();
-            decode_datagram(bytes, &mut self.decoded);
+            let errors = decode_datagram(bytes, &mut self.decoded);
             for (h, m) in &self.decoded {
                 self.sim.handle_mavlink(h, m);
                 self.counts.mavlink_in += 1;
+            }
+            self.counts.parse_errors += errors;
+            if self.decoded.is_empty() && errors == 0 && !bytes.is_empty() {
+                // Not a single frame start in it.
+                self.counts.parse_errors += 1;
+            }
+            if errors > 0 {
+                self.answer_unknown(bytes, out)?;
             }
         }
         Ok(())
     }
 
     fn on_tick(&mut self, now_ns: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
-        while self.sim.time_ns() < now_ns {
+        let target = self.pace.target(now_ns, self.sim.time_ns());
+        if self.finished() {
+            return Ok(());
+        }
+        while self.sim.time_ns() < target {
             let report = self
                 .sim
                 .step()
@@ -242,13 +462,17 @@ impl Stage for SimStage {
             out.publish(topics::MAVLINK_FROM_PX4, Message::Mavlink(&self.wire))?;
             self.counts.mavlink_out += 1;
         }
-        self.release(now_ns, out)?;
-        if now_ns >= self.next_truth_state_ns {
-            self.next_truth_state_ns = now_ns + TRUTH_STATE_PERIOD_NS;
-            let s = truth_state(&self.sim, now_ns);
+        self.release(target, out)?;
+        if target >= self.next_truth_state_ns {
+            self.next_truth_state_ns = target + TRUTH_STATE_PERIOD_NS;
+            let s = truth_state(&self.sim, self.pace.to_driver(target));
             out.publish(topics::SIM_TRUTH_STATE, Message::TruthState(&s))?;
         }
         Ok(())
+    }
+
+    fn finished(&self) -> bool {
+        self.end_ns.is_some_and(|end| self.sim.time_ns() >= end)
     }
 
     fn max_slice_len(&self, topic: &str) -> usize {
@@ -268,6 +492,9 @@ impl Stage for SimStage {
             ("truth_events", c.truth_events),
             ("mavlink_in", c.mavlink_in),
             ("mavlink_out", c.mavlink_out),
+            ("parse_errors", c.parse_errors),
+            ("unsupported", c.unsupported),
+            ("dropped", c.dropped),
         ]
     }
 }

@@ -1,16 +1,20 @@
 //! The simulator's MAVLink endpoint seen from a companion computer: a plain
 //! UDP socket, raw MAVLink 2 bytes, and the PX4 v1.16 behaviours a companion can
 //! tell apart, one test each (docs/px4-conformance.md maps each to PX4's source).
-//! Each test runs a SimVehicle on the wall clock in its own thread on an
+//! Each test runs the `sim` node as its process does (the `SimStage` paced by the wall
+//! clock behind a `runtime::UdpLink`, on the iceoryx2 driver) in its own thread on an
 //! ephemeral port. Timing tolerances are generous (shared 2-core machine).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::net::{SocketAddr, UdpSocket};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use graph::Graph;
+use ipc_types::topics;
 use mavlink::dialects::common::{
     HEARTBEAT_DATA, MavAutopilot, MavCmd, MavFrame, MavLandedState, MavMessage, MavModeFlag,
     MavResult, MavState, MavType, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA,
@@ -19,9 +23,12 @@ use mavlink::{MavHeader, MavlinkVersion};
 use px4_protocol::codec::decode_datagram;
 use px4_protocol::command_long;
 use px4_protocol::raw::renumber_command_long;
-use sim::px4::commander::Px4Params;
-use sim::px4::endpoint::{EndpointConfig, SimVehicle};
+use runtime::{Beat, Ipc, IpcPrefix, Reply, UdpLink};
+use sim::lockstep::Simulator;
+use sim::px4::commander::{Commander, Px4Params};
+use sim::stage::{Pace, SimStage};
 use sim::world::{World, WorldParams};
+use stage::{Counter, Input, Outbox, Stage, StageError};
 
 const OFFBOARD: u32 = 6 << 16;
 const POSCTL: u32 = 3 << 16;
@@ -31,9 +38,44 @@ const AUTO_LAND: u32 = (6 << 24) | (4 << 16);
 /// MAV_CMD_COMPONENT_ARM_DISARM's parameters for "arm".
 const ARM: [f32; 7] = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
 
+/// The simulator stage, stopped from the test when its flag is set.
+struct Stoppable {
+    inner: SimStage,
+    stop: Arc<AtomicBool>,
+}
+
+impl Stage for Stoppable {
+    fn name(&self) -> &'static str {
+        self.inner.name()
+    }
+    fn tick_period_ns(&self) -> Option<u64> {
+        self.inner.tick_period_ns()
+    }
+    fn on_input(
+        &mut self,
+        now: u64,
+        input: Input<'_>,
+        out: &mut dyn Outbox,
+    ) -> Result<(), StageError> {
+        self.inner.on_input(now, input, out)
+    }
+    fn on_tick(&mut self, now: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
+        self.inner.on_tick(now, out)
+    }
+    fn max_slice_len(&self, topic: &str) -> usize {
+        self.inner.max_slice_len(topic)
+    }
+    fn counters(&self) -> Vec<Counter> {
+        self.inner.counters()
+    }
+    fn finished(&self) -> bool {
+        self.stop.load(Ordering::Relaxed) || self.inner.finished()
+    }
+}
+
 struct Sim {
     stop: Arc<AtomicBool>,
-    handle: Option<JoinHandle<SimVehicle>>,
+    handle: Option<JoinHandle<(Stoppable, UdpLink)>>,
     addr: SocketAddr,
 }
 
@@ -45,21 +87,33 @@ impl Sim {
 
     fn start_with(params: Px4Params) -> Self {
         let world = World::new(WorldParams::default()).unwrap();
-        let config = EndpointConfig {
-            listen: "127.0.0.1:0".parse().unwrap(),
-            remote: None,
-            ..EndpointConfig::default()
-        };
-        let mut vehicle = SimVehicle::new(world, params, config).unwrap();
-        let addr = vehicle.endpoint().local_addr();
+        let sim = Simulator::from_world(world, Commander::new(params).unwrap(), 30.0, 30.0, 0);
+        let mut link = UdpLink::bind(
+            "127.0.0.1:0".parse().unwrap(),
+            None,
+            Reply::PeerAndRemote,
+            topics::MAVLINK_TO_PX4,
+            topics::MAVLINK_FROM_PX4,
+        )
+        .unwrap();
+        let addr = link.local_addr();
         let stop = Arc::new(AtomicBool::new(false));
-        let flag = stop.clone();
-        let handle = std::thread::spawn(move || {
-            let until = Instant::now() + Duration::from_secs(120);
-            vehicle
-                .run_realtime(until, &flag, 1.0, |_, _| true)
+        let mut stage = Stoppable {
+            inner: SimStage::paced(sim, Pace::realtime(1.0), Some(120_000_000_000)),
+            stop: stop.clone(),
+        };
+        let graph =
+            Graph::load(&PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../deploy/graph.toml"))
                 .unwrap();
-            vehicle
+        let spec = graph.node("sim").unwrap().spec();
+        let handle = std::thread::spawn(move || {
+            let ipc = Ipc::open("sim", &IpcPrefix::unique("conformance")).unwrap();
+            let beat = Beat {
+                period: Duration::from_millis(100),
+                deadline: Duration::from_millis(500),
+            };
+            runtime::driver::run(&ipc, &spec, &mut stage, Some(&mut link), beat).unwrap();
+            (stage, link)
         });
         Self {
             stop,
@@ -68,7 +122,8 @@ impl Sim {
         }
     }
 
-    fn finish(mut self) -> SimVehicle {
+    /// Stops the simulator; returns its stage and link to read their counters.
+    fn finish(mut self) -> (Stoppable, UdpLink) {
         self.stop.store(true, Ordering::Relaxed);
         self.handle.take().unwrap().join().unwrap()
     }
@@ -78,6 +133,16 @@ impl Drop for Sim {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
     }
+}
+
+/// A stage counter by name.
+fn counter(stage: &dyn Stage, key: &str) -> u64 {
+    stage
+        .counters()
+        .iter()
+        .find(|(k, _)| *k == key)
+        .map(|(_, v)| *v)
+        .unwrap_or_else(|| panic!("no counter {key}"))
 }
 
 /// A companion computer: system 1, component 191, like px4-link.
@@ -915,10 +980,14 @@ fn garbage_datagrams_do_not_crash_it() {
     // Still alive and answering.
     assert!(c.heartbeat(|_| true, secs(3)));
     c.arm();
-    let vehicle = sim.finish();
-    let stats = vehicle.endpoint().stats();
-    assert!(stats.parse_errors >= 3, "{stats:?}");
-    assert!(stats.messages_received >= 3, "{stats:?}");
+    let (stage, link) = sim.finish();
+    assert!(
+        counter(&stage, "parse_errors") >= 3,
+        "{:?}",
+        stage.counters()
+    );
+    assert!(counter(&stage, "mavlink_in") >= 3, "{:?}", stage.counters());
+    assert!(link.stats().datagrams_in >= 7, "{:?}", link.stats());
 }
 
 /// The `sim` binary as systemd would start it: a companion flies it over UDP, and the
@@ -926,7 +995,6 @@ fn garbage_datagrams_do_not_crash_it() {
 #[test]
 fn the_sim_process_flies_over_mavlink_and_publishes_camera_depth_and_ground_truth() {
     use ipc_types::msg::{TruthEvent, TruthKind};
-    use runtime::{Ipc, IpcPrefix};
 
     let port = UdpSocket::bind("127.0.0.1:0")
         .unwrap()

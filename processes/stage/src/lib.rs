@@ -120,6 +120,13 @@ pub trait Stage {
 
     /// Counters worth a line when the stage stops (inputs, outputs, drops by reason).
     fn counters(&self) -> Vec<Counter>;
+
+    /// Whether the stage has nothing more to do (the simulator at its scenario's end):
+    /// the iceoryx2 driver then stops the process cleanly, as on SIGTERM. Lockstep runs
+    /// end by their own rule (the referee, a duration).
+    fn finished(&self) -> bool {
+        false
+    }
 }
 
 /// The stop line of a stage: `name stopped k=v k=v`.

@@ -341,7 +341,9 @@ fn a_periodic_wake_needs_an_iceoryx2_trigger_and_is_handed_to_the_driver() {
     );
     let e = error(&clock);
     assert!(
-        e.contains("node fsm: wake = \"periodic\" needs an iceoryx2 input as the trigger, not clock"),
+        e.contains(
+            "node fsm: wake = \"periodic\" needs an iceoryx2 input as the trigger, not clock"
+        ),
         "{e}"
     );
     let e = error(&with(

@@ -1,11 +1,9 @@
-//! The simulator's PX4 side: a PX4-like commander behind a MAVLink 2 UDP
-//! endpoint, so px4-link talks to the simulator exactly as it would to PX4
-//! SITL or a real Pixhawk.
+//! The simulator's PX4 side: a PX4-like commander that the `sim` process puts behind a
+//! MAVLink 2 UDP socket (`runtime::UdpLink`, as PX4 SITL's onboard link), so px4-link
+//! talks to the simulator exactly as it would to PX4 SITL or a real Pixhawk.
 //!
 //! - [`commander`]: pure PX4 behaviour (modes, commands and ACKs, offboard
 //!   rules and failsafe, takeoff, land, auto-disarm, telemetry).
-//! - [`endpoint`]: the UDP socket around it, and [`endpoint::SimVehicle`]
-//!   that steps a [`crate::world::World`] with it.
 //! - [`frames`]: ENU/FLU <-> NED/FRD, used only at this boundary.
 //!
 //! The codec, the frame conversions, PX4's modes and the raw COMMAND_LONG/ACK frames
@@ -13,5 +11,4 @@
 //! `px4_protocol`'s, shared with px4-link.
 
 pub mod commander;
-pub mod endpoint;
 pub mod frames;

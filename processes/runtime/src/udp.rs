@@ -1,0 +1,190 @@
+//! A UDP datagram link as the iceoryx2 driver's [`External`] I/O: each datagram that
+//! arrives is one input on its `input` topic, handed over borrowed from the receive
+//! buffer; each output on its `output` topic is one datagram. Both ends of the MAVLink
+//! link use it: px4-link toward PX4 (or the simulator), and the simulator's autopilot
+//! toward px4-link, as PX4 SITL's onboard link does.
+
+use std::io::ErrorKind;
+use std::net::{SocketAddr, UdpSocket};
+use std::time::Duration;
+
+use stage::{Counter, External, Flow, Input, Message, StageError};
+
+/// The largest datagram (a sender may pack several MAVLink frames into one).
+const DATAGRAM_MAX: usize = 65_536;
+
+/// Whom a datagram goes to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reply {
+    /// The peer last heard from, else the configured remote (a companion).
+    PeerElseRemote,
+    /// The peer last heard from and the configured remote (PX4 SITL's onboard link keeps
+    /// sending to its configured companion port even after another peer spoke).
+    PeerAndRemote,
+}
+
+/// What went over the link.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct UdpStats {
+    /// Datagrams received.
+    pub datagrams_in: u64,
+    /// Datagrams sent (once per destination).
+    pub datagrams_out: u64,
+    /// Receives or sends that failed (the link goes on).
+    pub io_errors: u64,
+}
+
+/// Why the link could not be opened.
+#[derive(Debug, thiserror::Error)]
+#[error("UDP {addr}: {source}")]
+pub struct UdpError {
+    /// The address involved.
+    pub addr: SocketAddr,
+    /// What the socket said.
+    pub source: std::io::Error,
+}
+
+/// A bound UDP socket, its peer and its topics.
+#[derive(Debug)]
+pub struct UdpLink {
+    socket: UdpSocket,
+    local: SocketAddr,
+    peer: Option<SocketAddr>,
+    remote: Option<SocketAddr>,
+    reply: Reply,
+    topics: [&'static str; 2],
+    buf: Vec<u8>,
+    stats: UdpStats,
+}
+
+impl UdpLink {
+    /// Binds `listen`; arrivals are `input`, `output` is sent to the peer and/or `remote`.
+    pub fn bind(
+        listen: SocketAddr,
+        remote: Option<SocketAddr>,
+        reply: Reply,
+        input: &'static str,
+        output: &'static str,
+    ) -> Result<Self, UdpError> {
+        let err = |source| UdpError {
+            addr: listen,
+            source,
+        };
+        let socket = UdpSocket::bind(listen).map_err(err)?;
+        let local = socket.local_addr().map_err(err)?;
+        Ok(Self {
+            socket,
+            local,
+            peer: None,
+            remote,
+            reply,
+            topics: [input, output],
+            buf: vec![0; DATAGRAM_MAX],
+            stats: UdpStats::default(),
+        })
+    }
+
+    /// The bound address (the port, when 0 was asked for).
+    pub fn local_addr(&self) -> SocketAddr {
+        self.local
+    }
+
+    /// The peer last heard from.
+    pub fn peer(&self) -> Option<SocketAddr> {
+        self.peer
+    }
+
+    /// What went over the link.
+    pub fn stats(&self) -> UdpStats {
+        self.stats
+    }
+
+    fn send_to(&mut self, to: SocketAddr, frame: &[u8]) {
+        match self.socket.send_to(frame, to) {
+            Ok(_) => self.stats.datagrams_out += 1,
+            Err(e) => {
+                self.stats.io_errors += 1;
+                tracing::trace!(%to, error = %e, "UDP send failed");
+            }
+        }
+    }
+}
+
+impl External for UdpLink {
+    fn topics(&self) -> &[&'static str] {
+        &self.topics
+    }
+
+    fn wait(
+        &mut self,
+        timeout_ns: u64,
+        clock: &dyn Fn() -> u64,
+        deliver: &mut dyn FnMut(Input<'_>, u64) -> Result<(), StageError>,
+    ) -> Result<Flow, StageError> {
+        // The first read may wait (a zero timeout would mean forever); the rest only
+        // drain what is already there.
+        let mut wait = Duration::from_nanos(timeout_ns).max(Duration::from_micros(1));
+        loop {
+            if let Err(e) = self.socket.set_read_timeout(Some(wait)) {
+                return Err(StageError::Transport(format!("UDP {}: {e}", self.local)));
+            }
+            match self.socket.recv_from(&mut self.buf) {
+                Ok((n, from)) => {
+                    self.stats.datagrams_in += 1;
+                    self.peer = Some(from);
+                    let input = Input {
+                        topic: self.topics[0],
+                        msg: Message::Mavlink(self.buf.get(..n).unwrap_or(&[])),
+                    };
+                    deliver(input, clock())?;
+                    wait = Duration::from_micros(1);
+                }
+                Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
+                    return Ok(Flow::Open);
+                }
+                // A signal (the stop) or an ICMP "port unreachable" from an earlier send
+                // (the other end is not up yet): the driver looks at its flag, the link
+                // goes on.
+                Err(e) if e.kind() == ErrorKind::Interrupted => return Ok(Flow::Open),
+                Err(e) => {
+                    self.stats.io_errors += 1;
+                    tracing::trace!(error = %e, "UDP receive failed");
+                    return Ok(Flow::Open);
+                }
+            }
+        }
+    }
+
+    fn send(&mut self, _topic: &str, msg: Message<'_>) -> Result<(), StageError> {
+        let Message::Mavlink(frame) = msg else {
+            return Err(StageError::WrongType {
+                topic: self.topics[1].to_string(),
+                expected: "MAVLink bytes",
+                got: msg.payload().type_name(),
+            });
+        };
+        match (self.reply, self.peer, self.remote) {
+            (Reply::PeerElseRemote, Some(to), _) | (Reply::PeerElseRemote, None, Some(to)) => {
+                self.send_to(to, frame);
+            }
+            (Reply::PeerAndRemote, peer, remote) => {
+                if let Some(to) = peer {
+                    self.send_to(to, frame);
+                }
+                if let Some(to) = remote.filter(|r| Some(*r) != peer) {
+                    self.send_to(to, frame);
+                }
+            }
+            (Reply::PeerElseRemote, None, None) => {}
+        }
+        Ok(())
+    }
+
+    fn counters(&self) -> Vec<Counter> {
+        vec![
+            ("datagrams_in", self.stats.datagrams_in),
+            ("datagrams_out", self.stats.datagrams_out),
+            ("io_errors", self.stats.io_errors),
+        ]
+    }
+}
