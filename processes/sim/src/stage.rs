@@ -157,7 +157,7 @@ impl Pace {
     }
 
     /// The driver time of simulated time `sim_ns` (what the messages carry).
-    fn to_driver(&self, sim_ns: u64) -> u64 {
+    fn driver_time_of(&self, sim_ns: u64) -> u64 {
         match self {
             Self::Lockstep => sim_ns,
             Self::Realtime {
@@ -321,8 +321,8 @@ impl SimStage {
                 PixelFormat::Bgr8 => (PixelEncoding::Bgr8, 3),
             };
             let (capture, publish) = (
-                self.pace.to_driver(f.capture_ns),
-                self.pace.to_driver(f.publish_ns),
+                self.pace.driver_time_of(f.capture_ns),
+                self.pace.driver_time_of(f.publish_ns),
             );
             let mut msg = Header::captured_at(capture);
             msg.push_stage(StageId::Sensor, capture, publish);
@@ -362,8 +362,8 @@ impl SimStage {
             let (fx, fy) = p.focal_px();
             let (cx, cy) = p.principal_point_px();
             let (capture, publish) = (
-                self.pace.to_driver(f.capture_ns),
-                self.pace.to_driver(f.publish_ns),
+                self.pace.driver_time_of(f.capture_ns),
+                self.pace.driver_time_of(f.publish_ns),
             );
             let mut msg = Header::captured_at(capture);
             msg.push_stage(StageId::Sensor, capture, publish);
@@ -465,7 +465,7 @@ impl Stage for SimStage {
         self.release(target, out)?;
         if target >= self.next_truth_state_ns {
             self.next_truth_state_ns = target + TRUTH_STATE_PERIOD_NS;
-            let s = truth_state(&self.sim, self.pace.to_driver(target));
+            let s = truth_state(&self.sim, self.pace.driver_time_of(target));
             out.publish(topics::SIM_TRUTH_STATE, Message::TruthState(&s))?;
         }
         Ok(())
