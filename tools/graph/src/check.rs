@@ -185,12 +185,22 @@ fn node(n: &NodeFile, topics: &[Topic], path: &Path) -> Result<Node, GraphError>
             "the name is not allowed (allowed: a non-empty name without spaces, e.g. aruco-pnp)",
         ));
     }
-    let binaries = STACK_BINARIES.join(", ");
+    // A stage of your own runs a binary of your own: any command name, installed
+    // beside the stack's.
+    let binaries = format!(
+        "a command name of lowercase letters, digits and -: one of the stack's ({}) or your own",
+        STACK_BINARIES.join(", ")
+    );
+    let command_name = |b: &str| {
+        b.starts_with(|c: char| c.is_ascii_lowercase())
+            && b.chars()
+                .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-')
+    };
     let binary = match n.binary.as_deref() {
-        None | Some("") => return Err(err(&format!("no binary (allowed: one of {binaries})"))),
-        Some(b) if !STACK_BINARIES.contains(&b) => {
+        None | Some("") => return Err(err(&format!("no binary (allowed: {binaries})"))),
+        Some(b) if !command_name(b) => {
             return Err(err(&format!(
-                "binary {b} is not a stack binary (allowed: one of {binaries})"
+                "binary {b} is not allowed (allowed: {binaries})"
             )));
         }
         Some(b) => b.to_string(),

@@ -127,17 +127,24 @@ fn a_node_without_a_binary_is_refused_with_the_stack_binaries() {
     let e = error(&with("binary = \"fsm\"\n", ""));
     assert_eq!(
         e,
-        "deploy/graph.toml: node fsm: no binary (allowed: one of sim, camera-ingest, aruco-pnp, depth-map, planner, fsm, px4-link)"
+        "deploy/graph.toml: node fsm: no binary (allowed: a command name of lowercase letters, digits and -: one of the stack's (sim, camera-ingest, aruco-pnp, depth-map, planner, fsm, px4-link) or your own)"
     );
 }
 
 #[test]
-fn a_binary_that_is_not_a_stack_binary_is_refused() {
-    let e = error(&with("binary = \"fsm\"", "binary = \"watchdog\""));
-    assert!(
-        e.contains("node fsm: binary watchdog is not a stack binary (allowed: one of sim, "),
-        "{e}"
-    );
+fn a_binary_that_is_not_a_command_name_is_refused_and_one_of_your_own_is_not() {
+    for bad in ["Fsm", "../fsm", "fsm --x", "-fsm", "/usr/bin/fsm"] {
+        let e = error(&with("binary = \"fsm\"", &format!("binary = \"{bad}\"")));
+        assert!(
+            e.contains(&format!(
+                "node fsm: binary {bad} is not allowed (allowed: a command name"
+            )),
+            "{e}"
+        );
+    }
+    let own = with("binary = \"fsm\"", "binary = \"altitude-guard2\"");
+    let g = Graph::parse(&own, Path::new("g.toml")).unwrap();
+    assert_eq!(g.node("fsm").unwrap().binary, "altitude-guard2");
 }
 
 #[test]

@@ -23,8 +23,9 @@ pub use render::{dot, text};
 /// The graph's file name inside the deploy directory.
 pub const FILE_NAME: &str = "graph.toml";
 
-/// The binaries a node may run: the stack's process binaries (a name outside this list
-/// would only fail later, when a process is started).
+/// The stack's own process binaries. A node may also run a binary of its own (a stage
+/// added through the graph and the stage interface); the shipped graph uses only these
+/// (tools/graph/tests/deploy.rs).
 pub const STACK_BINARIES: &[&str] = &[
     "sim",
     "camera-ingest",

@@ -39,6 +39,11 @@ fn the_shipped_graph_loads_with_the_seven_processes() {
     );
     for n in &g.nodes {
         assert_eq!(n.name, n.binary, "each process is named for its binary");
+        assert!(
+            STACK_BINARIES.contains(&n.binary.as_str()),
+            "the shipped graph runs the stack's binaries only: {}",
+            n.binary
+        );
     }
 }
 

@@ -1,28 +1,9 @@
 //! `landing`: the one user-facing command of the landing stack.
 
-mod bench_aruco;
-mod bench_depth;
-mod bench_ipc;
-mod bench_perception;
-mod bench_planner;
-mod bench_sim;
-mod companion;
-mod config_cmd;
-mod flight_log;
-mod graph_cmd;
-mod map_cmd;
-mod pad_detect;
-mod pad_print;
-mod plan_cmd;
-mod plot;
-mod procs;
-mod record;
-mod run_cmd;
-mod run_eval;
-mod run_lockstep;
-mod run_processes;
-mod stats;
-
+use landing::{
+    bench_aruco, bench_depth, bench_ipc, bench_perception, bench_planner, bench_sim, config_cmd,
+    graph_cmd, map_cmd, pad_detect, pad_print, plan_cmd, record, run_cmd,
+};
 use std::path::PathBuf;
 use std::process::ExitCode;
 

@@ -4,10 +4,10 @@
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::Args;
 use ipc_types::msg::MissionState;
-use stack_config::{self as cfgload, Validate, deploy_dir};
+use stack_config::{self as cfgload, deploy_dir};
 
 use crate::config_cmd::StackConfig;
 use crate::flight_log::{FlightLog, FlightSample, Outcome, RunSummary, Touchdown};
@@ -32,6 +32,10 @@ pub struct RunArgs {
     /// The deploy directory (default: found above the current directory or executable).
     #[arg(long)]
     deploy_dir: Option<PathBuf>,
+    /// The dataflow graph to run (default: the deploy directory's graph.toml): a graph
+    /// with a stage of your own runs it in both modes (see docs/ARCHITECTURE.md).
+    #[arg(long, value_name = "FILE")]
+    graph: Option<PathBuf>,
     /// Print the summary as one JSON object on stdout.
     #[arg(long)]
     json: bool,
@@ -117,21 +121,14 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         .unwrap_or_else(|| deploy.join("config").join("landing.toml"));
     let cfg: StackConfig = cfgload::load(&cfg_path)?;
     let scn = sim::scenario::load(&args.scenario, &deploy)?;
-    // Both modes run what the deploy directory's graph declares; checked before anything
-    // starts.
-    let graph = graph::Graph::load(&graph::default_path(&deploy))?;
+    // Both modes run what the graph declares; checked before anything starts.
+    let graph_path = args
+        .graph
+        .clone()
+        .unwrap_or_else(|| graph::default_path(&deploy));
+    let graph = graph::Graph::load(&graph_path)?;
     let seed = args.seed.unwrap_or(scn.scenario.seed);
-    let mut fsm_cfg = cfg.fsm.clone();
-    fsm_cfg.preset_m = scn.scenario.mission.preset_m;
-    fsm_cfg.commit_height_m = scn.scenario.mission.commit_height_m;
-    if let Err(e) = fsm_cfg.validate() {
-        bail!(
-            "scenario {} gives the mission fsm.{}: {}",
-            scn.scenario.name,
-            e.key,
-            e.message
-        );
-    }
+    let fsm_cfg = run_lockstep::mission(&cfg, &scn)?;
     let mut recorder = match &args.record {
         Some(p) => {
             // As --plot does: a new directory for the outputs is made, not refused.
@@ -176,6 +173,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             log_dir: &log_dir,
             ipc_prefix,
             graph: &graph,
+            graph_path: &graph_path,
         };
         let r = run_processes::run(&launch, &mut recorder, progress)?;
         if tty {

@@ -40,6 +40,23 @@ pub struct Setup<'a> {
     pub fsm: FsmConfig,
 }
 
+/// The mission of `scenario` under `config`: the fsm section with the scenario's preset
+/// point and commit height, checked.
+pub fn mission(config: &StackConfig, scenario: &LoadedScenario) -> Result<FsmConfig> {
+    let mut fsm = config.fsm.clone();
+    fsm.preset_m = scenario.scenario.mission.preset_m;
+    fsm.commit_height_m = scenario.scenario.mission.commit_height_m;
+    if let Err(e) = stack_config::Validate::validate(&fsm) {
+        bail!(
+            "scenario {} gives the mission fsm.{}: {}",
+            scenario.scenario.name,
+            e.key,
+            e.message
+        );
+    }
+    Ok(fsm)
+}
+
 /// The stage of one graph node, built from the stack configuration and the scenario;
 /// `None` for a node the stack has no stage for.
 pub fn stage_for(node: &Node, setup: &Setup<'_>) -> Result<Option<Box<dyn Stage>>> {

@@ -44,6 +44,8 @@ pub struct Launch<'a> {
     /// The dataflow graph: which processes to start, in which order, with which
     /// arguments.
     pub graph: &'a Graph,
+    /// Its file, handed to every process (`--graph`): each finds its node there.
+    pub graph_path: &'a Path,
 }
 
 /// Runs the mission with every stage as a process; returns how it ended and the
@@ -98,6 +100,8 @@ pub fn run(
         let child = Command::new(&path)
             .args(node.command_args(&values))
             .args(["--ipc-prefix", prefix.as_str()])
+            .arg("--graph")
+            .arg(launch.graph_path)
             .env("LANDING_LOG", "info")
             .stdout(Stdio::null())
             .stderr(file)

@@ -1,0 +1,27 @@
+//! The `landing` command's library: the mission runners (lockstep and processes), the
+//! referee, benchmarks, plots, recordings and tools, so that tests and other tools can
+//! run a mission with stages of their own (`run_lockstep::driver`'s `extra`) rather than
+//! only through the command line.
+
+pub mod bench_aruco;
+pub mod bench_depth;
+pub mod bench_ipc;
+pub mod bench_perception;
+pub mod bench_planner;
+pub mod bench_sim;
+pub mod companion;
+pub mod config_cmd;
+pub mod flight_log;
+pub mod graph_cmd;
+pub mod map_cmd;
+pub mod pad_detect;
+pub mod pad_print;
+pub mod plan_cmd;
+pub mod plot;
+pub mod procs;
+pub mod record;
+pub mod run_cmd;
+pub mod run_eval;
+pub mod run_lockstep;
+pub mod run_processes;
+pub mod stats;
