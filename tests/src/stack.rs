@@ -1,7 +1,7 @@
-//! The whole stack as OS processes in a test, started with the arguments `landing run
-//! --processes` gives them (tools/landing/src/run_processes.rs), under a fresh iceoryx2
-//! prefix and fresh UDP ports, so a test can stop and restart any one of them while the
-//! others keep running.
+//! The whole stack as OS processes in a test, started from the graph
+//! (deploy/graph.toml) with the arguments `landing run --processes` gives them
+//! (`landing::run_processes::run_values`), under a fresh iceoryx2 prefix and fresh UDP
+//! ports, so a test can stop and restart any one of them while the others keep running.
 
 use std::collections::BTreeMap;
 use std::net::UdpSocket;
@@ -9,13 +9,15 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus};
 use std::time::Duration;
 
+use graph::{Graph, RunValues};
+use landing::run_processes::run_values;
 use runtime::IpcPrefix;
-use sim::scenario::LoadedScenario;
 
 use crate::process::Running;
 
 /// Every stack process, in the order `landing run --processes` starts them (the
-/// simulator last, so the stages' ports exist before its clock starts).
+/// simulator last, so the stages' ports exist before its clock starts); the shipped
+/// graph's start order (each [`Stack`] checks the two agree).
 pub const STAGES: [&str; 7] = [
     "px4-link",
     "camera-ingest",
@@ -65,11 +67,9 @@ fn free_udp_port() -> u16 {
 /// The stack of one scenario: its processes, any of which may be stopped and started
 /// again. Whatever still runs is killed when it is dropped.
 pub struct Stack {
-    scenario: LoadedScenario,
+    graph: Graph,
+    values: RunValues,
     prefix: IpcPrefix,
-    sim_port: u16,
-    link_port: u16,
-    duration_s: f64,
     running: BTreeMap<&'static str, Running>,
 }
 
@@ -77,14 +77,28 @@ impl Stack {
     /// A stack for the shipped `scenario` with nothing started yet; the simulator runs
     /// for `duration_s` simulated seconds once started.
     pub fn new(scenario: &str, duration_s: f64) -> Self {
-        let scenario = sim::scenario::load(scenario, &deploy_dir())
+        let deploy = deploy_dir();
+        let scenario = sim::scenario::load(scenario, &deploy)
             .unwrap_or_else(|e| panic!("scenario {scenario}: {e}"));
-        Self {
-            scenario,
-            prefix: IpcPrefix::unique("stack"),
-            sim_port: free_udp_port(),
-            link_port: free_udp_port(),
+        let graph = Graph::load(&deploy.join("graph.toml")).unwrap_or_else(|e| panic!("{e}"));
+        let order: Vec<&str> = graph
+            .start_order()
+            .into_iter()
+            .map(|n| n.name.as_str())
+            .collect();
+        assert_eq!(order, STAGES, "the graph's start order");
+        let values = run_values(
+            &scenario,
+            scenario.scenario.seed,
             duration_s,
+            &deploy.join("config/landing.toml"),
+            &deploy,
+            (free_udp_port(), free_udp_port()),
+        );
+        Self {
+            graph,
+            values,
+            prefix: IpcPrefix::unique("stack"),
             running: BTreeMap::new(),
         }
     }
@@ -94,55 +108,15 @@ impl Stack {
         &self.prefix
     }
 
-    /// The command line of stage `name`, as `landing run --processes` builds it.
+    /// The command line of stage `name`: the graph's, as `landing run --processes`
+    /// builds it.
     pub fn command(&self, name: &str) -> Command {
-        let scn = &self.scenario;
-        let config = deploy_dir().join("config/landing.toml");
-        let sim_addr = format!("127.0.0.1:{}", self.sim_port);
-        let link_addr = format!("127.0.0.1:{}", self.link_port);
-        let mut cmd = Command::new(stack_binary(name));
-        match name {
-            "px4-link" => {
-                cmd.arg("--config").arg(&config);
-                cmd.args(["--link", &format!("udp:{link_addr}"), "--remote", &sim_addr]);
-            }
-            "camera-ingest" => {
-                cmd.arg("--config").arg(&config);
-                cmd.arg("--deploy-dir").arg(deploy_dir());
-                cmd.args(["--source", "sim"]);
-                cmd.arg("--camera").arg(scn.calibration_path());
-            }
-            "aruco-pnp" => {
-                cmd.arg("--config").arg(&config);
-                cmd.arg("--deploy-dir").arg(deploy_dir());
-                cmd.arg("--camera").arg(scn.calibration_path());
-                cmd.arg("--pad").arg(scn.pad_path());
-            }
-            "depth-map" => {
-                cmd.arg("--config").arg(&config).args(["--input", "sim"]);
-            }
-            "planner" => {
-                cmd.arg("--config").arg(&config);
-            }
-            "fsm" => {
-                let p = scn.scenario.mission.preset_m;
-                cmd.arg("--config").arg(&config);
-                cmd.arg(format!("--preset={},{},{}", p[0], p[1], p[2]));
-                cmd.arg(format!(
-                    "--commit-height={}",
-                    scn.scenario.mission.commit_height_m
-                ));
-            }
-            "sim" => {
-                cmd.arg("--scenario").arg(&scn.path);
-                cmd.args(["--seed", &scn.scenario.seed.to_string()]);
-                cmd.args(["--duration-s", &self.duration_s.to_string()]);
-                cmd.arg("--deploy-dir").arg(deploy_dir());
-                cmd.args(["--mavlink-listen", &sim_addr]);
-                cmd.args(["--mavlink-remote", &link_addr]);
-            }
-            other => panic!("{other} is not a stack process (allowed: {STAGES:?})"),
-        }
+        let node = self
+            .graph
+            .node(name)
+            .unwrap_or_else(|| panic!("{name} is not a node of the graph (allowed: {STAGES:?})"));
+        let mut cmd = Command::new(stack_binary(&node.binary));
+        cmd.args(node.command_args(&self.values));
         cmd.arg("--ipc-prefix").arg(self.prefix.as_str());
         cmd.env("LANDING_LOG", "info");
         cmd

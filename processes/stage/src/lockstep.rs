@@ -335,6 +335,14 @@ impl Lockstep {
     /// Delivers `msg` on `topic` to its readers at the current instant, as if a node
     /// outside the graph had published it (an operator's safety order, a test's input).
     pub fn inject(&mut self, topic: &str, msg: Message<'_>) {
+        self.inject_at(self.now_ns, topic, msg);
+    }
+
+    /// Delivers `msg` on `topic` to its readers at `at_ns` (not before the current
+    /// instant): a recorded input sequence replayed at its recorded times. Inject in
+    /// time order; the driver advances to each time as it steps.
+    pub fn inject_at(&mut self, at_ns: u64, topic: &str, msg: Message<'_>) {
+        let at_ns = at_ns.max(self.now_ns);
         let msg = Rc::new(msg.to_owned());
         for node in &mut self.nodes {
             for (k, i) in node.spec.inputs.iter().enumerate() {
@@ -342,7 +350,7 @@ impl Lockstep {
                     && let Some(q) = node.queues.get_mut(k)
                 {
                     q.push_back(Pending {
-                        at_ns: self.now_ns,
+                        at_ns,
                         pass: 0,
                         msg: Rc::clone(&msg),
                     });

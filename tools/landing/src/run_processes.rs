@@ -48,6 +48,34 @@ pub struct Launch<'a> {
     pub graph_path: &'a Path,
 }
 
+/// The values of the graph's argument placeholders for one run of `scn`: the files, the
+/// seed, how long the simulator runs, and the UDP ports of the simulator and px4-link.
+pub fn run_values(
+    scn: &LoadedScenario,
+    seed: u64,
+    duration_s: f64,
+    config: &Path,
+    deploy: &Path,
+    (sim_port, link_port): (u16, u16),
+) -> RunValues {
+    let preset = scn.scenario.mission.preset_m;
+    RunValues {
+        config: config.display().to_string(),
+        deploy: deploy.display().to_string(),
+        calibration: scn.calibration_path().display().to_string(),
+        pad: scn.pad_path().display().to_string(),
+        scenario: scn.path.display().to_string(),
+        seed: seed.to_string(),
+        duration: duration_s.to_string(),
+        sim_addr: format!("127.0.0.1:{sim_port}"),
+        link_addr: format!("127.0.0.1:{link_port}"),
+        // The fsm gets `--preset={preset}`: the `--x=v` form, as a preset may start
+        // with a minus sign.
+        preset: format!("{},{},{}", preset[0], preset[1], preset[2]),
+        commit_height: scn.scenario.mission.commit_height_m.to_string(),
+    }
+}
+
 /// Runs the mission with every stage as a process; returns how it ended and the
 /// referee's record (the same referee as the lockstep run).
 pub fn run(
@@ -71,23 +99,14 @@ pub fn run(
     };
 
     let scn = launch.scenario;
-    let (sim_port, link_port) = (free_udp_port()?, free_udp_port()?);
-    let preset = scn.scenario.mission.preset_m;
-    let values = RunValues {
-        config: launch.config.display().to_string(),
-        deploy: launch.deploy.display().to_string(),
-        calibration: scn.calibration_path().display().to_string(),
-        pad: scn.pad_path().display().to_string(),
-        scenario: scn.path.display().to_string(),
-        seed: launch.seed.to_string(),
-        duration: scn.scenario.duration_s.to_string(),
-        sim_addr: format!("127.0.0.1:{sim_port}"),
-        link_addr: format!("127.0.0.1:{link_port}"),
-        // The fsm gets `--preset={preset}`: the `--x=v` form, as a preset may start
-        // with a minus sign.
-        preset: format!("{},{},{}", preset[0], preset[1], preset[2]),
-        commit_height: scn.scenario.mission.commit_height_m.to_string(),
-    };
+    let values = run_values(
+        scn,
+        launch.seed,
+        scn.scenario.duration_s,
+        launch.config,
+        launch.deploy,
+        (free_udp_port()?, free_udp_port()?),
+    );
     std::fs::create_dir_all(launch.log_dir)
         .with_context(|| format!("creating {}", launch.log_dir.display()))?;
     let mut children = Children::default();
