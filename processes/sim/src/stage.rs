@@ -206,6 +206,9 @@ struct Counts {
     parse_errors: u64,
     unsupported: u64,
     dropped: u64,
+    /// Camera and depth renders (at capture; a frame goes out after its latency).
+    renders: u64,
+    depth_renders: u64,
 }
 
 impl SimStage {
@@ -278,6 +281,7 @@ impl SimStage {
         if let Some(len) = self.sim.down_camera().map(|c| c.frame_len()) {
             let mut buf = self.spare_u8.pop().unwrap_or_else(|| vec![0; len]);
             buf.resize(len, 0);
+            self.counts.renders += 1;
             match self.sim.render_camera_into(&mut buf) {
                 Ok(Some(shot)) => self.camera.push_back(Held {
                     pixels: buf,
@@ -295,6 +299,7 @@ impl SimStage {
         if let Some(len) = self.sim.depth_camera().map(|c| c.frame_len()) {
             let mut buf = self.spare_u16.pop().unwrap_or_else(|| vec![0; len]);
             buf.resize(len, 0);
+            self.counts.depth_renders += 1;
             match self.sim.render_depth_into(&mut buf) {
                 Some(shot) => self.depth.push_back(Held {
                     pixels: buf,
@@ -495,6 +500,8 @@ impl Stage for SimStage {
             ("parse_errors", c.parse_errors),
             ("unsupported", c.unsupported),
             ("dropped", c.dropped),
+            ("renders", c.renders),
+            ("depth_renders", c.depth_renders),
         ]
     }
 }

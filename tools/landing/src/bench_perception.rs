@@ -1,5 +1,6 @@
 //! `landing bench perception`: sim -> camera-ingest -> aruco-pnp as three OS processes
-//! over iceoryx2; observation rate and frame-to-observation latency.
+//! over iceoryx2, started from the graph as `landing run --processes` starts them;
+//! observation rate and frame-to-observation latency.
 //!
 //! px4-link runs too, so aruco-pnp has the vehicle state and publishes world poses; the
 //! vehicle is flown through px4-link's request topic (arm, take off to 2 m next to the
@@ -8,8 +9,7 @@
 //! frame's publication by camera-ingest to the observation's arrival at a consumer (this
 //! one).
 
-use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
@@ -20,8 +20,14 @@ use runtime::ipc::{Wake, run_wait_loop};
 use runtime::{Ipc, IpcPrefix, monotonic_ns};
 use serde_json::json;
 
-use crate::procs::{Children, binary, free_udp_port};
+use stack_config::deploy_dir;
+
+use crate::procs::{Children, free_udp_port};
+use crate::run_processes::{command, run_values};
 use crate::stats::percentile;
+
+/// The graph's nodes this benchmark starts.
+const NODES: [&str; 4] = ["sim", "px4-link", "camera-ingest", "aruco-pnp"];
 
 /// Arguments of `landing bench perception`.
 #[derive(Debug, Args)]
@@ -50,60 +56,40 @@ pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
         Some(p) => IpcPrefix::new(p)?,
         None => IpcPrefix::unique("perception"),
     };
-    let (sim, ingest, aruco, link) = (
-        binary("sim")?,
-        binary("camera-ingest")?,
-        binary("aruco-pnp")?,
-        binary("px4-link")?,
+    let deploy = deploy_dir();
+    let graph_path = graph::default_path(&deploy);
+    let graph = graph::Graph::load(&graph_path)?;
+    let scn = sim::scenario::load(&args.scenario, &deploy)?;
+    // The graph's command lines, as `landing run --processes` starts them; the simulator
+    // runs long enough for any --seconds.
+    let values = run_values(
+        &scn,
+        scn.scenario.seed,
+        600.0,
+        &deploy.join("config").join("landing.toml"),
+        &deploy,
+        (free_udp_port()?, free_udp_port()?),
     );
-    let (sim_port, link_port) = (free_udp_port()?, free_udp_port()?);
     let ipc = Ipc::open("bench-perception", &prefix)?;
     let observations = ipc.subscriber::<PadObservation>(services::PAD_OBSERVATION)?;
     let mut requests = ipc.publisher::<LinkRequest>(services::PX4_REQUEST)?;
-    let spawn = |path: &Path, extra: &[&str]| -> Result<Child> {
-        Command::new(path)
-            .args(extra)
-            .args(["--ipc-prefix", prefix.as_str()])
-            .env("LANDING_LOG", "warn")
-            .stdout(Stdio::null())
-            .spawn()
-            .with_context(|| format!("starting {}", path.display()))
-    };
     eprintln!(
-        "bench perception: starting sim ({}), camera-ingest, aruco-pnp, px4-link...",
+        "bench perception: starting {} from the graph: px4-link, camera-ingest, aruco-pnp, then sim...",
         args.scenario
     );
     let mut children = Children::default();
-    children.push(
-        "sim",
-        spawn(
-            &sim,
-            &[
-                "--scenario",
-                &args.scenario,
-                "--duration-s",
-                "600",
-                "--mavlink-listen",
-                &format!("127.0.0.1:{sim_port}"),
-                "--mavlink-remote",
-                &format!("127.0.0.1:{link_port}"),
-            ],
-        )?,
-    );
-    children.push("camera-ingest", spawn(&ingest, &["--source", "sim"])?);
-    children.push("aruco-pnp", spawn(&aruco, &[])?);
-    children.push(
-        "px4-link",
-        spawn(
-            &link,
-            &[
-                "--link",
-                &format!("udp:127.0.0.1:{link_port}"),
-                "--remote",
-                &format!("127.0.0.1:{sim_port}"),
-            ],
-        )?,
-    );
+    for node in graph
+        .start_order()
+        .into_iter()
+        .filter(|n| NODES.contains(&n.name.as_str()))
+    {
+        let child = command(node, &values, &prefix, &graph_path)?
+            .env("LANDING_LOG", "warn")
+            .stdout(Stdio::null())
+            .spawn()
+            .with_context(|| format!("starting {}", node.binary))?;
+        children.push(&node.name, child);
+    }
     std::thread::sleep(Duration::from_millis(1500));
     eprintln!("bench perception: arming and taking off to 2 m through px4-link...");
     for (id, kind) in [(1, LinkRequestKind::Arm), (2, LinkRequestKind::Takeoff)] {

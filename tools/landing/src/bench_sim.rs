@@ -1,22 +1,28 @@
-//! `landing bench sim`: how much faster than real time the simulator runs with both
-//! cameras rendering at their rates, and what one render costs.
+//! `landing bench sim`: how fast `landing run` flies a mission in lockstep, and what the
+//! simulator's part of it costs.
 //!
-//! The vehicle is flown as px4-link would fly it (arm + take-off over MAVLink messages to
-//! the simulated autopilot), so the cameras see a real flight: the ground, the moving pad.
-//! The headline real-time factor renders the camera on its worker thread between capture
-//! and publish time, as the lockstep runner does; the single-thread figure is also given.
-//! Render times are measured in the single-thread flights.
+//! Each flight is the real lockstep run: every stage of the graph on the lockstep driver
+//! (the simulator, px4-link, camera-ingest, aruco-pnp, depth-map, planner, fsm), flying
+//! the scenario's mission. The headline real-time factor is simulated time over wall
+//! time for that whole pipeline, what a user of `landing run` gets. The simulator's
+//! share is timed on its own (its stage wrapped in a timer): its real-time factor alone,
+//! and the cost of a simulator call that rendered a camera frame or a depth frame (the
+//! render dominates such a call: a physics step is microseconds).
 
+use std::cell::RefCell;
 use std::path::PathBuf;
+use std::rc::Rc;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Args;
 use serde_json::json;
-use sim::camera_worker::CameraPipeline;
-use sim::lockstep::Simulator;
 use stack_config::deploy_dir;
+use stage::lockstep::Lockstep;
+use stage::{Counter, Input, Outbox, Stage, StageError};
 
+use crate::config_cmd::StackConfig;
+use crate::run_lockstep::{self, Setup};
 use crate::stats::percentile;
 
 /// Arguments of `landing bench sim`.
@@ -25,7 +31,7 @@ pub struct SimArgs {
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
-    /// Simulated seconds flown per camera resolution.
+    /// Simulated seconds flown per scenario (the mission, then the vehicle on the pad).
     #[arg(long, default_value_t = 20.0)]
     seconds: f64,
     /// The deploy directory (default: found above the current directory or executable).
@@ -33,87 +39,157 @@ pub struct SimArgs {
     deploy_dir: Option<PathBuf>,
 }
 
-/// What one flight measured.
-struct Flight {
-    /// Median over one-second windows of simulated time: this shared VM's
-    /// neighbours steal whole bursts of CPU, which the median sets aside.
-    realtime_factor: f64,
-    /// Simulated time over wall time for the whole flight.
-    realtime_factor_overall: f64,
+/// What the timed simulator measured.
+#[derive(Debug, Default)]
+struct Timings {
+    /// Wall time of all the simulator's calls, ns.
+    total_ns: u64,
+    /// Calls that rendered a camera frame (and no depth frame), ms.
     render_ms: Vec<f64>,
+    /// Calls that rendered a depth frame (and no camera frame), ms.
     depth_ms: Vec<f64>,
 }
 
-/// Flies `seconds` of `scenario`. Synchronous: every render on this thread, timed.
-/// Pipelined: the camera renders on a [`CameraPipeline`] between capture and publish time,
-/// as the lockstep runner does, while physics and depth run here.
-fn fly(scenario: &str, seconds: f64, deploy: &std::path::Path, pipelined: bool) -> Result<Flight> {
+/// The simulator's stage with each call timed, sorted by what the call rendered (the
+/// driver owns the stage; the bench keeps the other handle on the timings).
+struct Timed {
+    inner: Box<dyn Stage>,
+    timings: Rc<RefCell<Timings>>,
+}
+
+fn count(stage: &dyn Stage, key: &str) -> u64 {
+    stage
+        .counters()
+        .into_iter()
+        .find(|(k, _)| *k == key)
+        .map_or(0, |(_, v)| v)
+}
+
+impl Stage for Timed {
+    fn name(&self) -> &'static str {
+        self.inner.name()
+    }
+    fn tick_period_ns(&self) -> Option<u64> {
+        self.inner.tick_period_ns()
+    }
+    fn on_input(
+        &mut self,
+        now: u64,
+        input: Input<'_>,
+        out: &mut dyn Outbox,
+    ) -> Result<(), StageError> {
+        let t = Instant::now();
+        let r = self.inner.on_input(now, input, out);
+        self.timings.borrow_mut().total_ns += t.elapsed().as_nanos() as u64;
+        r
+    }
+    fn on_tick(&mut self, now: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
+        let before = (
+            count(&*self.inner, "renders"),
+            count(&*self.inner, "depth_renders"),
+        );
+        let t = Instant::now();
+        let r = self.inner.on_tick(now, out);
+        let ns = t.elapsed().as_nanos() as u64;
+        let rendered = (
+            count(&*self.inner, "renders") - before.0,
+            count(&*self.inner, "depth_renders") - before.1,
+        );
+        let mut timings = self.timings.borrow_mut();
+        timings.total_ns += ns;
+        match rendered {
+            (1, 0) => timings.render_ms.push(ns as f64 * 1e-6),
+            (0, 1) => timings.depth_ms.push(ns as f64 * 1e-6),
+            _ => {}
+        }
+        r
+    }
+    fn on_inputs_done(&mut self, now: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
+        self.inner.on_inputs_done(now, out)
+    }
+    fn max_slice_len(&self, topic: &str) -> usize {
+        self.inner.max_slice_len(topic)
+    }
+    fn counters(&self) -> Vec<Counter> {
+        self.inner.counters()
+    }
+    fn finished(&self) -> bool {
+        self.inner.finished()
+    }
+}
+
+/// What one flight measured.
+struct Flight {
+    /// Median over one-second windows of simulated time: this shared VM's neighbours
+    /// steal whole bursts of CPU, which the median sets aside.
+    realtime_factor: f64,
+    /// Simulated time over wall time for the whole flight.
+    realtime_factor_overall: f64,
+    /// Simulated time over the simulator's own wall time.
+    sim_realtime_factor: f64,
+    timings: Timings,
+}
+
+/// Simulated time per real-time-factor window.
+const WINDOW_NS: u64 = 1_000_000_000;
+
+/// Flies `seconds` of `scenario`'s mission as `landing run` does (seed 1).
+fn fly(scenario: &str, seconds: f64, deploy: &std::path::Path) -> Result<Flight> {
+    let cfg: StackConfig = stack_config::load(&deploy.join("config").join("landing.toml"))?;
     let scn = sim::scenario::load(scenario, deploy)?;
-    let mut sim = Simulator::new(&scn, 1).context("building the simulator")?;
-    // Home is reported from the first step on; the take-off altitude is AMSL.
-    sim.step()?;
-    let origin = sim
-        .take_mavlink()
-        .iter()
-        .find_map(crate::companion::origin_amsl)
-        .context("the simulated autopilot sent no HOME_POSITION")?;
-    crate::companion::arm_and_take_off(&mut sim, origin, 2.0);
-    let mut camera = if pipelined {
-        CameraPipeline::from_simulator(&mut sim)?
-    } else {
-        None
+    let setup = Setup {
+        scenario: &scn,
+        seed: 1,
+        config: &cfg,
+        fsm: run_lockstep::mission(&cfg, &scn)?,
     };
-    let mut ready = Vec::new();
-    let mut image = vec![0u8; sim.down_camera().map_or(0, |c| c.frame_len())];
-    let mut depth = vec![0u16; sim.depth_camera().map_or(0, |c| c.frame_len())];
-    let (mut render_ms, mut depth_ms) = (Vec::new(), Vec::new());
+    let graph = graph::Graph::load(&graph::default_path(deploy))?;
+    let timings = Rc::new(RefCell::new(Timings::default()));
+    let mut stages = Vec::new();
+    for node in graph.step_order() {
+        let mut stage = run_lockstep::stage_for(node, &setup)?
+            .with_context(|| format!("no stage for {}", node.name))?;
+        if node.name == "sim" {
+            stage = Box::new(Timed {
+                inner: stage,
+                timings: Rc::clone(&timings),
+            });
+        }
+        stages.push((node.spec(), stage));
+    }
+    let mut driver = Lockstep::new(stages)?;
     let end_ns = (seconds * 1e9) as u64;
     let start = Instant::now();
     let (mut window_start, mut window_end_ns) = (start, WINDOW_NS);
     let mut window_factors = Vec::new();
-    while sim.time_ns() < end_ns {
-        if sim.time_ns() >= window_end_ns {
+    while driver.now_ns() < end_ns {
+        if driver.step(&mut |_| {})?.is_none() {
+            break;
+        }
+        if driver.now_ns() >= window_end_ns {
             let now = Instant::now();
             window_factors.push(1.0 / (now - window_start).as_secs_f64().max(1e-9));
             (window_start, window_end_ns) = (now, window_end_ns + WINDOW_NS);
         }
-        let r = sim.step()?;
-        let _ = sim.take_mavlink();
-        if let Some(c) = camera.as_mut() {
-            c.on_step(&sim, &r, &mut ready)?;
-            for (buf, _) in ready.drain(..) {
-                c.recycle(buf);
-            }
-        } else if r.camera_due {
-            let t = Instant::now();
-            sim.render_camera_into(&mut image)?;
-            render_ms.push(t.elapsed().as_secs_f64() * 1e3);
-        }
-        if r.depth_due {
-            let t = Instant::now();
-            sim.render_depth_into(&mut depth);
-            depth_ms.push(t.elapsed().as_secs_f64() * 1e3);
-        }
-    }
-    if let Some(c) = camera.as_mut() {
-        c.drain(&mut ready)?;
     }
     let wall = start.elapsed().as_secs_f64();
+    let simulated = driver.now_ns() as f64 * 1e-9;
+    drop(driver);
+    let timings = Rc::try_unwrap(timings)
+        .map(RefCell::into_inner)
+        .unwrap_or_default();
     Ok(Flight {
         // Too short a flight for windows: the whole flight is the one figure.
         realtime_factor: if window_factors.len() >= 3 {
             percentile(&window_factors, 50.0)
         } else {
-            seconds / wall.max(1e-9)
+            simulated / wall.max(1e-9)
         },
-        realtime_factor_overall: seconds / wall.max(1e-9),
-        render_ms,
-        depth_ms,
+        realtime_factor_overall: simulated / wall.max(1e-9),
+        sim_realtime_factor: simulated / (timings.total_ns as f64 * 1e-9).max(1e-9),
+        timings,
     })
 }
-
-/// Simulated time per real-time-factor window.
-const WINDOW_NS: u64 = 1_000_000_000;
 
 fn round3(x: f64) -> f64 {
     (x * 1000.0).round() / 1000.0
@@ -129,44 +205,42 @@ pub fn run(args: &SimArgs) -> Result<()> {
     }
     let deploy = args.deploy_dir.clone().unwrap_or_else(deploy_dir);
     let secs = args.seconds;
-    eprintln!("bench sim: {secs} s of outdoor-1 (640x480 camera, depth), one thread...");
-    let small = fly("outdoor-1", secs, &deploy, false)?;
-    eprintln!("bench sim: the same with the camera on its render worker...");
-    let small_piped = fly("outdoor-1", secs, &deploy, true)?;
-    eprintln!("bench sim: {secs} s of paper-sim (1280x720 camera, depth), one thread...");
-    let large = fly("paper-sim", secs, &deploy, false)?;
-    eprintln!("bench sim: the same with the camera on its render worker...");
-    let large_piped = fly("paper-sim", secs, &deploy, true)?;
-    let mut depth_all = small.depth_ms.clone();
-    depth_all.extend(&large.depth_ms);
+    eprintln!("bench sim: {secs} s of the paper-sim mission in lockstep (1280x720 camera)...");
+    let paper = fly("paper-sim", secs, &deploy)?;
+    eprintln!("bench sim: {secs} s of the outdoor-1 mission in lockstep (640x480 camera)...");
+    let small = fly("outdoor-1", secs, &deploy)?;
+    let mut depth_all = small.timings.depth_ms.clone();
+    depth_all.extend(&paper.timings.depth_ms);
+    let p50 = |v: &[f64]| round3(percentile(v, 50.0));
     let out = json!({
-        "realtime_factor": round3(small_piped.realtime_factor),
-        "realtime_factor_single_thread": round3(small.realtime_factor),
-        "realtime_factor_1280x720": round3(large_piped.realtime_factor),
-        "realtime_factor_1280x720_single_thread": round3(large.realtime_factor),
-        "realtime_factor_overall": round3(small_piped.realtime_factor_overall),
-        "render_ms_p50_640x480": round3(percentile(&small.render_ms, 50.0)),
-        "render_ms_p50_1280x720": round3(percentile(&large.render_ms, 50.0)),
-        "depth_ms_p50": round3(percentile(&depth_all, 50.0)),
-        "frames": small.render_ms.len() + large.render_ms.len(),
+        "realtime_factor": round3(paper.realtime_factor),
+        "realtime_factor_overall": round3(paper.realtime_factor_overall),
+        "realtime_factor_640x480": round3(small.realtime_factor),
+        "sim_realtime_factor": round3(paper.sim_realtime_factor),
+        "sim_realtime_factor_640x480": round3(small.sim_realtime_factor),
+        "render_ms_p50_640x480": p50(&small.timings.render_ms),
+        "render_ms_p50_1280x720": p50(&paper.timings.render_ms),
+        "depth_ms_p50": p50(&depth_all),
+        "frames": small.timings.render_ms.len() + paper.timings.render_ms.len(),
     });
     if args.json {
         println!("{out}");
     } else {
         println!(
-            "real-time factor, physics 500 Hz + 640x480 camera 30 Hz + depth 30 Hz: {:.1} \
-             (median of 1 s windows, camera on its render worker; {:.1} over the whole \
-             flight; {:.1} all on one thread)",
-            small_piped.realtime_factor, small_piped.realtime_factor_overall, small.realtime_factor
+            "real-time factor of `landing run` (every stage in lockstep), paper-sim: {:.1} \
+             (median of 1 s windows; {:.1} over the whole flight); outdoor-1 (640x480): {:.1}",
+            paper.realtime_factor, paper.realtime_factor_overall, small.realtime_factor
         );
         println!(
-            "real-time factor with the 1280x720 camera: {:.1} ({:.1} on one thread)",
-            large_piped.realtime_factor, large.realtime_factor
+            "the simulator alone (physics 500 Hz, camera and depth 30 Hz) in those flights: \
+             {:.1} (1280x720), {:.1} (640x480)",
+            paper.sim_realtime_factor, small.sim_realtime_factor
         );
         println!(
-            "render p50: 640x480 {:.2} ms, 1280x720 {:.2} ms; depth 640x480 p50 {:.2} ms",
-            percentile(&small.render_ms, 50.0),
-            percentile(&large.render_ms, 50.0),
+            "simulator step with a render p50: camera 640x480 {:.2} ms, 1280x720 {:.2} ms; \
+             depth 640x480 {:.2} ms",
+            percentile(&small.timings.render_ms, 50.0),
+            percentile(&paper.timings.render_ms, 50.0),
             percentile(&depth_all, 50.0)
         );
     }

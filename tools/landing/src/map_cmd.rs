@@ -1,35 +1,34 @@
-//! `landing map`: flies a short scripted path in the lockstep simulator, builds the
-//! occupancy map from every depth frame with the pose the autopilot *reports*, and draws
-//! it (top and side views) into a PNG.
+//! `landing map`: flies a short scripted path in the lockstep simulator, maps every depth
+//! frame with the pose the autopilot *reports*, and draws the map (top and side views)
+//! into a PNG.
 //!
-//! The vehicle is flown as px4-link will fly it: COMMAND_LONG arm and take-off, then
-//! SET_POSITION_TARGET_LOCAL_NED streamed at 20 Hz for more than a second before the
-//! switch to OFFBOARD (confirmed from the HEARTBEAT's custom mode), then slow legs that
-//! look at the obstacle from the front, both sides and above. The mapper sees only
-//! what a companion sees: LOCAL_POSITION_NED and ATTITUDE_QUATERNION (the estimator's
-//! output, with its noise and drift) and the depth frames, each handed over at its
-//! publish time (capture + latency). The truth (where the obstacles really are, where
-//! the vehicle really went) is used only to lay out the script's legs around the first
-//! obstacle (as an operator who can see it would), for the printed comparison and for
-//! the outlines in the figure: this is an evaluation tool; the map never sees it.
+//! The stages are the pipeline's own, on the lockstep driver: the simulator, px4-link
+//! (MAVLink through its wire encoding both ways) and depth-map as the graph declares
+//! them, with a scripted companion (`map_pilot`) in the fsm's place that flies through
+//! px4-link's requests and setpoints: OFFBOARD with the setpoint stream running, arm,
+//! climb, then slow legs that look at the obstacle from the front, both sides and above.
+//! The figure is the map depth-map *published* (what the planner reads). The truth
+//! (where the obstacles really are, where the vehicle really went) is used only to lay
+//! out the script's legs around the first obstacle (as an operator who can see it
+//! would), for the printed comparison and for the outlines in the figure: this is an
+//! evaluation tool; the map never sees it.
 
-use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use depth_map::{DepthMapConfig, DepthMapper, DepthPixels, DepthView, OccupancyMap};
-use ipc_types::msg::{CellState, Intrinsics};
-use mavlink::dialects::common::{
-    MavCmd, MavFrame, MavMessage, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA,
-};
-use nalgebra::{Isometry3, Point3, Translation3, Vector3};
+use ipc_types::msg::{CellState, OccupancyMapHeader};
+use nalgebra::{Point3, Vector3};
 use opencv::core::{Mat, Point, Rect, Scalar, Vector};
 use opencv::{core, imgcodecs, imgproc};
-use sim::lockstep::Simulator;
 use sim::world::Aabb;
 use stack_config::{self as cfgload, deploy_dir};
-use state_history::{StateHistory, TimedPose};
+use stage::lockstep::{Lockstep, Published};
+use stage::{Message, Stage};
+
+use crate::config_cmd::StackConfig;
+use crate::map_pilot::{self, MapPilot};
+use crate::run_lockstep::{self, Setup};
 
 /// Arguments of `landing map`.
 #[derive(Debug, Args)]
@@ -43,8 +42,7 @@ pub struct MapArgs {
     /// Seed of every random process (default: the scenario's).
     #[arg(long)]
     seed: Option<u64>,
-    /// Stack configuration to read [depth_map] from (default: the deploy directory's
-    /// config/landing.toml).
+    /// Stack configuration (default: the deploy directory's config/landing.toml).
     #[arg(long)]
     config: Option<PathBuf>,
     /// The deploy directory (default: found above the current directory or executable).
@@ -59,8 +57,6 @@ pub struct MapArgs {
 const HEIGHT_M: f64 = 1.0;
 /// Speed along the legs, m/s.
 const SPEED_M_S: f64 = 0.4;
-/// Setpoint stream period (20 Hz).
-const SETPOINT_PERIOD_NS: u64 = 50_000_000;
 /// Occupied cells whose centre is below this are the ground layer (the ground is z = 0
 /// and the cells are 0.15 m): left out of the comparison.
 const GROUND_CUT_M: f64 = 0.15;
@@ -70,155 +66,62 @@ const TOP_VIEW_FROM_M: f64 = 0.45;
 /// Longest flight, simulated s.
 const MAX_FLIGHT_S: f64 = 90.0;
 
-use crate::companion::{COMPANION, command};
-
-/// Position + yaw setpoint, ENU in, NED on the wire.
-fn setpoint(sim: &mut Simulator, p: &Vector3<f64>, yaw_enu: f64) {
-    let ignore = PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
-        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
-        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE
-        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
-        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AY_IGNORE
-        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE
-        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE;
-    let time_boot_ms = (sim.time_ns() / 1_000_000) as u32;
-    let ned = px4_protocol::frames::ned_from_enu(p);
-    sim.handle_mavlink(
-        &COMPANION,
-        &MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
-            time_boot_ms,
-            x: ned[0] as f32,
-            y: ned[1] as f32,
-            z: ned[2] as f32,
-            vx: 0.0,
-            vy: 0.0,
-            vz: 0.0,
-            afx: 0.0,
-            afy: 0.0,
-            afz: 0.0,
-            yaw: px4_protocol::frames::yaw_enu_to_ned(yaw_enu) as f32,
-            yaw_rate: 0.0,
-            type_mask: ignore,
-            target_system: 1,
-            target_component: 1,
-            coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
-        }),
-    );
+/// The occupancy window as depth-map published it: header and one state byte per cell.
+struct PublishedMap {
+    dims: [usize; 3],
+    resolution: f64,
+    origin: Point3<f64>,
+    cells: Vec<u8>,
 }
 
-/// What the companion knows of the vehicle, from telemetry only.
-struct Telemetry {
-    attitude: StateHistory,
-    offboard: bool,
-    latest: Option<TimedPose>,
-    /// AMSL altitude of the local origin, from HOME_POSITION.
-    origin_amsl: Option<f64>,
-}
-
-impl Telemetry {
-    /// Reads the autopilot's messages; each LOCAL_POSITION_NED becomes a full state
-    /// (its position, the attitude interpolated at its time) handed to the mapper.
-    fn read(
-        &mut self,
-        msgs: &[MavMessage],
-        mapper: &mut DepthMapper,
-        path: &mut Vec<Vector3<f64>>,
-    ) {
-        for m in msgs {
-            match m {
-                MavMessage::HEARTBEAT(h) => {
-                    self.offboard = (h.custom_mode >> 16) & 0xff == 6;
-                }
-                MavMessage::HOME_POSITION(_) => {
-                    self.origin_amsl = crate::companion::origin_amsl(m);
-                }
-                MavMessage::ATTITUDE_QUATERNION(a) => {
-                    if let Some(r) =
-                        px4_protocol::frames::world_from_body_enu([a.q1, a.q2, a.q3, a.q4])
-                    {
-                        self.attitude.push(TimedPose {
-                            time_ns: u64::from(a.time_boot_ms) * 1_000_000,
-                            world_from_body: Isometry3::from_parts(Translation3::identity(), r),
-                            velocity: Vector3::zeros(),
-                        });
-                    }
-                }
-                MavMessage::LOCAL_POSITION_NED(p) => {
-                    let t = u64::from(p.time_boot_ms) * 1_000_000;
-                    let Ok(att) = self.attitude.at(t) else {
-                        continue;
-                    };
-                    let pos = sim::px4::commander::enu_from_local_ned(p.x, p.y, p.z);
-                    let vel = sim::px4::commander::enu_from_local_ned(p.vx, p.vy, p.vz);
-                    let state = TimedPose {
-                        time_ns: t,
-                        world_from_body: Isometry3::from_parts(
-                            Translation3::from(pos),
-                            att.rotation,
-                        ),
-                        velocity: vel,
-                    };
-                    if mapper.push_state(state) {
-                        if path.last().is_none_or(|l| (l - pos).norm() > 0.02) {
-                            path.push(pos);
-                        }
-                        self.latest = Some(state);
-                    }
-                }
-                _ => {}
-            }
+impl PublishedMap {
+    fn new(h: &OccupancyMapHeader, cells: &[u8]) -> Self {
+        Self {
+            dims: h.dims.map(|d| d as usize),
+            resolution: h.resolution,
+            origin: Point3::from(h.origin),
+            cells: cells.to_vec(),
         }
     }
 
-    fn position(&self) -> Option<Vector3<f64>> {
-        self.latest.map(|s| s.world_from_body.translation.vector)
+    fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
+    fn resolution(&self) -> f64 {
+        self.resolution
+    }
+
+    fn origin(&self) -> Point3<f64> {
+        self.origin
+    }
+
+    fn state_at_index(&self, [x, y, z]: [usize; 3]) -> CellState {
+        let i = x + self.dims[0] * (y + self.dims[1] * z);
+        self.cells
+            .get(i)
+            .map_or(CellState::Unknown, |c| CellState::from_raw(*c))
+    }
+
+    fn cell_centre(&self, [x, y, z]: [usize; 3]) -> Point3<f64> {
+        let r = self.resolution;
+        self.origin + Vector3::new(x as f64 + 0.5, y as f64 + 0.5, z as f64 + 0.5) * r
+    }
+
+    fn occupied(&self) -> usize {
+        self.cells
+            .iter()
+            .filter(|c| CellState::from_raw(**c) == CellState::Occupied)
+            .count()
     }
 }
 
-/// The script's phases.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Phase {
-    Ground,
-    Climb,
-    Stream {
-        since_ns: u64,
-    },
-    /// Flying leg `leg`; `since_ns`: when its waypoint was reached (0: not yet).
-    Legs {
-        leg: usize,
-        since_ns: u64,
-    },
-    Done,
-}
-
-impl Phase {
-    fn name(&self) -> &'static str {
-        match self {
-            Self::Ground => "on the ground",
-            Self::Climb => "take-off",
-            Self::Stream { .. } => "setpoint stream",
-            Self::Legs { .. } => "offboard legs",
-            Self::Done => "done",
-        }
-    }
-}
-
-/// The legs: toward the obstacle, to each side of it, above it, looking at it.
-fn legs(start: Vector3<f64>, look_at: Vector3<f64>) -> Vec<Vector3<f64>> {
-    let mut ahead = look_at - start;
-    ahead.z = 0.0;
-    let dist = ahead.norm().max(1e-6);
-    let dir = ahead / dist;
-    let side = Vector3::new(-dir.y, dir.x, 0.0);
-    let near = start + dir * (0.4 * dist);
-    let near = Vector3::new(near.x, near.y, HEIGHT_M);
-    vec![
-        near,
-        near - side * 1.5,
-        near + side * 1.5,
-        near,
-        Vector3::new(near.x, near.y, HEIGHT_M + 0.6),
-    ]
+/// A counter of a stage on the driver.
+fn counter(driver: &Lockstep, node: &str, key: &str) -> u64 {
+    driver
+        .stage(node)
+        .and_then(|s| s.counters().into_iter().find(|(k, _)| *k == key))
+        .map_or(0, |(_, v)| v)
 }
 
 /// Runs the flight, writes the PNG, prints the comparison.
@@ -242,30 +145,14 @@ pub fn run(args: &MapArgs) -> Result<()> {
         );
     }
     let deploy = args.deploy_dir.clone().unwrap_or_else(deploy_dir);
-    let cfg: DepthMapConfig = match &args.config {
-        Some(p) => cfgload::load_process::<DepthMapConfig>(p, "depth_map")?.1,
-        None => {
-            let p = deploy.join("config").join("landing.toml");
-            if p.is_file() {
-                cfgload::load_process::<DepthMapConfig>(&p, "depth_map")?.1
-            } else {
-                DepthMapConfig::default()
-            }
-        }
-    };
+    let cfg_path = args
+        .config
+        .clone()
+        .unwrap_or_else(|| deploy.join("config").join("landing.toml"));
+    let cfg: StackConfig = cfgload::load(&cfg_path)?;
     let scn = sim::scenario::load(&args.scenario, &deploy)?;
     let seed = args.seed.unwrap_or(scn.scenario.seed);
-    let mut sim = Simulator::new(&scn, seed).context("building the simulator")?;
-    let cam = sim
-        .depth_camera()
-        .context("the scenario has no depth camera")?;
-    let p = cam.params().clone();
-    let (fx, fy) = p.focal_px();
-    let (cx, cy) = p.principal_point_px();
-    let intrinsics = Intrinsics { fx, fy, cx, cy };
-    let frame_len = cam.frame_len();
-    let mut mapper = DepthMapper::from_config(&cfg)?;
-    let obstacles: Vec<Aabb> = sim.world().obstacles().to_vec();
+    let obstacles: Vec<Aabb> = scn.scenario.obstacles.clone();
     let look_at = obstacles
         .first()
         .map(|b| {
@@ -276,170 +163,101 @@ pub fn run(args: &MapArgs) -> Result<()> {
             )
         })
         .unwrap_or(Vector3::new(3.0, 0.0, 0.5));
-
-    let mut tele = Telemetry {
-        attitude: StateHistory::new(100, 50_000_000),
-        offboard: false,
-        latest: None,
-        origin_amsl: None,
+    let graph = graph::Graph::load(&graph::default_path(&deploy))?;
+    let setup = Setup {
+        scenario: &scn,
+        seed,
+        config: &cfg,
+        fsm: run_lockstep::mission(&cfg, &scn)?,
     };
+    let mut stages = Vec::new();
+    for name in ["sim", "px4-link"] {
+        let node = graph
+            .node(name)
+            .with_context(|| format!("the graph has no {name}"))?;
+        let stage = run_lockstep::stage_for(node, &setup)?.context("no stage")?;
+        stages.push((node.spec(), stage));
+    }
+    stages.push((
+        MapPilot::spec(),
+        Box::new(MapPilot::new(HEIGHT_M, SPEED_M_S, look_at)) as Box<dyn Stage>,
+    ));
+    let node = graph
+        .node("depth-map")
+        .context("the graph has no depth-map")?;
+    stages.push((
+        node.spec(),
+        run_lockstep::stage_for(node, &setup)?.context("no stage")?,
+    ));
+    let mut driver = Lockstep::new(stages)?;
+    let depth = &scn.scenario.depth;
+    eprintln!(
+        "map: {} (seed {seed}), depth {}x{} at {} Hz, {} m cells",
+        scn.scenario.name,
+        depth.sensor.width,
+        depth.sensor.height,
+        depth.rate_hz,
+        cfg.depth_map.resolution_m
+    );
+
     let mut path: Vec<Vector3<f64>> = Vec::new();
     let mut truth_path: Vec<Vector3<f64>> = Vec::new();
-    let mut pool: Vec<Vec<u16>> = (0..4).map(|_| vec![0u16; frame_len]).collect();
-    let mut pending: VecDeque<(Vec<u16>, u64, u64)> = VecDeque::new();
-    let mut phase = Phase::Ground;
-    let mut waypoints: Vec<Vector3<f64>> = Vec::new();
-    let mut target = Vector3::zeros();
-    let mut next_setpoint_ns = 0u64;
+    let mut map: Option<PublishedMap> = None;
     let mut next_progress_ns = 0u64;
-    let (mut skipped, mut last_error) = (0u64, None);
-    eprintln!(
-        "map: {} (seed {seed}), depth {}x{} at {} Hz, map {:?} cells of {} m",
-        scn.scenario.name,
-        p.width,
-        p.height,
-        scn.scenario.depth.rate_hz,
-        mapper.map().dims(),
-        cfg.resolution_m
-    );
-    while sim.time_ns() < (MAX_FLIGHT_S * 1e9) as u64 && phase != Phase::Done {
-        let report = sim.step()?;
-        let now = sim.time_ns();
-        let msgs = sim.take_mavlink();
-        tele.read(&msgs, &mut mapper, &mut path);
-        let truth = sim.world().truth().position;
-        if truth_path.last().is_none_or(|l| (l - truth).norm() > 0.02) {
-            truth_path.push(truth);
-        }
-        if report.depth_due {
-            let mut buf = pool.pop().unwrap_or_else(|| vec![0u16; frame_len]);
-            if let Some(shot) = sim.render_depth_into(&mut buf) {
-                pending.push_back((buf, shot.capture_ns, shot.publish_ns));
-            } else {
-                pool.push(buf);
-            }
-        }
-        // Frames go to the mapper at their publish time, as the process would get them.
-        while pending.front().is_some_and(|f| f.2 <= now) {
-            let Some((buf, capture_ns, _)) = pending.pop_front() else {
-                break;
-            };
-            let view = DepthView::new(
-                p.width,
-                p.height,
-                intrinsics,
-                DepthPixels::U16 {
-                    data: &buf,
-                    scale_m: sim::depth::DEPTH_SCALE_M as f32,
-                },
-            )?;
-            if let Err(e) = mapper.process(&view, capture_ns) {
-                skipped += 1;
-                last_error = Some(e);
-            }
-            pool.push(buf);
-        }
-        phase = match phase {
-            Phase::Ground if now >= 500_000_000 => match tele.origin_amsl {
-                Some(origin) => {
-                    crate::companion::arm_and_take_off(&mut sim, origin, HEIGHT_M);
-                    Phase::Climb
+    let end_ns = (MAX_FLIGHT_S * 1e9) as u64;
+    while driver.now_ns() < end_ns && counter(&driver, map_pilot::NAME, "done") == 0 {
+        driver.step(&mut |p: &Published<'_>| match p.msg {
+            Message::VehicleState(v) => {
+                let pos = Vector3::from(v.world_from_body.translation);
+                if path.last().is_none_or(|l| (l - pos).norm() > 0.02) {
+                    path.push(pos);
                 }
-                None => phase,
-            },
-            Phase::Climb
-                if now >= 6_000_000_000
-                    && tele.position().is_some_and(|p| p.z > HEIGHT_M - 0.1) =>
-            {
-                target = tele.position().unwrap_or_default();
-                target.z = HEIGHT_M;
-                waypoints = legs(target, look_at);
-                Phase::Stream { since_ns: now }
             }
-            Phase::Stream { .. } if tele.offboard => Phase::Legs {
-                leg: 0,
-                since_ns: 0,
-            },
-            Phase::Stream { since_ns } if now >= since_ns + 1_500_000_000 => {
-                // Once a second until the HEARTBEAT confirms OFFBOARD.
-                if (now - since_ns) % 1_000_000_000 < 2_000_000 {
-                    command(
-                        &mut sim,
-                        MavCmd::MAV_CMD_DO_SET_MODE,
-                        [1.0, 6.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-                    );
+            Message::TruthState(t) => {
+                let pos = Vector3::from(t.vehicle_position);
+                if truth_path.last().is_none_or(|l| (l - pos).norm() > 0.02) {
+                    truth_path.push(pos);
                 }
-                phase
             }
-            Phase::Legs { leg, since_ns } => match waypoints.get(leg) {
-                Some(w) => {
-                    let to = w - target;
-                    let step = SPEED_M_S * 0.002;
-                    if to.norm() > step {
-                        target += to / to.norm() * step;
-                        phase
-                    } else {
-                        target = *w;
-                        // Hold 1.5 s at each waypoint.
-                        let arrived = if since_ns == 0 { now } else { since_ns };
-                        if now >= arrived + 1_500_000_000 {
-                            Phase::Legs {
-                                leg: leg + 1,
-                                since_ns: 0,
-                            }
-                        } else {
-                            Phase::Legs {
-                                leg,
-                                since_ns: arrived,
-                            }
-                        }
-                    }
-                }
-                None => Phase::Done,
-            },
-            other => other,
-        };
-        if matches!(phase, Phase::Stream { .. } | Phase::Legs { .. }) && now >= next_setpoint_ns {
-            let d = look_at - target;
-            setpoint(&mut sim, &target, d.y.atan2(d.x));
-            next_setpoint_ns = now + SETPOINT_PERIOD_NS;
-        }
+            Message::OccupancyMap(h, cells) => map = Some(PublishedMap::new(h, cells)),
+            _ => {}
+        })?;
+        let now = driver.now_ns();
+        let phase = usize::try_from(counter(&driver, map_pilot::NAME, "phase"))
+            .ok()
+            .and_then(|i| MapPilot::PHASES.get(i))
+            .copied()
+            .unwrap_or("?");
         if now >= next_progress_ns {
             next_progress_ns = now + 2_000_000_000;
-            let c = mapper.counters();
             eprintln!(
                 "map: t {:5.1} s  {:<16} frames {:4}  mapped {:4}  occupied cells {:5}",
                 now as f64 * 1e-9,
-                phase.name(),
-                c.frames,
-                c.integrated,
-                mapper.map().census().occupied
+                phase,
+                counter(&driver, "depth-map", "frames"),
+                counter(&driver, "depth-map", "integrated"),
+                map.as_ref().map_or(0, PublishedMap::occupied)
             );
         }
     }
-    if phase != Phase::Done {
-        bail!(
-            "the scripted flight did not finish in {MAX_FLIGHT_S} s (stuck in `{}`)",
-            phase.name()
-        );
+    if counter(&driver, map_pilot::NAME, "done") == 0 {
+        bail!("the scripted flight did not finish in {MAX_FLIGHT_S} s");
     }
-    let c = mapper.counters();
-    if let Some(e) = &last_error {
-        eprintln!("map: {skipped} frames skipped, the last because: {e}");
-    }
-    let map = mapper.map();
-    let est_end = tele.position().unwrap_or_default();
-    let truth_end = sim.world().truth().position;
+    let Some(map) = map else {
+        bail!("depth-map published no map");
+    };
+    let est_end = path.last().copied().unwrap_or_default();
+    let truth_end = truth_path.last().copied().unwrap_or_default();
     println!(
         "flight: {:.1} s, {} depth frames, {} mapped; estimate vs truth at the end: {:.3} m apart",
-        sim.time_ns() as f64 * 1e-9,
-        c.frames,
-        c.integrated,
+        driver.now_ns() as f64 * 1e-9,
+        counter(&driver, "depth-map", "frames"),
+        counter(&driver, "depth-map", "integrated"),
         (est_end - truth_end).norm()
     );
-    compare(map, &obstacles);
+    compare(&map, &obstacles);
     draw(
-        map,
+        &map,
         &path,
         &truth_path,
         &obstacles,
@@ -451,7 +269,7 @@ pub fn run(args: &MapArgs) -> Result<()> {
 }
 
 /// Prints where each obstacle really is against where the map put it.
-fn compare(map: &OccupancyMap, obstacles: &[Aabb]) {
+fn compare(map: &PublishedMap, obstacles: &[Aabb]) {
     let [nx, ny, nz] = map.dims();
     let r = map.resolution();
     let mut near = vec![(0usize, [f64::INFINITY; 3], [f64::NEG_INFINITY; 3]); obstacles.len()];
@@ -698,7 +516,7 @@ impl Panel {
 /// over y), cells coloured by state, axes in metres, a 1 m scale bar, the estimated
 /// path, the obstacles' true outlines.
 fn draw(
-    map: &OccupancyMap,
+    map: &PublishedMap,
     path: &[Vector3<f64>],
     truth_path: &[Vector3<f64>],
     obstacles: &[Aabb],

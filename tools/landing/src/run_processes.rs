@@ -11,7 +11,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use graph::{Graph, RunValues};
+use graph::{Graph, Node, RunValues};
 use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::msg::{
     FsmStatus, LinkOutcome, LinkRequest, MissionState, PadObservation, PlannerGoal, PlannerStats,
@@ -76,6 +76,23 @@ pub fn run_values(
     }
 }
 
+/// The command line of graph node `node` for one run: its binary (beside this
+/// executable), the graph's arguments with `values` filled in, the iceoryx2 prefix and
+/// the graph file (each process finds its node there).
+pub fn command(
+    node: &Node,
+    values: &RunValues,
+    prefix: &IpcPrefix,
+    graph_path: &Path,
+) -> Result<Command> {
+    let mut cmd = Command::new(binary(&node.binary)?);
+    cmd.args(node.command_args(values))
+        .args(["--ipc-prefix", prefix.as_str()])
+        .arg("--graph")
+        .arg(graph_path);
+    Ok(cmd)
+}
+
 /// Runs the mission with every stage as a process; returns how it ended and the
 /// referee's record (the same referee as the lockstep run).
 pub fn run(
@@ -113,19 +130,14 @@ pub fn run(
     // The graph's start order: the nodes marked start_last (the simulator, whose clock
     // starts the world) after the others.
     for node in launch.graph.start_order() {
-        let path = binary(&node.binary)?;
         let log: PathBuf = launch.log_dir.join(format!("{}.log", node.name));
         let file = File::create(&log).with_context(|| format!("creating {}", log.display()))?;
-        let child = Command::new(&path)
-            .args(node.command_args(&values))
-            .args(["--ipc-prefix", prefix.as_str()])
-            .arg("--graph")
-            .arg(launch.graph_path)
+        let child = command(node, &values, &prefix, launch.graph_path)?
             .env("LANDING_LOG", "info")
             .stdout(Stdio::null())
             .stderr(file)
             .spawn()
-            .with_context(|| format!("starting {}", path.display()))?;
+            .with_context(|| format!("starting {}", node.binary))?;
         children.push(&node.name, child);
         if !node.start_last {
             // Let each stage open its ports before the simulator's clock starts.

@@ -181,7 +181,8 @@ fn the_sim_benchmark_prints_the_documented_json() {
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
     for key in [
         "realtime_factor",
-        "realtime_factor_single_thread",
+        "realtime_factor_640x480",
+        "sim_realtime_factor",
         "render_ms_p50_640x480",
         "render_ms_p50_1280x720",
         "depth_ms_p50",
