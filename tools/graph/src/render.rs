@@ -2,7 +2,7 @@
 
 use std::fmt::Write;
 
-use crate::{CLOCK, Graph, Input, Node, Topic, Transport};
+use crate::{CLOCK, Graph, Input, Node, Topic, Transport, Wake};
 
 /// The graph as readable text: each node with its rate, trigger, heartbeat deadline,
 /// latency and edges; then the topics; then the order a lockstep driver steps by.
@@ -65,10 +65,10 @@ pub fn text(graph: &Graph) -> String {
 }
 
 fn node_line(n: &Node) -> String {
-    let trigger = if n.trigger == CLOCK {
-        "on its clock".to_string()
-    } else {
-        format!("on {}", n.trigger)
+    let trigger = match (n.trigger == CLOCK, n.wake) {
+        (true, _) => "on its clock".to_string(),
+        (false, Wake::Event) => format!("on {}", n.trigger),
+        (false, Wake::Periodic) => format!("on {}, waited for by its period", n.trigger),
     };
     let mut line = format!(
         "{}  (binary {}; {} Hz {trigger}; heartbeat {} ms; latency {} ms",
