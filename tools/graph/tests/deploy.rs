@@ -294,3 +294,18 @@ fn every_topic_of_the_graph_is_the_topic_tables_with_its_service_and_type() {
         assert_eq!(t.evaluator_only, row.evaluator_only, "{}", t.name);
     }
 }
+
+#[test]
+fn the_architecture_page_shows_the_shipped_graph_as_landing_graph_prints_it() {
+    let page = std::fs::read_to_string(root().join("docs/ARCHITECTURE.md")).unwrap();
+    let block = page
+        .split("<!-- landing graph -->\n```\n")
+        .nth(1)
+        .and_then(|rest| rest.split("```\n<!-- /landing graph -->").next())
+        .expect("docs/ARCHITECTURE.md has a <!-- landing graph --> block");
+    assert_eq!(
+        block.trim_end(),
+        graph::text(&shipped()).trim_end(),
+        "docs/ARCHITECTURE.md's graph block is not what `landing graph` prints: paste its output"
+    );
+}
