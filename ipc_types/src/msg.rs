@@ -1010,7 +1010,7 @@ impl TruthKind {
 /// --processes`). No pipeline process may read it.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("landing::TruthState/v1")]
+#[type_name("landing::TruthState/v2")]
 pub struct TruthState {
     /// Sequence, publish time (monotonic ns), stage stamps.
     pub msg: Header,
@@ -1028,6 +1028,37 @@ pub struct TruthState {
     pub pad_position: [f64; 3],
     /// Pad velocity, m/s.
     pub pad_velocity: [f64; 3],
+    /// Each foot of the landing gear in the pad frame (x, y), m (meaningful with
+    /// `pad_valid`).
+    pub gear_pad: [[f64; 2]; 4],
+    /// What the vehicle rests on: [`Contact`] as raw.
+    pub contact: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+}
+
+/// What the vehicle rests on, in [`TruthState::contact`].
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Contact {
+    /// In the air.
+    Airborne = 0,
+    /// On the ground.
+    Ground = 1,
+    /// On the pad (the ground vehicle's roof).
+    Pad = 2,
+}
+
+impl Contact {
+    /// From the raw value; `None` for an unknown one.
+    pub fn from_raw(raw: u32) -> Option<Self> {
+        match raw {
+            0 => Some(Self::Airborne),
+            1 => Some(Self::Ground),
+            2 => Some(Self::Pad),
+            _ => None,
+        }
+    }
 }
 
 /// A ground-truth event from the simulator, on the evaluator-only topic
@@ -1035,7 +1066,7 @@ pub struct TruthState {
 #[repr(C)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("landing::TruthEvent/v1")]
+#[type_name("landing::TruthEvent/v2")]
 pub struct TruthEvent {
     /// Sequence, event time (`capture_ns`, simulated ns), stage stamps.
     pub msg: Header,
@@ -1047,6 +1078,10 @@ pub struct TruthEvent {
     pub rel_position_pad: [f64; 2],
     /// Touchdown/impact: velocity relative to the surface, m/s.
     pub rel_velocity: [f64; 3],
+    /// Touchdown: each foot of the landing gear in the pad frame (x, y), m.
+    pub gear_pad: [[f64; 2]; 4],
+    /// Touchdown: angle between body up and the surface normal, deg.
+    pub tilt_deg: f64,
     /// Collision: index of the obstacle in the scenario.
     pub obstacle_index: u32,
     /// Keeps the layout free of implicit padding.

@@ -58,8 +58,8 @@ impl Payload {
             Self::LinkOutcome => "landing::LinkOutcome/v1",
             Self::SafetyCommand => "landing::SafetyCommand/v1",
             Self::FsmStatus => "landing::FsmStatus/v1",
-            Self::TruthEvent => "landing::TruthEvent/v1",
-            Self::TruthState => "landing::TruthState/v1",
+            Self::TruthEvent => "landing::TruthEvent/v2",
+            Self::TruthState => "landing::TruthState/v2",
             Self::Mavlink => "MAVLink 2",
         }
     }

@@ -54,6 +54,10 @@ pub struct FsmConfig {
     pub flare_align_m: f64,
     /// Land: descent rate of the final drop, m/s.
     pub drop_rate_m_s: f64,
+    /// Land: the oldest pad observation the touchdown may steer by, s. Older, the vehicle
+    /// drops at once if it is low and was aligned, else goes around: the filter's
+    /// extrapolation is no pad to land on.
+    pub land_max_pad_age_s: f64,
     /// Descend and Land: velocity added per metre of horizontal error over the pad, 1/s,
     /// on top of the autopilot's own position gain (0 = the autopilot's alone).
     pub relative_gain: f64,
@@ -122,6 +126,7 @@ impl Default for FsmConfig {
             flare_height_m: 0.25,
             flare_align_m: 0.04,
             drop_rate_m_s: 0.8,
+            land_max_pad_age_s: 0.4,
             relative_gain: 1.0,
             go_around_m: 0.4,
             max_go_arounds: 3,
@@ -247,6 +252,7 @@ impl Validate for FsmConfig {
             ("go_around_m", self.go_around_m, 0.05, 5.0),
             ("flare_height_m", self.flare_height_m, 0.05, 3.0),
             ("flare_align_m", self.flare_align_m, 0.005, 1.0),
+            ("land_max_pad_age_s", self.land_max_pad_age_s, 0.05, 5.0),
             ("drop_rate_m_s", self.drop_rate_m_s, 0.1, 3.0),
             ("relative_gain", self.relative_gain, 0.0, 10.0),
             ("lost_after_s", self.lost_after_s, 0.05, 30.0),

@@ -819,6 +819,21 @@ impl Fsm {
             self.go_around(now_ns, format!("{e:.2} m off the pad at {height:.2} m"));
             return;
         }
+        let flare = self.cfg.flare_height_m.min(self.cfg.commit_height_m - 0.05);
+        // The pad unseen too long: its estimate is an extrapolation. Low and aligned when
+        // it was last seen, drop now (the drop takes a tenth of a second; waiting only
+        // lets the extrapolation drift); otherwise climb back and find it again.
+        if !on_ground && !self.dropping && est.age_s > self.cfg.land_max_pad_age_s {
+            if height <= flare + 0.03 && e < self.cfg.land_align_m {
+                self.dropping = true;
+            } else {
+                self.go_around(
+                    now_ns,
+                    format!("pad unseen for {:.1} s at {height:.2} m", est.age_s),
+                );
+                return;
+            }
+        }
         if on_ground {
             // Stay pressed onto the pad, moving with it, until the motors are off.
             out.setpoint = Some(self.pad_setpoint(
@@ -843,7 +858,6 @@ impl Fsm {
         // with it, then drop: a gust has a fraction of a second to push it off, not the
         // whole descent.
         let gate = self.cfg.land_align_m;
-        let flare = self.cfg.flare_height_m.min(self.cfg.commit_height_m - 0.05);
         let rel_v = (Vector3::from(v.velocity) - est.velocity).xy().norm();
         if !self.dropping
             && height <= flare + 0.03

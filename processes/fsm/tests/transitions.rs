@@ -836,3 +836,28 @@ fn goals_sent_while_tracking_a_distant_pad_are_rendezvous_points_ahead_of_it() {
     );
     assert!((g.velocity[0] + 0.3).abs() < 0.15, "{:?}", g.velocity);
 }
+
+#[test]
+fn a_pad_unseen_during_the_touchdown_is_never_landed_on_by_extrapolation() {
+    // High in Land when the pad disappears (and the pad vehicle speeds up unseen): the
+    // estimate goes stale, and the vehicle climbs back instead of steering by it. (A
+    // slow touchdown rate keeps it in the air long enough for the estimate to age.)
+    let mut w = World::new(FsmConfig {
+        land_rate_m_s: 0.2,
+        ..config()
+    });
+    w.expect(MissionState::Land, 40.0);
+    w.pad_visible = false;
+    w.pad_vel = Vector3::new(0.4, 0.0, 0.0);
+    w.expect(MissionState::Track, 1.0);
+    assert!(
+        w.fsm.reason().contains("pad unseen for"),
+        "{}",
+        w.fsm.reason()
+    );
+    assert!(!w.on_ground(), "it touched down on a stale estimate");
+    // Seen again, it lands.
+    w.pad_visible = true;
+    w.pad_vel = Vector3::zeros();
+    w.expect(MissionState::Landed, 60.0);
+}

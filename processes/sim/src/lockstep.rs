@@ -6,7 +6,7 @@
 //! the caller renders into a buffer of its choosing (a loaned shared-memory sample in the
 //! `sim` binary, a reused vector in lockstep), so rendering never copies.
 
-use ipc_types::msg::{Header, Text, TruthEvent, TruthKind, TruthState};
+use ipc_types::msg::{Contact, Header, Text, TruthEvent, TruthKind, TruthState};
 
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
@@ -319,6 +319,8 @@ pub fn truth_event(e: &TimedEvent) -> TruthEvent {
             on_pad,
             rel_position_pad,
             rel_velocity,
+            tilt_rad,
+            gear_pad,
         } => {
             m.kind = TruthKind::Touchdown as u32;
             m.on_pad = u32::from(on_pad);
@@ -326,6 +328,8 @@ pub fn truth_event(e: &TimedEvent) -> TruthEvent {
                 m.rel_position_pad = [p.x, p.y];
             }
             m.rel_velocity = [rel_velocity.x, rel_velocity.y, rel_velocity.z];
+            m.tilt_deg = tilt_rad.to_degrees();
+            m.gear_pad = gear_pad.unwrap_or_default();
         }
         Event::Liftoff { from_pad } => {
             m.kind = TruthKind::Liftoff as u32;
@@ -350,18 +354,30 @@ mod tests;
 /// Where the vehicle and the pad really are now, stamped `now_ns` (the publisher's clock),
 /// for the evaluator-only truth-state topic.
 pub fn truth_state(sim: &Simulator, now_ns: u64) -> TruthState {
-    let truth = sim.world().truth();
-    let pad = sim.world().pad();
+    world_truth_state(sim.world(), now_ns)
+}
+
+/// [`truth_state`] of a bare world (the referee's scripted tests step one directly).
+pub fn world_truth_state(world: &World, now_ns: u64) -> TruthState {
+    let truth = world.truth();
+    let pad = world.pad();
     TruthState {
         msg: Header::captured_at(now_ns),
-        sim_time_ns: sim.time_ns(),
+        sim_time_ns: world.time_ns(),
         vehicle_position: truth.position.into(),
         vehicle_velocity: truth.velocity.into(),
         pad_valid: u32::from(pad.is_some()),
-        armed: u32::from(sim.world().armed()),
+        armed: u32::from(world.armed()),
         pad_position: pad
             .as_ref()
             .map_or([0.0; 3], |p| p.world_from_pad.translation.vector.into()),
         pad_velocity: pad.as_ref().map_or([0.0; 3], |p| p.linear_velocity.into()),
+        gear_pad: world.gear_in_pad().unwrap_or_default(),
+        contact: match world.resting_on_pad() {
+            None => Contact::Airborne,
+            Some(false) => Contact::Ground,
+            Some(true) => Contact::Pad,
+        } as u32,
+        reserved: 0,
     }
 }

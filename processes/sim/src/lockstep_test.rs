@@ -111,12 +111,16 @@ fn a_touchdown_becomes_a_truth_event() {
             on_pad: true,
             rel_position_pad: Some(nalgebra::Vector2::new(0.03, -0.01)),
             rel_velocity: nalgebra::Vector3::new(0.0, 0.0, -0.3),
+            tilt_rad: 0.1,
+            gear_pad: Some([[0.1, 0.1], [0.1, -0.1], [-0.1, -0.1], [-0.1, 0.1]]),
         },
     };
     let t = truth_event(&e);
     assert_eq!(TruthKind::from_raw(t.kind), Some(TruthKind::Touchdown));
     assert_eq!(t.on_pad, 1);
     assert_eq!(t.rel_position_pad, [0.03, -0.01]);
+    assert!((t.tilt_deg - 0.1f64.to_degrees()).abs() < 1e-12);
+    assert_eq!(t.gear_pad[1], [0.1, -0.1]);
     assert_eq!(t.msg.capture_ns, 5);
 }
 

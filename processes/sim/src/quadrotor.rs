@@ -96,6 +96,10 @@ pub struct AirframeParams {
     pub angular_drag_coefficients_n_m_s: [f64; 3],
     /// Radius of the sphere around the body origin used for obstacle collisions, in m.
     pub collision_radius_m: f64,
+    /// Where the landing gear touches the ground: the feet, in body FLU, m (z = 0: the
+    /// body origin is the gear's lowest point). The referee wants every foot on the
+    /// printed board.
+    pub landing_gear_m: [[f64; 3]; 4],
 }
 
 impl Default for AirframeParams {
@@ -116,6 +120,13 @@ impl Default for AirframeParams {
             drag_coefficients_n_s_m: [0.35, 0.35, 0.5],
             angular_drag_coefficients_n_m_s: [0.003, 0.003, 0.005],
             collision_radius_m: 0.25,
+            // F450 landing gear: skids 20 cm long, 24 cm apart.
+            landing_gear_m: [
+                [0.10, 0.12, 0.0],
+                [0.10, -0.12, 0.0],
+                [-0.10, -0.12, 0.0],
+                [-0.10, 0.12, 0.0],
+            ],
         }
     }
 }
@@ -138,6 +149,12 @@ impl AirframeParams {
             drag_coefficients_n_s_m: [0.12, 0.12, 0.25],
             angular_drag_coefficients_n_m_s: [0.001, 0.001, 0.002],
             collision_radius_m: 0.18,
+            landing_gear_m: [
+                [0.07, 0.07, 0.0],
+                [0.07, -0.07, 0.0],
+                [-0.07, -0.07, 0.0],
+                [-0.07, 0.07, 0.0],
+            ],
         }
     }
 
@@ -179,6 +196,16 @@ impl AirframeParams {
             params::non_negative(&format!("angular_drag_coefficients_n_m_s[{i}]"), *d)?;
         }
         params::positive("collision_radius_m", self.collision_radius_m)?;
+        for (i, foot) in self.landing_gear_m.iter().enumerate() {
+            params::finite_all(&format!("landing_gear_m[{i}]"), foot)?;
+            if foot.iter().any(|c| c.abs() > 2.0) {
+                return Err(ParamError::new(
+                    format!("landing_gear_m[{i}]"),
+                    format!("{foot:?}"),
+                    "each coordinate must be within 2 m of the body origin",
+                ));
+            }
+        }
         let ratio = self.thrust_to_weight();
         if ratio <= 1.2 {
             return Err(ParamError::new(

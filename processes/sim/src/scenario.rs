@@ -241,6 +241,61 @@ struct AirframeFile {
     limits: Limits,
     #[serde(default)]
     px4: Px4Params,
+    #[serde(default)]
+    touchdown: TouchdownLimits,
+}
+
+/// What the referee accepts at a touchdown, relative to the surface touched. Written
+/// once: these defaults, which an airframe's `[touchdown]` may tighten, never loosen.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TouchdownLimits {
+    /// Speed along the surface normal, m/s.
+    pub max_vertical_speed_mps: f64,
+    /// Speed along the surface, m/s.
+    pub max_horizontal_speed_mps: f64,
+    /// Angle between body up and the surface normal, deg.
+    pub max_tilt_deg: f64,
+}
+
+impl Default for TouchdownLimits {
+    /// 1.0 m/s down, 0.5 m/s sideways, 15 deg.
+    fn default() -> Self {
+        Self {
+            max_vertical_speed_mps: 1.0,
+            max_horizontal_speed_mps: 0.5,
+            max_tilt_deg: 15.0,
+        }
+    }
+}
+
+impl TouchdownLimits {
+    /// Each limit is positive and no looser than the default.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let d = Self::default();
+        for (field, v, max) in [
+            (
+                "max_vertical_speed_mps",
+                self.max_vertical_speed_mps,
+                d.max_vertical_speed_mps,
+            ),
+            (
+                "max_horizontal_speed_mps",
+                self.max_horizontal_speed_mps,
+                d.max_horizontal_speed_mps,
+            ),
+            ("max_tilt_deg", self.max_tilt_deg, d.max_tilt_deg),
+        ] {
+            if !(v.is_finite() && v > 0.0 && v <= max) {
+                return Err(ParamError::new(
+                    field,
+                    v,
+                    format!("must be > 0 and <= {max} (an airframe may tighten the referee's limits, not loosen them)"),
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// PX4 speed, acceleration and tilt limits; absent ones keep PX4's defaults.
@@ -288,6 +343,9 @@ impl Validate for AirframeFile {
         let mut a = AutopilotParams::tuned_for(&self.airframe);
         self.limits.apply(&mut a);
         a.validate().map_err(|e| from_param("limits", e))?;
+        self.touchdown
+            .validate()
+            .map_err(|e| from_param("touchdown", e))?;
         self.px4.validate().map_err(|e| from_param("px4", e))
     }
 }
@@ -305,6 +363,8 @@ pub struct LoadedScenario {
     pub autopilot: AutopilotParams,
     /// The PX4 parameters of its commander (`[px4]`).
     pub px4: Px4Params,
+    /// The referee's touchdown limits for this airframe (`[touchdown]`).
+    pub touchdown: TouchdownLimits,
     /// `deploy/config/` (calibration files are resolved against it).
     pub config_dir: PathBuf,
 }
@@ -391,6 +451,7 @@ pub fn load(name_or_path: &str, deploy_dir: &Path) -> Result<LoadedScenario, Sce
         path,
         autopilot,
         px4: airframe.px4,
+        touchdown: airframe.touchdown,
         airframe: airframe.airframe,
         config_dir,
     })

@@ -192,6 +192,11 @@ pub enum Event {
         /// Vehicle velocity relative to the surface point it hit, in the
         /// surface's frame (pad frame on the pad, world on the ground), m/s.
         rel_velocity: Vector3<f64>,
+        /// Angle between body up and the surface normal at contact, rad.
+        tilt_rad: f64,
+        /// Each foot of the landing gear in the pad frame (x, y), m; None without a
+        /// ground vehicle.
+        gear_pad: Option<[[f64; 2]; 4]>,
     },
     /// The vehicle left a surface and has been airborne for the debounce time.
     Liftoff {
@@ -409,6 +414,28 @@ impl World {
             .map(|g| g.state_at(self.time_s()))
     }
 
+    /// Each foot of the landing gear in the pad frame (x, y) now, m; None without a
+    /// ground vehicle. Truth, for the evaluator's "every foot on the board".
+    pub fn gear_in_pad(&self) -> Option<[[f64; 2]; 4]> {
+        let pad = self.pad()?;
+        let s = self.quad.state();
+        let feet = self.quad.params().landing_gear_m;
+        Some(feet.map(|f| {
+            let world = s.position + s.world_from_body * Vector3::from(f);
+            let local = pad.world_from_pad.inverse_transform_point(&world.into());
+            [local.x, local.y]
+        }))
+    }
+
+    /// The surface the vehicle rests on: `None` while airborne, else whether it is the
+    /// pad.
+    pub fn resting_on_pad(&self) -> Option<bool> {
+        match self.quad.contact() {
+            ContactState::Resting { surface_id } => Some(surface_id == PAD_SURFACE_ID),
+            ContactState::Airborne => None,
+        }
+    }
+
     /// The ground vehicle, if any.
     pub fn ground_vehicle(&self) -> Option<&GroundVehicle> {
         self.ground_vehicle.as_ref()
@@ -561,10 +588,13 @@ impl World {
                     .world_from_surface
                     .rotation
                     .inverse_transform_vector(&impact.relative_velocity);
+                let gear_pad = self.gear_in_pad();
                 self.push(Event::Touchdown {
                     on_pad,
                     rel_position_pad,
                     rel_velocity,
+                    tilt_rad: impact.tilt_rad,
+                    gear_pad,
                 });
             }
             self.airborne = false;

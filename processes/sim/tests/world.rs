@@ -140,6 +140,7 @@ fn touching_down_at_0_3_m_s_on_the_moving_pad_reports_the_relative_velocity() {
             on_pad: true,
             rel_position_pad: Some(p),
             rel_velocity,
+            ..
         }) => {
             eprintln!("touchdown at {p:?} in the pad frame, relative velocity {rel_velocity:?}");
             assert!(p.norm() < 0.1, "position on pad {p:?}");

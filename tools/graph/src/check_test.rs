@@ -247,7 +247,7 @@ fn a_topic_no_node_uses_is_refused() {
 fn no_node_may_read_ground_truth() {
     let text = with(
         "name = \"safety/command\"\nservice = \"landing/safety/command\"\ntype = \"landing::SafetyCommand/v1\"\nexternal = true",
-        "name = \"safety/command\"\nservice = \"landing/sim/truth\"\ntype = \"landing::TruthEvent/v1\"\nevaluator_only = true",
+        "name = \"safety/command\"\nservice = \"landing/sim/truth\"\ntype = \"landing::TruthEvent/v2\"\nevaluator_only = true",
     );
     let e = error(&text);
     assert!(

@@ -68,14 +68,32 @@ pub struct FlightLog {
     pub obstacles: Vec<([f64; 3], [f64; 3])>,
     /// The touchdown, when there was one.
     pub touchdown: Option<Touchdown>,
+    /// The first contact of the final landing (speeds and tilt the referee judged).
+    pub contact: Option<TouchdownContact>,
+}
+
+/// How the final landing first met its surface, relative to it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct TouchdownContact {
+    /// Speed along the surface normal, m/s.
+    pub vertical_speed_mps: f64,
+    /// Speed along the surface, m/s.
+    pub horizontal_speed_mps: f64,
+    /// Angle between body up and the surface normal, deg.
+    pub tilt_deg: f64,
 }
 
 /// How a run ended, as the summary names it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Outcome {
-    /// Touched down on the pad.
+    /// At rest on the pad at the end, disarmed, every foot on the board.
     Landed,
+    /// A touchdown beyond the referee's speed or tilt limits.
+    HardLanding,
+    /// The fsm said Landed but the vehicle ended elsewhere (beside the pad, over the
+    /// board's edge, sliding, still armed).
+    OffPad,
     /// Landed in place (off the pad) after a failure: vehicle safe, mission not done.
     SafeLanded,
     /// Hit something or came down hard.
@@ -89,6 +107,8 @@ impl Outcome {
     pub fn name(self) -> &'static str {
         match self {
             Self::Landed => "landed",
+            Self::HardLanding => "hard_landing",
+            Self::OffPad => "off_pad",
             Self::SafeLanded => "safe_landed",
             Self::Crashed => "crashed",
             Self::Timeout => "timeout",
@@ -118,6 +138,14 @@ pub struct RunSummary {
     pub touchdown_error_m: Option<f64>,
     /// UAV speed relative to the surface at touchdown, m/s.
     pub touchdown_rel_speed_mps: Option<f64>,
+    /// Speed along the surface normal at the final landing's first contact, m/s.
+    pub touchdown_vertical_speed_mps: Option<f64>,
+    /// Speed along the surface there, m/s.
+    pub touchdown_horizontal_speed_mps: Option<f64>,
+    /// Tilt from the surface normal there, deg.
+    pub touchdown_tilt_deg: Option<f64>,
+    /// The referee's reason for the outcome, one line.
+    pub referee: String,
     /// Take-off to touchdown (or to the end of the log), s.
     pub flight_time_s: f64,
     /// UAV path length from take-off to touchdown, m.
@@ -254,6 +282,10 @@ impl RunSummary {
             outcome,
             touchdown_error_m: log.touchdown.as_ref().map(|t| t.error_m),
             touchdown_rel_speed_mps: log.touchdown.as_ref().map(|t| t.rel_speed_mps),
+            touchdown_vertical_speed_mps: log.contact.map(|c| c.vertical_speed_mps),
+            touchdown_horizontal_speed_mps: log.contact.map(|c| c.horizontal_speed_mps),
+            touchdown_tilt_deg: log.contact.map(|c| c.tilt_deg),
+            referee: String::new(),
             flight_time_s,
             distance_m,
             target_speed_kmh: log.target_speed_mps().map(|v| v * KMH_PER_MPS),
@@ -280,17 +312,22 @@ impl fmt::Display for RunSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let verdict = match self.outcome {
             Outcome::Landed => "LANDED on the pad",
+            Outcome::HardLanding => "HARD LANDING",
+            Outcome::OffPad => "OFF THE PAD",
             Outcome::SafeLanded => "SAFE LANDING (not on the pad)",
             Outcome::Crashed => "CRASHED",
             Outcome::Timeout => "TIMEOUT (no landing)",
         };
         writeln!(f, "scenario    {} (seed {})", self.scenario, self.seed)?;
-        writeln!(f, "outcome     {verdict}")?;
+        writeln!(f, "outcome     {verdict}: {}", self.referee)?;
         writeln!(
             f,
-            "touchdown   error {}, relative speed {}",
+            "touchdown   error {}, relative speed {}; first contact {} down, {} sideways, tilt {}",
             opt(self.touchdown_error_m, 3, "m"),
-            opt(self.touchdown_rel_speed_mps, 2, "m/s")
+            opt(self.touchdown_rel_speed_mps, 2, "m/s"),
+            opt(self.touchdown_vertical_speed_mps, 2, "m/s"),
+            opt(self.touchdown_horizontal_speed_mps, 2, "m/s"),
+            opt(self.touchdown_tilt_deg, 1, "deg")
         )?;
         writeln!(
             f,

@@ -37,6 +37,7 @@ pub(crate) fn synthetic_log(dt: f64) -> FlightLog {
         seed: 7,
         samples,
         obstacles: vec![([1.0, 1.0, 0.0], [1.6, 2.2, 1.2])],
+        contact: None,
         touchdown: Some(Touchdown {
             t_s: 7.0,
             uav: [4.0, 0.0, 0.0],

@@ -51,6 +51,7 @@ fn paper_like_log() -> FlightLog {
     FlightLog {
         scenario: "paper-like".to_string(),
         seed: 3,
+        contact: None,
         touchdown: Some(Touchdown {
             t_s: last.0,
             uav: last.1,

@@ -113,7 +113,7 @@ recordable!(
     PlannerGoal => "landing::PlannerGoal/v1",
     Setpoint => "landing::Setpoint/v1",
     FsmStatus => "landing::FsmStatus/v1",
-    TruthEvent => "landing::TruthEvent/v1",
+    TruthEvent => "landing::TruthEvent/v2",
     LinkRequest => "landing::LinkRequest/v1",
     LinkOutcome => "landing::LinkOutcome/v1",
     SafetyCommand => "landing::SafetyCommand/v1",

@@ -10,10 +10,10 @@ use ipc_types::msg::MissionState;
 use stack_config::{self as cfgload, deploy_dir};
 
 use crate::config_cmd::StackConfig;
-use crate::flight_log::{FlightLog, FlightSample, Outcome, RunSummary, Touchdown};
+use crate::flight_log::{FlightLog, FlightSample, Outcome, RunSummary, Touchdown, TouchdownContact};
 use crate::plot;
 use crate::record::Recorder;
-use crate::run_eval::{End, Evaluator, Referee};
+use crate::run_eval::{self, Evaluator, Referee, Rules};
 use crate::run_lockstep::{self, Recording};
 use crate::run_processes;
 
@@ -94,21 +94,18 @@ fn flight_log(
             on_pad: t.on_pad,
         }
     });
+    let contact = eval.landing_contact().map(|t| TouchdownContact {
+        vertical_speed_mps: t.vertical_mps,
+        horizontal_speed_mps: t.horizontal_mps,
+        tilt_deg: t.tilt_deg,
+    });
     FlightLog {
         scenario: name.to_string(),
         seed,
         samples,
         obstacles,
         touchdown,
-    }
-}
-
-fn outcome_of(end: End, eval: &Evaluator) -> Outcome {
-    match end {
-        End::Landed if eval.final_touchdown().is_some_and(|t| t.on_pad) => Outcome::Landed,
-        End::Landed | End::SafeLanded => Outcome::SafeLanded,
-        End::Crashed => Outcome::Crashed,
-        End::Timeout => Outcome::Timeout,
+        contact,
     }
 }
 
@@ -129,6 +126,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
     let graph = graph::Graph::load(&graph_path)?;
     let seed = args.seed.unwrap_or(scn.scenario.seed);
     let fsm_cfg = run_lockstep::mission(&cfg, &scn)?;
+    let rules = Rules::of(&scn)?;
     let mut recorder = match &args.record {
         Some(p) => {
             // As --plot does: a new directory for the outputs is made, not refused.
@@ -204,6 +202,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         }
         (end, referee)
     };
+    let last_state = referee.last_state().copied();
     let Referee {
         eval,
         stats,
@@ -221,11 +220,13 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
     }
     for t in &eval.touchdowns {
         eprintln!(
-            "  {:7.2} s  touchdown on the {} {:.3} m from the pad centre at {:.2} m/s ({})",
+            "  {:7.2} s  touchdown on the {} {:.3} m from the pad centre at {:.2} m/s down, {:.2} m/s sideways, tilt {:.1} deg ({})",
             t.t_s,
             if t.on_pad { "pad" } else { "ground" },
             t.error_m,
-            t.rel_speed_mps,
+            t.vertical_mps,
+            t.horizontal_mps,
+            t.tilt_deg,
             t.phase.name()
         );
     }
@@ -239,15 +240,17 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         .map(|b| (b.min_m, b.max_m))
         .collect();
     let log = flight_log(&scn.scenario.name, seed, &eval, obstacles);
-    let outcome = outcome_of(end, &eval);
+    let (outcome, why) = run_eval::verdict(end, &eval, last_state.as_ref(), &rules);
+    eprintln!("  referee: {outcome}: {why}");
     let replans = u32::try_from(stats.plans.saturating_sub(1)).unwrap_or(u32::MAX);
-    let summary = RunSummary::from_log(
+    let mut summary = RunSummary::from_log(
         &log,
         outcome,
         &stats.planning_ms,
         replans,
         Some(eval.collisions),
     );
+    summary.referee = why;
     if let Some(dir) = &args.plot {
         let mut written = plot::write_plots(dir, &log)?;
         if !stats.planning_ms.is_empty() {

@@ -1,7 +1,12 @@
 //! The evaluator of `landing run`: the only part that reads the simulator's ground
 //! truth (where the vehicle and the pad really are, touchdowns, collisions, crashes).
 
-use ipc_types::msg::{FsmStatus, MissionState, PlannerStats, TruthEvent, TruthKind, TruthState};
+use ipc_types::msg::{
+    Contact, FsmStatus, MissionState, PlannerStats, TruthEvent, TruthKind, TruthState,
+};
+pub use sim::scenario::TouchdownLimits;
+
+use crate::flight_log::Outcome;
 
 /// The world at one instant, for the flight log and the plots.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -59,8 +64,64 @@ pub struct Touchdown {
     pub error_m: f64,
     /// Speed relative to the surface, m/s.
     pub rel_speed_mps: f64,
+    /// Speed along the surface normal, m/s.
+    pub vertical_mps: f64,
+    /// Speed along the surface, m/s.
+    pub horizontal_mps: f64,
+    /// Angle between body up and the surface normal, deg.
+    pub tilt_deg: f64,
+    /// Each foot of the landing gear in the pad frame, m.
+    pub gear_pad: [[f64; 2]; 4],
+    /// How long the vehicle had been in the air before (since its last lift-off), s;
+    /// infinite for the first touchdown.
+    pub airborne_s: f64,
     /// The fsm's state at that moment.
     pub phase: MissionState,
+}
+
+/// A lift-off shorter than this before a touchdown is a bounce of the same landing, s.
+pub const BOUNCE_MAX_S: f64 = 1.0;
+/// Relative speed below which the vehicle is at rest on the pad at the end, m/s.
+pub const AT_REST_MPS: f64 = 0.1;
+
+/// The printed board every foot must be on, in the pad frame (x, y), m.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Board {
+    /// Lower corner.
+    pub min_m: [f64; 2],
+    /// Upper corner.
+    pub max_m: [f64; 2],
+}
+
+impl Board {
+    /// How far the point is outside the board, m (0 inside or on the edge).
+    pub fn outside_m(&self, p: [f64; 2]) -> f64 {
+        let d = |i: usize| (self.min_m[i] - p[i]).max(p[i] - self.max_m[i]).max(0.0);
+        d(0).hypot(d(1))
+    }
+}
+
+/// What the referee judges by: the touchdown limits and the board.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rules {
+    /// Touchdown speed and tilt limits.
+    pub limits: TouchdownLimits,
+    /// The board (deploy/config/pad.toml).
+    pub board: Board,
+}
+
+impl Rules {
+    /// The shipped rules for a scenario: its airframe's limits and the pad file's board.
+    pub fn of(scn: &sim::scenario::LoadedScenario) -> Result<Self, optics::pad::PadError> {
+        let pad = optics::pad::PadModel::load(scn.pad_path())?;
+        Ok(Self {
+            limits: scn.touchdown,
+            board: Board {
+                min_m: pad.board.min_m,
+                max_m: pad.board.max_m,
+            },
+        })
+    }
 }
 
 /// Collects the truth during a run.
@@ -74,6 +135,8 @@ pub struct Evaluator {
     pub collisions: u32,
     /// Crash reasons.
     pub crashes: Vec<String>,
+    /// Time of the last lift-off, s.
+    last_liftoff_s: Option<f64>,
 }
 
 impl Evaluator {
@@ -83,13 +146,22 @@ impl Evaluator {
             Some(TruthKind::Touchdown) => {
                 let [x, y] = t.rel_position_pad;
                 let v = t.rel_velocity;
+                let t_s = t.msg.capture_ns as f64 * 1e-9;
                 self.touchdowns.push(Touchdown {
-                    t_s: t.msg.capture_ns as f64 * 1e-9,
+                    t_s,
                     on_pad: t.on_pad != 0,
                     error_m: x.hypot(y),
                     rel_speed_mps: (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(),
+                    vertical_mps: v[2].abs(),
+                    horizontal_mps: v[0].hypot(v[1]),
+                    tilt_deg: t.tilt_deg,
+                    gear_pad: t.gear_pad,
+                    airborne_s: self.last_liftoff_s.map_or(f64::INFINITY, |l| t_s - l),
                     phase,
                 });
+            }
+            Some(TruthKind::Liftoff) => {
+                self.last_liftoff_s = Some(t.msg.capture_ns as f64 * 1e-9);
             }
             Some(TruthKind::Collision) => self.collisions += 1,
             Some(TruthKind::Crash) => self.crashes.push(t.reason.as_str().to_string()),
@@ -102,14 +174,26 @@ impl Evaluator {
         self.samples.push(s);
     }
 
-    /// The touchdown that ended the mission: the last one on the pad, else the last one
-    /// after take-off.
-    pub fn final_touchdown(&self) -> Option<&Touchdown> {
-        let flown = |t: &&Touchdown| t.phase != MissionState::Idle;
+    /// Touchdowns after take-off (a vehicle settling before it flew does not count).
+    pub fn flown_touchdowns(&self) -> impl Iterator<Item = &Touchdown> {
         self.touchdowns
             .iter()
-            .rfind(|t| flown(t) && t.on_pad)
-            .or_else(|| self.touchdowns.iter().rfind(flown))
+            .filter(|t| t.phase != MissionState::Idle)
+    }
+
+    /// The touchdown the vehicle ended on: the last one after take-off, wherever it was
+    /// (a touch on the pad, a lift-off and a landing beside it ends beside it).
+    pub fn final_touchdown(&self) -> Option<&Touchdown> {
+        self.flown_touchdowns().last()
+    }
+
+    /// The first contact of the final landing: the last touchdown after a flight longer
+    /// than a bounce ([`BOUNCE_MAX_S`]); its speeds and tilt are the landing's.
+    pub fn landing_contact(&self) -> Option<&Touchdown> {
+        self.flown_touchdowns()
+            .filter(|t| t.airborne_s >= BOUNCE_MAX_S)
+            .last()
+            .or_else(|| self.flown_touchdowns().next())
     }
 }
 
@@ -207,9 +291,15 @@ impl Referee {
     /// A truth event (touchdown, collision, crash).
     pub fn on_truth(&mut self, t: &TruthEvent) {
         self.eval.on_truth(t, self.phase);
-        if is_crash(t) && self.ended.is_none() {
+        let collision = t.kind == TruthKind::Collision as u32;
+        if (is_crash(t) || collision) && self.ended.is_none() {
             self.ended = Some((End::Crashed, self.sim_time_ns()));
         }
+    }
+
+    /// The truth state last received.
+    pub fn last_state(&self) -> Option<&TruthState> {
+        self.last_state.as_ref()
     }
 
     /// The truth state (20 Hz): a flight-log sample.
@@ -242,6 +332,75 @@ impl Referee {
             .filter(|(_, at)| self.sim_time_ns() >= at + SETTLE_NS)
             .map(|(e, _)| e)
     }
+}
+
+/// The outcome of a run and the referee's one-line reason, by the rules: a crash or any
+/// contact with an obstacle is `crashed`; any touchdown after take-off beyond a limit is
+/// `hard_landing`; `landed` needs the fsm's Landed and, at the end of the run, the
+/// vehicle disarmed and at rest on the pad with every foot on the board; Landed
+/// anywhere else is `off_pad`.
+pub fn verdict(end: End, eval: &Evaluator, last: Option<&TruthState>, rules: &Rules) -> (Outcome, String) {
+    match end {
+        End::Crashed => {
+            let why = if eval.collisions > 0 {
+                "touched an obstacle".to_string()
+            } else {
+                eval.crashes.join("; ")
+            };
+            return (Outcome::Crashed, why);
+        }
+        End::Timeout => return (Outcome::Timeout, "the scenario's time ran out".into()),
+        End::Landed | End::SafeLanded => {}
+    }
+    let l = &rules.limits;
+    for t in eval.flown_touchdowns() {
+        let over = [
+            (t.vertical_mps, l.max_vertical_speed_mps, "vertical speed", "m/s"),
+            (t.horizontal_mps, l.max_horizontal_speed_mps, "horizontal speed", "m/s"),
+            (t.tilt_deg, l.max_tilt_deg, "tilt", "deg"),
+        ]
+        .into_iter()
+        .find(|(v, max, _, _)| !(v <= max));
+        if let Some((v, max, what, unit)) = over {
+            let on = if t.on_pad { "pad" } else { "ground" };
+            return (
+                Outcome::HardLanding,
+                format!("touchdown on the {on} at {:.2} s: {what} {v:.2} {unit} above the limit {max} {unit}", t.t_s),
+            );
+        }
+    }
+    if end == End::SafeLanded {
+        return (Outcome::SafeLanded, "the fsm ended in safe-land or abort".into());
+    }
+    let Some(s) = last else {
+        return (Outcome::OffPad, "no truth state at the end".into());
+    };
+    if Contact::from_raw(s.contact) != Some(Contact::Pad) {
+        let where_ = match Contact::from_raw(s.contact) {
+            Some(Contact::Ground) => "on the ground",
+            _ => "in the air",
+        };
+        return (Outcome::OffPad, format!("at the end the vehicle is {where_}, not on the pad"));
+    }
+    if s.armed != 0 {
+        return (Outcome::OffPad, "at the end the vehicle is still armed".into());
+    }
+    let v = s.vehicle_velocity;
+    let p = s.pad_velocity;
+    let rel = ((v[0] - p[0]).powi(2) + (v[1] - p[1]).powi(2) + (v[2] - p[2]).powi(2)).sqrt();
+    if !(rel <= AT_REST_MPS) {
+        return (Outcome::OffPad, format!("at the end the vehicle moves at {rel:.2} m/s on the pad"));
+    }
+    if let Some((k, out)) = s
+        .gear_pad
+        .iter()
+        .map(|f| rules.board.outside_m(*f))
+        .enumerate()
+        .find(|(_, d)| !(*d <= 0.0))
+    {
+        return (Outcome::OffPad, format!("foot {k} rests {out:.3} m beyond the board's edge"));
+    }
+    (Outcome::Landed, "at rest on the pad, disarmed, every foot on the board".into())
 }
 
 /// A stage's compute time from the stamp it closed last: exit - enter of the newest
