@@ -290,7 +290,9 @@ impl TouchdownLimits {
                 return Err(ParamError::new(
                     field,
                     v,
-                    format!("must be > 0 and <= {max} (an airframe may tighten the referee's limits, not loosen them)"),
+                    format!(
+                        "must be > 0 and <= {max} (an airframe may tighten the referee's limits, not loosen them)"
+                    ),
                 ));
             }
         }

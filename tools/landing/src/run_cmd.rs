@@ -10,7 +10,9 @@ use ipc_types::msg::MissionState;
 use stack_config::{self as cfgload, deploy_dir};
 
 use crate::config_cmd::StackConfig;
-use crate::flight_log::{FlightLog, FlightSample, Outcome, RunSummary, Touchdown, TouchdownContact};
+use crate::flight_log::{
+    FlightLog, FlightSample, Outcome, RunSummary, Touchdown, TouchdownContact,
+};
 use crate::plot;
 use crate::record::Recorder;
 use crate::run_eval::{self, Evaluator, Referee, Rules};

@@ -339,7 +339,12 @@ impl Referee {
 /// `hard_landing`; `landed` needs the fsm's Landed and, at the end of the run, the
 /// vehicle disarmed and at rest on the pad with every foot on the board; Landed
 /// anywhere else is `off_pad`.
-pub fn verdict(end: End, eval: &Evaluator, last: Option<&TruthState>, rules: &Rules) -> (Outcome, String) {
+pub fn verdict(
+    end: End,
+    eval: &Evaluator,
+    last: Option<&TruthState>,
+    rules: &Rules,
+) -> (Outcome, String) {
     match end {
         End::Crashed => {
             let why = if eval.collisions > 0 {
@@ -355,8 +360,18 @@ pub fn verdict(end: End, eval: &Evaluator, last: Option<&TruthState>, rules: &Ru
     let l = &rules.limits;
     for t in eval.flown_touchdowns() {
         let over = [
-            (t.vertical_mps, l.max_vertical_speed_mps, "vertical speed", "m/s"),
-            (t.horizontal_mps, l.max_horizontal_speed_mps, "horizontal speed", "m/s"),
+            (
+                t.vertical_mps,
+                l.max_vertical_speed_mps,
+                "vertical speed",
+                "m/s",
+            ),
+            (
+                t.horizontal_mps,
+                l.max_horizontal_speed_mps,
+                "horizontal speed",
+                "m/s",
+            ),
             (t.tilt_deg, l.max_tilt_deg, "tilt", "deg"),
         ]
         .into_iter()
@@ -365,12 +380,18 @@ pub fn verdict(end: End, eval: &Evaluator, last: Option<&TruthState>, rules: &Ru
             let on = if t.on_pad { "pad" } else { "ground" };
             return (
                 Outcome::HardLanding,
-                format!("touchdown on the {on} at {:.2} s: {what} {v:.2} {unit} above the limit {max} {unit}", t.t_s),
+                format!(
+                    "touchdown on the {on} at {:.2} s: {what} {v:.2} {unit} above the limit {max} {unit}",
+                    t.t_s
+                ),
             );
         }
     }
     if end == End::SafeLanded {
-        return (Outcome::SafeLanded, "the fsm ended in safe-land or abort".into());
+        return (
+            Outcome::SafeLanded,
+            "the fsm ended in safe-land or abort".into(),
+        );
     }
     let Some(s) = last else {
         return (Outcome::OffPad, "no truth state at the end".into());
@@ -380,16 +401,25 @@ pub fn verdict(end: End, eval: &Evaluator, last: Option<&TruthState>, rules: &Ru
             Some(Contact::Ground) => "on the ground",
             _ => "in the air",
         };
-        return (Outcome::OffPad, format!("at the end the vehicle is {where_}, not on the pad"));
+        return (
+            Outcome::OffPad,
+            format!("at the end the vehicle is {where_}, not on the pad"),
+        );
     }
     if s.armed != 0 {
-        return (Outcome::OffPad, "at the end the vehicle is still armed".into());
+        return (
+            Outcome::OffPad,
+            "at the end the vehicle is still armed".into(),
+        );
     }
     let v = s.vehicle_velocity;
     let p = s.pad_velocity;
     let rel = ((v[0] - p[0]).powi(2) + (v[1] - p[1]).powi(2) + (v[2] - p[2]).powi(2)).sqrt();
     if !(rel <= AT_REST_MPS) {
-        return (Outcome::OffPad, format!("at the end the vehicle moves at {rel:.2} m/s on the pad"));
+        return (
+            Outcome::OffPad,
+            format!("at the end the vehicle moves at {rel:.2} m/s on the pad"),
+        );
     }
     if let Some((k, out)) = s
         .gear_pad
@@ -398,9 +428,15 @@ pub fn verdict(end: End, eval: &Evaluator, last: Option<&TruthState>, rules: &Ru
         .enumerate()
         .find(|(_, d)| !(*d <= 0.0))
     {
-        return (Outcome::OffPad, format!("foot {k} rests {out:.3} m beyond the board's edge"));
+        return (
+            Outcome::OffPad,
+            format!("foot {k} rests {out:.3} m beyond the board's edge"),
+        );
     }
-    (Outcome::Landed, "at rest on the pad, disarmed, every foot on the board".into())
+    (
+        Outcome::Landed,
+        "at rest on the pad, disarmed, every foot on the board".into(),
+    )
 }
 
 /// A stage's compute time from the stamp it closed last: exit - enter of the newest

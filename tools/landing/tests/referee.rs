@@ -82,7 +82,8 @@ impl Scripted {
     fn place(&mut self, position: Vector3<f64>, velocity: [f64; 3], tilt_deg: f64) {
         let mut s = VehicleState::at_rest(position, 0.0);
         s.velocity = Vector3::from(velocity);
-        s.world_from_body = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), tilt_deg.to_radians());
+        s.world_from_body =
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), tilt_deg.to_radians());
         self.world.set_vehicle_state(s).unwrap();
     }
 
@@ -99,7 +100,8 @@ impl Scripted {
             }
             if self.world.time_ns() >= self.next_state_ns {
                 let now = self.world.time_ns();
-                self.referee.on_truth_state(&world_truth_state(&self.world, now));
+                self.referee
+                    .on_truth_state(&world_truth_state(&self.world, now));
                 self.next_state_ns = now + STATE_PERIOD_NS;
             }
         }
@@ -141,7 +143,11 @@ fn a_touchdown_beside_the_pad_is_off_pad() {
     let mut s = Scripted::new(still_pad(Vec::new()));
     let pad = s.world.pad().unwrap().world_from_pad.translation.vector;
     // 1.2 m beside the pad's centre, just above the ground.
-    s.place(Vector3::new(pad.x, pad.y + 1.2, 0.005), [0.0, 0.0, -0.4], 0.0);
+    s.place(
+        Vector3::new(pad.x, pad.y + 1.2, 0.005),
+        [0.0, 0.0, -0.4],
+        0.0,
+    );
     s.run(0.5);
     let (outcome, why) = s.fsm_says_landed();
     assert_eq!(outcome, Outcome::OffPad, "{why}");
@@ -156,7 +162,10 @@ fn a_touchdown_with_a_foot_over_the_boards_edge_is_off_pad() {
     s.place_over_pad(0.0, 0.40, 0.005, [0.0, 0.0, -0.4], 0.0);
     s.run(0.5);
     let touchdown = s.referee.eval.final_touchdown().copied().unwrap();
-    assert!(touchdown.on_pad, "the simulator's surface is the pad: {touchdown:?}");
+    assert!(
+        touchdown.on_pad,
+        "the simulator's surface is the pad: {touchdown:?}"
+    );
     let (outcome, why) = s.fsm_says_landed();
     assert_eq!(outcome, Outcome::OffPad, "{why}");
     assert!(why.contains("beyond the board's edge"), "{why}");
@@ -197,7 +206,11 @@ fn a_touch_on_the_pad_then_a_landing_beside_it_is_judged_by_the_final_touchdown(
     assert!(s.referee.eval.final_touchdown().unwrap().on_pad);
     // Lifted off (a bounce, scripted) and down again 1.5 m beside the pad.
     let pad = s.world.pad().unwrap().world_from_pad.translation.vector;
-    s.place(Vector3::new(pad.x + 1.5, pad.y, 0.005), [0.0, 0.0, -0.3], 0.0);
+    s.place(
+        Vector3::new(pad.x + 1.5, pad.y, 0.005),
+        [0.0, 0.0, -0.3],
+        0.0,
+    );
     s.run(1.5);
     let last = s.referee.eval.final_touchdown().copied().unwrap();
     assert!(!last.on_pad, "{last:?}");
