@@ -375,7 +375,7 @@ pub fn verdict(
             (t.tilt_deg, l.max_tilt_deg, "tilt", "deg"),
         ]
         .into_iter()
-        .find(|(v, max, _, _)| !(v <= max));
+        .find(|(v, max, _, _)| !within(*v, *max));
         if let Some((v, max, what, unit)) = over {
             let on = if t.on_pad { "pad" } else { "ground" };
             return (
@@ -415,7 +415,7 @@ pub fn verdict(
     let v = s.vehicle_velocity;
     let p = s.pad_velocity;
     let rel = ((v[0] - p[0]).powi(2) + (v[1] - p[1]).powi(2) + (v[2] - p[2]).powi(2)).sqrt();
-    if !(rel <= AT_REST_MPS) {
+    if !within(rel, AT_REST_MPS) {
         return (
             Outcome::OffPad,
             format!("at the end the vehicle moves at {rel:.2} m/s on the pad"),
@@ -426,7 +426,7 @@ pub fn verdict(
         .iter()
         .map(|f| rules.board.outside_m(*f))
         .enumerate()
-        .find(|(_, d)| !(*d <= 0.0))
+        .find(|(_, d)| !within(*d, 0.0))
     {
         return (
             Outcome::OffPad,
@@ -437,6 +437,11 @@ pub fn verdict(
         Outcome::Landed,
         "at rest on the pad, disarmed, every foot on the board".into(),
     )
+}
+
+/// `v <= max`, false for NaN: a value the referee cannot read never passes.
+fn within(v: f64, max: f64) -> bool {
+    v <= max
 }
 
 /// A stage's compute time from the stamp it closed last: exit - enter of the newest
