@@ -170,6 +170,24 @@ impl Header {
     }
 }
 
+/// A point in a plane, metres (a landing-gear foot in the pad frame).
+#[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::Point2/v1")]
+pub struct Point2 {
+    /// x, m.
+    pub x: f64,
+    /// y, m.
+    pub y: f64,
+}
+
+impl From<[f64; 2]> for Point2 {
+    fn from([x, y]: [f64; 2]) -> Self {
+        Self { x, y }
+    }
+}
+
 /// A rigid transform: translation in metres and a unit quaternion (x, y, z, w).
 ///
 /// Named at each use by what it maps (`world_from_body`, `camera_from_pad`).
@@ -612,7 +630,9 @@ pub struct PlannerStats {
     pub msg: Header,
     /// Trajectory id the call produced (0 on failure).
     pub trajectory_id: u64,
-    /// Wall time of the call, ms.
+    /// Unused, 0: the planner reads no clock; the call's wall time is its stage stamp in
+    /// `msg` (exit - enter, closed by the driver as the statistics leave). Kept so the
+    /// wire layout of v1 stays; drop it at the next version.
     pub planning_ms: f64,
     /// Optimizer iterations.
     pub iterations: u32,
@@ -1030,7 +1050,7 @@ pub struct TruthState {
     pub pad_velocity: [f64; 3],
     /// Each foot of the landing gear in the pad frame (x, y), m (meaningful with
     /// `pad_valid`).
-    pub gear_pad: [[f64; 2]; 4],
+    pub gear_pad: [Point2; 4],
     /// What the vehicle rests on: [`Contact`] as raw.
     pub contact: u32,
     /// Keeps the layout free of implicit padding.
@@ -1078,8 +1098,8 @@ pub struct TruthEvent {
     pub rel_position_pad: [f64; 2],
     /// Touchdown/impact: velocity relative to the surface, m/s.
     pub rel_velocity: [f64; 3],
-    /// Touchdown: each foot of the landing gear in the pad frame (x, y), m.
-    pub gear_pad: [[f64; 2]; 4],
+    /// Touchdown: each foot of the landing gear in the pad frame, m.
+    pub gear_pad: [Point2; 4],
     /// Touchdown: angle between body up and the surface normal, deg.
     pub tilt_deg: f64,
     /// Collision: index of the obstacle in the scenario.

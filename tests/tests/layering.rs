@@ -46,6 +46,18 @@ fn library_sources(dir: &Path, out: &mut Vec<PathBuf>) {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return;
     };
+    // Modules the binary declares itself (`mod capture;` in main.rs) are the binary's
+    // code, not the library's: its I/O beside the stage (a camera thread, a socket).
+    let binary_modules: Vec<String> = std::fs::read_to_string(dir.join("main.rs"))
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| {
+            l.trim()
+                .strip_prefix("mod ")?
+                .strip_suffix(';')
+                .map(|m| format!("{m}.rs"))
+        })
+        .collect();
     for e in entries.flatten() {
         let p = e.path();
         let name = p.file_name().and_then(|n| n.to_str()).unwrap_or_default();
@@ -53,7 +65,11 @@ fn library_sources(dir: &Path, out: &mut Vec<PathBuf>) {
             if name != "bin" {
                 library_sources(&p, out);
             }
-        } else if name.ends_with(".rs") && name != "main.rs" && !name.ends_with("_test.rs") {
+        } else if name.ends_with(".rs")
+            && name != "main.rs"
+            && !name.ends_with("_test.rs")
+            && !binary_modules.iter().any(|m| m == name)
+        {
             out.push(p);
         }
     }

@@ -18,7 +18,7 @@ pub struct Output {
     /// A new trajectory (a plan, a stop, or an emergency stop).
     pub trajectory: Option<Trajectory>,
     /// Statistics of the planning call made in this step. `planning_ms` is 0: the
-    /// library reads no clock, so the caller times the step and fills it in.
+    /// library reads no clock; the call is timed by the planner's stage stamp.
     pub stats: Option<PlannerStats>,
 }
 

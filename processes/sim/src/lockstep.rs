@@ -6,7 +6,7 @@
 //! the caller renders into a buffer of its choosing (a loaned shared-memory sample in the
 //! `sim` binary, a reused vector in lockstep), so rendering never copies.
 
-use ipc_types::msg::{Contact, Header, Text, TruthEvent, TruthKind, TruthState};
+use ipc_types::msg::{Contact, Header, Point2, Text, TruthEvent, TruthKind, TruthState};
 
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
@@ -329,7 +329,7 @@ pub fn truth_event(e: &TimedEvent) -> TruthEvent {
             }
             m.rel_velocity = [rel_velocity.x, rel_velocity.y, rel_velocity.z];
             m.tilt_deg = tilt_rad.to_degrees();
-            m.gear_pad = gear_pad.unwrap_or_default();
+            m.gear_pad = gear_pad.unwrap_or_default().map(Point2::from);
         }
         Event::Liftoff { from_pad } => {
             m.kind = TruthKind::Liftoff as u32;
@@ -372,7 +372,7 @@ pub fn world_truth_state(world: &World, now_ns: u64) -> TruthState {
             .as_ref()
             .map_or([0.0; 3], |p| p.world_from_pad.translation.vector.into()),
         pad_velocity: pad.as_ref().map_or([0.0; 3], |p| p.linear_velocity.into()),
-        gear_pad: world.gear_in_pad().unwrap_or_default(),
+        gear_pad: world.gear_in_pad().unwrap_or_default().map(Point2::from),
         contact: match world.resting_on_pad() {
             None => Contact::Airborne,
             Some(false) => Contact::Ground,

@@ -120,7 +120,7 @@ fn a_touchdown_becomes_a_truth_event() {
     assert_eq!(t.on_pad, 1);
     assert_eq!(t.rel_position_pad, [0.03, -0.01]);
     assert!((t.tilt_deg - 0.1f64.to_degrees()).abs() < 1e-12);
-    assert_eq!(t.gear_pad[1], [0.1, -0.1]);
+    assert_eq!((t.gear_pad[1].x, t.gear_pad[1].y), (0.1, -0.1));
     assert_eq!(t.msg.capture_ns, 5);
 }
 

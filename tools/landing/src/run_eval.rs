@@ -2,7 +2,7 @@
 //! truth (where the vehicle and the pad really are, touchdowns, collisions, crashes).
 
 use ipc_types::msg::{
-    Contact, FsmStatus, MissionState, PlannerStats, TruthEvent, TruthKind, TruthState,
+    Contact, FsmStatus, MissionState, PlannerStats, Point2, TruthEvent, TruthKind, TruthState,
 };
 pub use sim::scenario::TouchdownLimits;
 
@@ -71,7 +71,7 @@ pub struct Touchdown {
     /// Angle between body up and the surface normal, deg.
     pub tilt_deg: f64,
     /// Each foot of the landing gear in the pad frame, m.
-    pub gear_pad: [[f64; 2]; 4],
+    pub gear_pad: [Point2; 4],
     /// How long the vehicle had been in the air before (since its last lift-off), s;
     /// infinite for the first touchdown.
     pub airborne_s: f64,
@@ -95,7 +95,8 @@ pub struct Board {
 
 impl Board {
     /// How far the point is outside the board, m (0 inside or on the edge).
-    pub fn outside_m(&self, p: [f64; 2]) -> f64 {
+    pub fn outside_m(&self, p: Point2) -> f64 {
+        let p = [p.x, p.y];
         let d = |i: usize| (self.min_m[i] - p[i]).max(p[i] - self.max_m[i]).max(0.0);
         d(0).hypot(d(1))
     }

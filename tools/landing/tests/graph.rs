@@ -148,7 +148,7 @@ fn a_node_without_a_binary_is_one_line_naming_the_allowed_binaries() {
     let path = broken("no_binary.toml", "binary = \"planner\"\n", "");
     let err = refused(&path, "planner");
     assert!(
-        err.contains("no binary (allowed: one of sim, camera-ingest, aruco-pnp, depth-map, planner, fsm, px4-link)"),
+        err.contains("no binary (allowed: a command name of lowercase letters, digits and -: one of the stack's (sim, camera-ingest, aruco-pnp, depth-map, planner, fsm, px4-link) or your own)"),
         "{err}"
     );
 }
