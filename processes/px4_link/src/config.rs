@@ -4,6 +4,8 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 
 use serde::Deserialize;
+
+use crate::link::SetpointBounds;
 use stack_config::{Invalid, Validate, check_range};
 
 use crate::LinkSettings;
@@ -68,6 +70,16 @@ pub struct Px4LinkConfig {
     pub command_attempts: u32,
     /// The autopilot counts as disconnected without a heartbeat this long, ms.
     pub heartbeat_timeout_ms: u64,
+    /// Setpoints asking more horizontal speed than this are refused, m/s.
+    pub max_horizontal_speed_m_s: f64,
+    /// Setpoints asking more vertical speed than this are refused, m/s.
+    pub max_vertical_speed_m_s: f64,
+    /// Setpoints asking more acceleration than this are refused, m/s^2.
+    pub max_acceleration_m_s2: f64,
+    /// Position setpoints farther than this from the take-off point are refused, m.
+    pub geofence_radius_m: f64,
+    /// Position setpoints higher than this above the take-off point are refused, m.
+    pub geofence_height_m: f64,
 }
 
 impl Default for Px4LinkConfig {
@@ -79,6 +91,11 @@ impl Default for Px4LinkConfig {
             command_timeout_ms: 500,
             command_attempts: 4,
             heartbeat_timeout_ms: 1500,
+            max_horizontal_speed_m_s: SetpointBounds::default().max_horizontal_speed_m_s,
+            max_vertical_speed_m_s: SetpointBounds::default().max_vertical_speed_m_s,
+            max_acceleration_m_s2: SetpointBounds::default().max_acceleration_m_s2,
+            geofence_radius_m: SetpointBounds::default().geofence_radius_m,
+            geofence_height_m: SetpointBounds::default().geofence_height_m,
         }
     }
 }
@@ -150,6 +167,13 @@ impl Px4LinkConfig {
             command_timeout_ns: self.command_timeout_ms * 1_000_000,
             command_attempts: self.command_attempts,
             heartbeat_timeout_ns: self.heartbeat_timeout_ms * 1_000_000,
+            bounds: SetpointBounds {
+                max_horizontal_speed_m_s: self.max_horizontal_speed_m_s,
+                max_vertical_speed_m_s: self.max_vertical_speed_m_s,
+                max_acceleration_m_s2: self.max_acceleration_m_s2,
+                geofence_radius_m: self.geofence_radius_m,
+                geofence_height_m: self.geofence_height_m,
+            },
             ..LinkSettings::default()
         }
     }
@@ -167,7 +191,27 @@ impl Validate for Px4LinkConfig {
             self.heartbeat_timeout_ms,
             300,
             60_000,
-        )
+        )?;
+        check_range(
+            "max_horizontal_speed_m_s",
+            self.max_horizontal_speed_m_s,
+            0.5,
+            60.0,
+        )?;
+        check_range(
+            "max_vertical_speed_m_s",
+            self.max_vertical_speed_m_s,
+            0.2,
+            20.0,
+        )?;
+        check_range(
+            "max_acceleration_m_s2",
+            self.max_acceleration_m_s2,
+            1.0,
+            100.0,
+        )?;
+        check_range("geofence_radius_m", self.geofence_radius_m, 5.0, 10_000.0)?;
+        check_range("geofence_height_m", self.geofence_height_m, 2.0, 1_000.0)
     }
 }
 

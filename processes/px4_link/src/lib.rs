@@ -12,6 +12,6 @@ pub mod link;
 pub mod node;
 pub mod stage;
 
-pub use link::{LinkSettings, Outcome, Px4Link, Request, Status};
+pub use link::{LinkSettings, Outcome, Px4Link, Refusal, Request, SetpointBounds, Status};
 pub use node::LinkNode;
 pub use stage::{Framing, LinkStage};

@@ -83,6 +83,92 @@ pub struct LinkSettings {
     /// Telemetry rates asked of the autopilot: LOCAL_POSITION_NED, ATTITUDE_QUATERNION,
     /// EXTENDED_SYS_STATE, Hz.
     pub telemetry_hz: [f32; 3],
+    /// What a setpoint may ask; beyond it the setpoint is refused and counted.
+    pub bounds: SetpointBounds,
+}
+
+/// The envelope px4-link lets a setpoint ask for, whatever the planner or fsm says:
+/// checked on the values as they go on the wire (f32), against the take-off point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SetpointBounds {
+    /// Horizontal speed, m/s.
+    pub max_horizontal_speed_m_s: f64,
+    /// Vertical speed, m/s.
+    pub max_vertical_speed_m_s: f64,
+    /// Acceleration, m/s^2.
+    pub max_acceleration_m_s2: f64,
+    /// Horizontal distance of a position from the take-off point, m.
+    pub geofence_radius_m: f64,
+    /// Height of a position above the take-off point, m (and at most 2 m below it).
+    pub geofence_height_m: f64,
+}
+
+impl Default for SetpointBounds {
+    /// 20 m/s across (72 km/h: above the 50 km/h the stack aims at), 5 m/s up or down,
+    /// 20 m/s^2, 200 m around the take-off point, 50 m above it.
+    fn default() -> Self {
+        Self {
+            max_horizontal_speed_m_s: 20.0,
+            max_vertical_speed_m_s: 5.0,
+            max_acceleration_m_s2: 20.0,
+            geofence_radius_m: 200.0,
+            geofence_height_m: 50.0,
+        }
+    }
+}
+
+/// Why a setpoint was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Refusal {
+    /// A field is not finite once converted to the wire's f32.
+    NotFinite,
+    /// Beyond a speed or acceleration limit.
+    TooFast,
+    /// A position outside the geofence around the take-off point.
+    OutsideGeofence,
+}
+
+impl SetpointBounds {
+    /// Whether `sp` (ENU) stays inside, with `home` the take-off point when known.
+    pub fn check(&self, sp: &Setpoint, home: Option<Vector3<f64>>) -> Result<(), Refusal> {
+        let wire = |v: &[f64; 3]| v.map(|x| f64::from(x as f32));
+        let used = |bit: u32| sp.valid & bit != 0;
+        let (p, v, a) = (
+            wire(&sp.position),
+            wire(&sp.velocity),
+            wire(&sp.acceleration),
+        );
+        let finite = |x: &[f64]| x.iter().all(|c| c.is_finite());
+        if (used(Setpoint::POSITION) && !finite(&p))
+            || (used(Setpoint::VELOCITY) && !finite(&v))
+            || (used(Setpoint::ACCELERATION) && !finite(&a))
+            || (used(Setpoint::YAW) && !(sp.yaw as f32).is_finite())
+        {
+            return Err(Refusal::NotFinite);
+        }
+        let inside = |x: f64, max: f64| x <= max;
+        if used(Setpoint::VELOCITY)
+            && !(inside(v[0].hypot(v[1]), self.max_horizontal_speed_m_s)
+                && inside(v[2].abs(), self.max_vertical_speed_m_s))
+        {
+            return Err(Refusal::TooFast);
+        }
+        if used(Setpoint::ACCELERATION)
+            && !inside(Vector3::from(a).norm(), self.max_acceleration_m_s2)
+        {
+            return Err(Refusal::TooFast);
+        }
+        if let (true, Some(h)) = (used(Setpoint::POSITION), home) {
+            let d = Vector3::from(p) - h;
+            if !(inside(d.xy().norm(), self.geofence_radius_m)
+                && inside(d.z, self.geofence_height_m)
+                && inside(-d.z, 2.0))
+            {
+                return Err(Refusal::OutsideGeofence);
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Default for LinkSettings {
@@ -99,6 +185,7 @@ impl Default for LinkSettings {
             command_attempts: 4,
             heartbeat_timeout_ns: 1_500_000_000,
             telemetry_hz: [30.0, 50.0, 5.0],
+            bounds: SetpointBounds::default(),
         }
     }
 }
@@ -155,6 +242,9 @@ pub struct Px4Link {
     queue: VecDeque<Request>,
     outcomes: Vec<(Request, Outcome)>,
     setpoint: Option<(u64, Setpoint)>,
+    home: Option<Vector3<f64>>,
+    refused: u64,
+    last_refusal: Option<Refusal>,
     stream_since_ns: Option<u64>,
     last_setpoint_sent_ns: Option<u64>,
     last_heartbeat_sent_ns: Option<u64>,
@@ -174,6 +264,9 @@ impl Px4Link {
             queue: VecDeque::new(),
             outcomes: Vec::new(),
             setpoint: None,
+            home: None,
+            refused: 0,
+            last_refusal: None,
             stream_since_ns: None,
             last_setpoint_sent_ns: None,
             last_heartbeat_sent_ns: None,
@@ -235,7 +328,23 @@ impl Px4Link {
         if sp.valid & (Setpoint::POSITION | Setpoint::VELOCITY) == 0 {
             return;
         }
+        if let Err(why) = self.settings.bounds.check(&sp, self.home) {
+            self.refused += 1;
+            self.last_refusal = Some(why);
+            return;
+        }
         self.setpoint = Some((now_ns, sp));
+    }
+
+    /// Setpoints refused by the bounds so far, and why the last one was.
+    pub fn refused_setpoints(&self) -> (u64, Option<Refusal>) {
+        (self.refused, self.last_refusal)
+    }
+
+    /// The take-off point the geofence is centred on (ENU): where the vehicle was when
+    /// it armed, else its first reported position.
+    pub fn home(&self) -> Option<Vector3<f64>> {
+        self.home
     }
 
     /// Takes in one message from the autopilot, received at `now_ns`.
@@ -258,15 +367,23 @@ impl Px4Link {
                     return;
                 }
                 self.telemetry.custom_mode = h.custom_mode;
-                self.telemetry.armed = h
+                let armed = h
                     .base_mode
                     .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+                if armed && !self.telemetry.armed {
+                    // The geofence is centred where the vehicle armed.
+                    if let Some((p, _)) = self.telemetry.position {
+                        self.home = Some(p);
+                    }
+                }
+                self.telemetry.armed = armed;
                 self.telemetry.last_heartbeat_ns = Some(now_ns);
             }
             MavMessage::LOCAL_POSITION_NED(p) => {
                 let pos = enu_from_ned([f64::from(p.x), f64::from(p.y), f64::from(p.z)]);
                 let vel = enu_from_ned([f64::from(p.vx), f64::from(p.vy), f64::from(p.vz)]);
                 if pos.iter().chain(vel.iter()).all(|v| v.is_finite()) {
+                    self.home.get_or_insert(pos);
                     self.telemetry.position = Some((pos, vel));
                     self.telemetry.last_telemetry_ns = now_ns;
                 }

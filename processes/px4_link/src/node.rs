@@ -139,6 +139,11 @@ impl LinkNode {
         self.link.set_setpoint(now_ns, setpoint);
     }
 
+    /// Setpoints the bounds refused so far, and why the last one was.
+    pub fn refused_setpoints(&self) -> (u64, Option<crate::link::Refusal>) {
+        self.link.refused_setpoints()
+    }
+
     /// Takes one message from the autopilot.
     pub fn on_message(&mut self, now_ns: u64, header: &MavHeader, msg: &MavMessage) {
         self.advance(now_ns);

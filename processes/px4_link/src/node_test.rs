@@ -332,3 +332,97 @@ fn the_state_is_handed_out_once_per_telemetry_then_again_when_stale_with_its_old
     assert_eq!(s.link.connected, 0);
     assert_eq!(s.msg.capture_ns, 30_000_000);
 }
+
+/// A small deterministic generator (xorshift64*), so the property test needs no crate.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+
+    /// Mostly ordinary values, sometimes huge, beyond f32, NaN or infinite.
+    fn value(&mut self) -> f64 {
+        let u = (self.next() >> 11) as f64 / (1u64 << 53) as f64;
+        match self.next() % 16 {
+            0 => f64::NAN,
+            1 => f64::INFINITY,
+            2 => -1e39,
+            3 => 1e6 * (u - 0.5),
+            4..=6 => 400.0 * (u - 0.5),
+            _ => 40.0 * (u - 0.5),
+        }
+    }
+}
+
+#[test]
+fn no_setpoint_beyond_the_bounds_is_ever_sent_whatever_the_mission_asks() {
+    let bounds = crate::SetpointBounds::default();
+    let mut node = LinkNode::new(LinkSettings::default());
+    telemetry(&mut node, 0);
+    let home = node.link.home().unwrap();
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let (mut sent, mut inside) = (0, 0);
+    for k in 1..20_000u64 {
+        let now = k * 5_000_000;
+        let mut v = || [rng.value(), rng.value(), rng.value()];
+        let sp = Setpoint {
+            position: v(),
+            velocity: v(),
+            acceleration: v(),
+            yaw: rng.value(),
+            valid: (rng.next() % 16) as u32,
+            ..Setpoint::default()
+        };
+        if bounds.check(&sp, Some(home)).is_ok() {
+            inside += 1;
+        }
+        node.on_setpoint(now, &sp);
+        if k % 8 == 0 {
+            telemetry(&mut node, now);
+        }
+        node.send_due(now, |_, m| {
+            if let MavMessage::SET_POSITION_TARGET_LOCAL_NED(t) = m {
+                sent += 1;
+                let ignore = |bit| t.type_mask.contains(bit);
+                use mavlink::dialects::common::PositionTargetTypemask as M;
+                let wire = [t.x, t.y, t.z, t.vx, t.vy, t.vz, t.afx, t.afy, t.afz, t.yaw];
+                assert!(wire.iter().all(|x| x.is_finite()), "{t:?}");
+                if !ignore(M::POSITION_TARGET_TYPEMASK_X_IGNORE) {
+                    // NED on the wire, home in ENU.
+                    let (e, n, d) = (f64::from(t.y), f64::from(t.x), f64::from(t.z));
+                    let horizontal = (e - home.x).hypot(n - home.y);
+                    assert!(horizontal <= bounds.geofence_radius_m, "{t:?}");
+                    assert!(-d - home.z <= bounds.geofence_height_m, "{t:?}");
+                    assert!(-d - home.z >= -2.0, "{t:?}");
+                }
+                if !ignore(M::POSITION_TARGET_TYPEMASK_VX_IGNORE) {
+                    let h = f64::from(t.vx).hypot(f64::from(t.vy));
+                    assert!(h <= bounds.max_horizontal_speed_m_s + 1e-4, "{t:?}");
+                    assert!(
+                        f64::from(t.vz.abs()) <= bounds.max_vertical_speed_m_s + 1e-4,
+                        "{t:?}"
+                    );
+                }
+                if !ignore(M::POSITION_TARGET_TYPEMASK_AX_IGNORE) {
+                    let a = (f64::from(t.afx).powi(2)
+                        + f64::from(t.afy).powi(2)
+                        + f64::from(t.afz).powi(2))
+                    .sqrt();
+                    assert!(a <= bounds.max_acceleration_m_s2 + 1e-4, "{t:?}");
+                }
+            }
+            Ok::<(), ()>(())
+        })
+        .unwrap();
+    }
+    let (refused, _) = node.refused_setpoints();
+    eprintln!("{sent} setpoints sent, {inside} of the random ones inside, {refused} refused");
+    assert!(
+        sent > 1_000 && inside > 1_000 && refused > 1_000,
+        "the test must exercise both sides"
+    );
+}

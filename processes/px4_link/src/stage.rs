@@ -118,7 +118,12 @@ impl Stage for LinkStage {
             }
             Message::Setpoint(s) => {
                 self.counts.setpoints += 1;
+                let before = self.node.refused_setpoints().0;
                 self.node.on_setpoint(now_ns, s);
+                let (refused, why) = self.node.refused_setpoints();
+                if refused > before && refused.is_power_of_two() {
+                    tracing::warn!(refused, ?why, "setpoint beyond the bounds refused");
+                }
             }
             Message::LinkRequest(r) => {
                 self.counts.requests += 1;
@@ -151,6 +156,7 @@ impl Stage for LinkStage {
             ("states", c.states),
             ("outcomes", c.outcomes),
             ("setpoints", c.setpoints),
+            ("setpoints_refused", self.node.refused_setpoints().0),
             ("requests", c.requests),
             ("safety", c.safety),
         ]
