@@ -17,6 +17,7 @@ use serde::Deserialize;
 
 use crate::params::{self, ParamError};
 use crate::quadrotor::Surface;
+use crate::rng::Pcg32;
 
 /// The highest ground-vehicle speed the simulator accepts: 60 km/h, in m/s.
 pub const MAX_GROUND_SPEED_M_S: f64 = 60.0 / 3.6;
@@ -58,6 +59,21 @@ pub enum PathParams {
         lobe_radius_m: f64,
         /// Heading at the crossing point, rad.
         heading_rad: f64,
+    },
+    /// A straight line from `start_m` along `heading_rad` for `straight_m`, then an arc
+    /// of `radius_m` turning by `turn_rad` (positive: left), then straight on: a car
+    /// taking a corner.
+    Corner {
+        /// Start point (x, y), m.
+        start_m: [f64; 2],
+        /// Direction of travel at the start, rad.
+        heading_rad: f64,
+        /// Length of the first straight, m.
+        straight_m: f64,
+        /// Radius of the turn, m.
+        radius_m: f64,
+        /// How far it turns, rad (positive: left).
+        turn_rad: f64,
     },
     /// A polyline through `points_m`, turning in place at each corner; the
     /// vehicle stops at the last point unless `closed` (then it loops).
@@ -128,6 +144,57 @@ pub struct GroundVehicleParams {
     /// Optional pitch/roll oscillation of the pad.
     #[serde(default)]
     pub oscillation: Option<PadOscillation>,
+    /// How a driver drives the route: speed noise and heading wander; absent, the
+    /// vehicle follows the route and the speed profile exactly.
+    #[serde(default)]
+    pub driver: Option<DriverParams>,
+    /// A lane change: a smooth sideways move off the route.
+    #[serde(default)]
+    pub lane_change: Option<LaneChange>,
+}
+
+/// A driver's imperfection, seeded per run: the speed wanders around the profile
+/// (relative, so a parked vehicle stays parked) and the heading around the route.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DriverParams {
+    /// Standard deviation of the speed relative to the profile (0.1 = 10 %), at most 0.3.
+    pub speed_noise_fraction: f64,
+    /// Typical period of the speed's wander, s.
+    pub speed_period_s: f64,
+    /// Standard deviation of the heading off the route, rad.
+    pub heading_wander_rad: f64,
+    /// Typical distance over which the heading wanders, m.
+    pub wander_wavelength_m: f64,
+    /// Seed of the wander (the run's seed; not read from files).
+    #[serde(skip)]
+    pub seed: u64,
+}
+
+impl Default for DriverParams {
+    /// 10 % speed noise over about 6 s, 1 deg of heading wander over about 8 m.
+    fn default() -> Self {
+        Self {
+            speed_noise_fraction: 0.1,
+            speed_period_s: 6.0,
+            heading_wander_rad: 0.0175,
+            wander_wavelength_m: 8.0,
+            seed: 1,
+        }
+    }
+}
+
+/// A lane change: from `at_s` (time since the scenario's start), the vehicle moves
+/// `offset_m` to its left (negative: right) over `duration_s`, smoothly (quintic).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LaneChange {
+    /// When it starts, s.
+    pub at_s: f64,
+    /// Sideways distance, m (positive: left).
+    pub offset_m: f64,
+    /// How long it takes, s.
+    pub duration_s: f64,
 }
 
 fn default_pad_height() -> f64 {
@@ -153,6 +220,8 @@ impl Default for GroundVehicleParams {
             pad_height_m: default_pad_height(),
             pad_half_size_m: default_pad_half_size(),
             oscillation: None,
+            driver: None,
+            lane_change: None,
         }
     }
 }
@@ -198,6 +267,24 @@ impl GroundVehicleParams {
                 params::finite_all("path.centre_m", centre_m)?;
                 params::positive("path.lobe_radius_m", *lobe_radius_m)?;
                 params::finite("path.heading_rad", *heading_rad)?;
+            }
+            PathParams::Corner {
+                start_m,
+                heading_rad,
+                straight_m,
+                radius_m,
+                turn_rad,
+            } => {
+                params::finite_all("path.start_m", start_m)?;
+                params::finite("path.heading_rad", *heading_rad)?;
+                params::non_negative("path.straight_m", *straight_m)?;
+                params::positive("path.radius_m", *radius_m)?;
+                params::in_range(
+                    "path.turn_rad",
+                    *turn_rad,
+                    -std::f64::consts::PI,
+                    std::f64::consts::PI,
+                )?;
             }
             PathParams::Waypoints { points_m, .. } => {
                 for (i, p) in points_m.iter().enumerate() {
@@ -253,6 +340,22 @@ impl GroundVehicleParams {
                     speed_in_range(&format!("speed.points[{i}] speed"), *v)?;
                 }
             }
+        }
+        if let Some(d) = &self.driver {
+            params::in_range(
+                "driver.speed_noise_fraction",
+                d.speed_noise_fraction,
+                0.0,
+                0.3,
+            )?;
+            params::positive("driver.speed_period_s", d.speed_period_s)?;
+            params::in_range("driver.heading_wander_rad", d.heading_wander_rad, 0.0, 0.2)?;
+            params::positive("driver.wander_wavelength_m", d.wander_wavelength_m)?;
+        }
+        if let Some(l) = &self.lane_change {
+            params::non_negative("lane_change.at_s", l.at_s)?;
+            params::in_range("lane_change.offset_m", l.offset_m, -10.0, 10.0)?;
+            params::positive("lane_change.duration_s", l.duration_s)?;
         }
         params::non_negative("start_delay_s", self.start_delay_s)?;
         params::in_range("pad_height_m", self.pad_height_m, 0.0, 5.0)?;
@@ -365,6 +468,38 @@ struct PathPoint {
 pub struct GroundVehicle {
     params: GroundVehicleParams,
     polyline: Option<Polyline>,
+    /// The driver's speed wander: time is warped by `1 + sum(a sin(w t + p))`.
+    speed_wander: Vec<Wave>,
+    /// The driver's sideways wander along the route: `sum(a (sin(w s + p) - sin p))`, m.
+    lateral_wander: Vec<Wave>,
+}
+
+/// One sinusoid of a wander.
+#[derive(Debug, Clone, Copy)]
+struct Wave {
+    amplitude: f64,
+    omega: f64,
+    phase: f64,
+}
+
+/// Three sinusoids around `period` (in the unit of their argument) whose sum has the
+/// standard deviation `std`, seeded.
+fn waves(rng: &mut Pcg32, period: f64, std: f64) -> Vec<Wave> {
+    if std == 0.0 {
+        return Vec::new();
+    }
+    let amplitude = std / 1.5f64.sqrt();
+    [0.6, 1.0, 1.7]
+        .iter()
+        .map(|f| {
+            let p = period * f * (0.8 + 0.4 * rng.uniform());
+            Wave {
+                amplitude,
+                omega: std::f64::consts::TAU / p,
+                phase: std::f64::consts::TAU * rng.uniform(),
+            }
+        })
+        .collect()
 }
 
 impl GroundVehicle {
@@ -375,7 +510,30 @@ impl GroundVehicle {
             PathParams::Waypoints { points_m, closed } => Polyline::new(points_m, *closed),
             _ => None,
         };
-        Ok(Self { params, polyline })
+        let (speed_wander, lateral_wander) = match &params.driver {
+            Some(d) => {
+                let mut rng = Pcg32::with_stream(d.seed, 11);
+                let speed = waves(&mut rng, d.speed_period_s, d.speed_noise_fraction);
+                // Heading ~ d(offset)/ds: an offset wave of amplitude a and wavenumber k
+                // turns the heading by a k.
+                let heading = waves(&mut rng, d.wander_wavelength_m, d.heading_wander_rad);
+                let lateral = heading
+                    .into_iter()
+                    .map(|w| Wave {
+                        amplitude: w.amplitude / w.omega,
+                        ..w
+                    })
+                    .collect();
+                (speed, lateral)
+            }
+            None => (Vec::new(), Vec::new()),
+        };
+        Ok(Self {
+            params,
+            polyline,
+            speed_wander,
+            lateral_wander,
+        })
     }
 
     /// The parameters in use.
@@ -389,13 +547,23 @@ impl GroundVehicle {
         let t = if t_s.is_finite() { t_s.max(0.0) } else { 0.0 };
         let driving_time = (t - self.params.start_delay_s).max(0.0);
         let driving = t > self.params.start_delay_s;
-        let distance = self.distance_at(driving_time);
+        // The driver's speed wander warps the profile's time: tau' = 1 + sum(a sin(..)).
+        let (tau, dtau, ddtau) =
+            self.speed_wander
+                .iter()
+                .fold((driving_time, 1.0, 0.0), |(tau, d, dd), w| {
+                    let x = w.omega * driving_time + w.phase;
+                    (
+                        tau + w.amplitude / w.omega * (w.phase.cos() - x.cos()),
+                        d + w.amplitude * x.sin(),
+                        dd + w.amplitude * w.omega * x.cos(),
+                    )
+                });
+        let distance = self.distance_at(tau);
         let point = self.point_at(distance);
         let (mut speed, mut accel) = if driving {
-            (
-                self.speed_at(driving_time),
-                self.speed_rate_at(driving_time),
-            )
+            let v = self.speed_at(tau);
+            (v * dtau, self.speed_rate_at(tau) * dtau * dtau + v * ddtau)
         } else {
             (0.0, 0.0)
         };
@@ -403,27 +571,72 @@ impl GroundVehicle {
             speed = 0.0;
             accel = 0.0;
         }
+        // Sideways: the driver's wander along the route plus a lane change in time.
+        let (mut y, mut dy_ds, mut d2y_ds2) = (0.0, 0.0, 0.0);
+        for w in &self.lateral_wander {
+            let x = w.omega * distance + w.phase;
+            // From the route itself at its start: a parked vehicle stays on it.
+            y += w.amplitude * (x.sin() - w.phase.sin());
+            dy_ds += w.amplitude * w.omega * x.cos();
+            d2y_ds2 -= w.amplitude * w.omega * w.omega * x.sin();
+        }
+        let (lane, lane_v, lane_a) = self.lane_offset_at(t);
+        y += lane;
+        let lat_v = dy_ds * speed + lane_v;
+        let lat_a = d2y_ds2 * speed * speed + dy_ds * accel + lane_a;
         let (roll, pitch, roll_rate, pitch_rate) = self.oscillation_at(t);
-        let heading = point.heading;
-        let tangent = Vector3::new(heading.cos(), heading.sin(), 0.0);
-        let normal = Vector3::new(-heading.sin(), heading.cos(), 0.0);
-        let yaw_rate = point.curvature * speed;
+        let tangent = Vector3::new(point.heading.cos(), point.heading.sin(), 0.0);
+        let normal = Vector3::new(-point.heading.sin(), point.heading.cos(), 0.0);
+        // The vehicle points along its velocity (at a crawl, along the route).
+        let (off, off_rate) = if speed > 0.05 {
+            (
+                lat_v.atan2(speed),
+                (lat_a * speed - lat_v * accel) / (speed * speed + lat_v * lat_v),
+            )
+        } else {
+            (0.0, 0.0)
+        };
+        let heading = point.heading + off;
+        let yaw_rate = point.curvature * speed + off_rate;
         let rz = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), heading);
         let ry = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), pitch);
         let angular_velocity = Vector3::z() * yaw_rate
             + rz * (Vector3::y() * pitch_rate)
             + (rz * ry) * (Vector3::x() * roll_rate);
         let rotation = UnitQuaternion::from_euler_angles(roll, pitch, heading);
+        let position = point.position + Vector2::new(normal.x, normal.y) * y;
         PadState {
             world_from_pad: Isometry3::from_parts(
-                Translation3::new(point.position.x, point.position.y, self.params.pad_height_m),
+                Translation3::new(position.x, position.y, self.params.pad_height_m),
                 rotation,
             ),
-            linear_velocity: tangent * speed,
-            linear_acceleration: tangent * accel + normal * (point.curvature * speed * speed),
+            linear_velocity: tangent * speed + normal * lat_v,
+            linear_acceleration: tangent * accel
+                + normal * (point.curvature * speed * speed + lat_a),
             angular_velocity,
-            speed_m_s: speed,
+            speed_m_s: (speed * speed + lat_v * lat_v).sqrt(),
             distance_m: distance,
+        }
+    }
+
+    /// The lane change's sideways offset, its rate and its acceleration at `t_s`.
+    fn lane_offset_at(&self, t_s: f64) -> (f64, f64, f64) {
+        let Some(l) = &self.params.lane_change else {
+            return (0.0, 0.0, 0.0);
+        };
+        let u = ((t_s - l.at_s) / l.duration_s).clamp(0.0, 1.0);
+        let inside = t_s > l.at_s && t_s < l.at_s + l.duration_s;
+        let s = u * u * u * (10.0 - 15.0 * u + 6.0 * u * u);
+        let ds = 30.0 * u * u * (1.0 - u) * (1.0 - u);
+        let dds = 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u);
+        if inside {
+            (
+                l.offset_m * s,
+                l.offset_m * ds / l.duration_s,
+                l.offset_m * dds / (l.duration_s * l.duration_s),
+            )
+        } else {
+            (l.offset_m * s, 0.0, 0.0)
         }
     }
 
@@ -534,6 +747,44 @@ impl GroundVehicle {
                     arc_point(c + left * r, r, heading_rad - half_pi, 1.0, u)
                 } else {
                     arc_point(c - left * r, r, heading_rad + half_pi, -1.0, u - lobe)
+                }
+            }
+            PathParams::Corner {
+                start_m,
+                heading_rad,
+                straight_m,
+                radius_m,
+                turn_rad,
+            } => {
+                let h = *heading_rad;
+                let start = Vector2::new(start_m[0], start_m[1]);
+                let dir = Vector2::new(h.cos(), h.sin());
+                if s <= *straight_m {
+                    return PathPoint {
+                        position: start + dir * s,
+                        heading: h,
+                        curvature: 0.0,
+                        at_end: false,
+                    };
+                }
+                let sign = if *turn_rad < 0.0 { -1.0 } else { 1.0 };
+                let r = *radius_m;
+                let left = Vector2::new(-h.sin(), h.cos());
+                let centre = start + dir * *straight_m + left * (sign * r);
+                let arc = r * turn_rad.abs();
+                let half_pi = std::f64::consts::FRAC_PI_2;
+                let on_arc = (s - straight_m).min(arc);
+                let p = arc_point(centre, r, h - sign * half_pi, sign, on_arc);
+                if s - straight_m <= arc {
+                    return p;
+                }
+                let h2 = h + turn_rad;
+                PathPoint {
+                    position: p.position
+                        + Vector2::new(h2.cos(), h2.sin()) * (s - straight_m - arc),
+                    heading: h2,
+                    curvature: 0.0,
+                    at_end: false,
                 }
             }
             PathParams::Waypoints { .. } => match &self.polyline {

@@ -341,3 +341,171 @@ fn parses_from_toml() {
     );
     assert!(bad.is_err());
 }
+
+fn east(speed_m_s: f64) -> PathParams {
+    let _ = speed_m_s;
+    PathParams::Straight {
+        start_m: [0.0, 0.0],
+        heading_rad: 0.0,
+    }
+}
+
+fn driven(path: PathParams, speed: SpeedProfile, seed: u64) -> GroundVehicle {
+    GroundVehicle::new(GroundVehicleParams {
+        path,
+        speed,
+        driver: Some(DriverParams {
+            seed,
+            ..DriverParams::default()
+        }),
+        ..GroundVehicleParams::default()
+    })
+    .unwrap()
+}
+
+/// Position differences over 1 ms match the reported velocity (and the speed's
+/// derivative the acceleration), so the pad filter and the contact see one motion.
+fn assert_consistent(g: &GroundVehicle, from_s: f64, to_s: f64) {
+    let dt = 1e-3;
+    let mut t = from_s + 0.01;
+    while t < to_s {
+        let (a, b) = (g.state_at(t), g.state_at(t + dt));
+        let v = (translation(&b) - translation(&a)) / dt;
+        let reported = (a.linear_velocity + b.linear_velocity) / 2.0;
+        assert!(
+            (v - reported).norm() < 2e-3,
+            "t {t}: moved {v:?}, reported {reported:?}"
+        );
+        let acc = (b.linear_velocity - a.linear_velocity) / dt;
+        let reported = (a.linear_acceleration + b.linear_acceleration) / 2.0;
+        assert!(
+            (acc - reported).norm() < 2e-2,
+            "t {t}: {acc:?} vs {reported:?}"
+        );
+        t += 0.37;
+    }
+}
+
+#[test]
+fn a_driver_wanders_in_speed_and_heading_around_the_profile_smoothly() {
+    let g = driven(east(0.9), constant(0.9), 3);
+    let speeds: Vec<f64> = (0..600)
+        .map(|k| g.state_at(k as f64 * 0.1).speed_m_s)
+        .collect();
+    let mean = speeds.iter().sum::<f64>() / speeds.len() as f64;
+    let std = (speeds.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / speeds.len() as f64).sqrt();
+    assert!((mean - 0.9).abs() < 0.05, "mean {mean}");
+    assert!(
+        std > 0.04 && std < 0.14,
+        "speed std {std} (10 % of 0.9 expected)"
+    );
+    let heading_off: Vec<f64> = (0..600)
+        .map(|k| {
+            wrap(
+                g.state_at(k as f64 * 0.1)
+                    .world_from_pad
+                    .rotation
+                    .euler_angles()
+                    .2,
+            )
+        })
+        .collect();
+    let max_off = heading_off.iter().fold(0.0f64, |m, h| m.max(h.abs()));
+    assert!(
+        max_off > 0.005 && max_off < 0.08,
+        "heading wander {max_off} rad"
+    );
+    let max_acc = (0..600)
+        .map(|k| g.state_at(k as f64 * 0.1).linear_acceleration.norm())
+        .fold(0.0f64, f64::max);
+    assert!(max_acc < 0.3, "gentle: {max_acc} m/s^2");
+    assert_consistent(&g, 0.0, 60.0);
+}
+
+#[test]
+fn the_driver_is_the_same_for_a_seed_and_differs_between_seeds() {
+    let at = |seed| translation(&driven(east(0.9), constant(0.9), seed).state_at(30.0));
+    assert_eq!(at(4), at(4));
+    assert!((at(4) - at(5)).norm() > 0.01);
+}
+
+#[test]
+fn a_parked_vehicle_with_a_driver_stays_parked() {
+    let g = driven(east(0.0), constant(0.0), 3);
+    for k in 0..100 {
+        let s = g.state_at(k as f64 * 0.3);
+        assert!(translation(&s).xy().norm() < 1e-12 && s.linear_velocity.norm() < 1e-12);
+    }
+}
+
+#[test]
+fn braking_to_a_stop_through_a_driver_ends_parked() {
+    let g = driven(
+        east(0.9),
+        SpeedProfile::PiecewiseLinear {
+            points: vec![[0.0, 0.9], [10.0, 0.9], [12.0, 0.0]],
+        },
+        7,
+    );
+    let stopped = g.state_at(40.0);
+    assert!(stopped.speed_m_s < 1e-9, "{}", stopped.speed_m_s);
+    assert_eq!(
+        translation(&g.state_at(40.0)),
+        translation(&g.state_at(50.0))
+    );
+}
+
+#[test]
+fn a_corner_turns_ninety_degrees_on_its_arc_and_drives_on() {
+    let g = vehicle(
+        PathParams::Corner {
+            start_m: [0.0, 0.0],
+            heading_rad: 0.0,
+            straight_m: 5.0,
+            radius_m: 3.0,
+            turn_rad: std::f64::consts::FRAC_PI_2,
+        },
+        constant(1.0),
+    );
+    let before = g.state_at(4.0);
+    assert!((translation(&before) - Vector3::new(4.0, 0.0, 0.4)).norm() < 1e-9);
+    // Half way round the arc (5 m + 3 pi / 4 m).
+    let mid = g.state_at(5.0 + 3.0 * std::f64::consts::FRAC_PI_4);
+    let h = mid.world_from_pad.rotation.euler_angles().2;
+    assert!((h - std::f64::consts::FRAC_PI_4).abs() < 1e-9, "{h}");
+    assert!((mid.angular_velocity.z - 1.0 / 3.0).abs() < 1e-9);
+    // After it: heading north from (8, 3).
+    let after = g.state_at(5.0 + 3.0 * std::f64::consts::FRAC_PI_2 + 2.0);
+    assert!(
+        (translation(&after) - Vector3::new(8.0, 5.0, 0.4)).norm() < 1e-9,
+        "{after:?}"
+    );
+    assert!(
+        (after.world_from_pad.rotation.euler_angles().2 - std::f64::consts::FRAC_PI_2).abs() < 1e-9
+    );
+    assert_consistent(&g, 0.0, 15.0);
+}
+
+#[test]
+fn a_lane_change_moves_the_vehicle_sideways_smoothly_and_stays_there() {
+    let g = GroundVehicle::new(GroundVehicleParams {
+        path: east(0.9),
+        speed: constant(0.9),
+        lane_change: Some(LaneChange {
+            at_s: 5.0,
+            offset_m: 1.0,
+            duration_s: 3.0,
+        }),
+        ..GroundVehicleParams::default()
+    })
+    .unwrap();
+    assert!(translation(&g.state_at(4.9)).y.abs() < 1e-12);
+    let mid = g.state_at(6.5);
+    assert!((translation(&mid).y - 0.5).abs() < 1e-9);
+    assert!(
+        mid.world_from_pad.rotation.euler_angles().2 > 0.3,
+        "it heads left while moving over"
+    );
+    assert!((translation(&g.state_at(9.0)).y - 1.0).abs() < 1e-12);
+    assert_consistent(&g, 0.0, 12.0);
+}

@@ -31,6 +31,9 @@ pub const SHIPPED: &[&str] = &[
     "outdoor-1",
     "outdoor-2",
     "obstacle-demo",
+    "paper-braking",
+    "paper-lane-change",
+    "paper-turn",
     "highspeed-10",
     "highspeed-20",
     "highspeed-30",
@@ -379,12 +382,16 @@ impl LoadedScenario {
         noise.seed = seed;
         let mut wind = s.wind.clone();
         wind.seed = seed.wrapping_add(1);
+        let mut ground_vehicle = s.ground_vehicle.clone();
+        if let Some(d) = ground_vehicle.driver.as_mut() {
+            d.seed = seed.wrapping_add(2);
+        }
         WorldParams {
             airframe: self.airframe.clone(),
             autopilot: Some(self.autopilot.clone()),
             estimator_noise: noise,
             wind,
-            ground_vehicle: Some(s.ground_vehicle.clone()),
+            ground_vehicle: Some(ground_vehicle),
             obstacles: s.obstacles.clone(),
             crash: s.crash.clone(),
             initial_position_m: [0.0; 3],
