@@ -1,8 +1,10 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
-//! The paper's detection-range table, reproduced with the renderer and the detector:
-//! the highest height (camera over the pad centre, level) at which each marker size is
-//! still decoded. Prints a markdown table (run with `--nocapture`); docs/perception.md
-//! quotes it.
+//! The paper's detection-range table, reproduced with the renderer and the detector: per
+//! marker size, the largest height at which it is decoded in at least 95 % of frames
+//! (20 frames per height, each with its own render noise and a jittered pose: the
+//! camera within 5 cm of the pad centre's vertical, tilted up to 3 deg, any yaw), not
+//! the highest single detection. Prints a markdown table (run with `--nocapture`);
+//! docs/perception.md quotes it.
 
 mod common;
 
@@ -18,6 +20,24 @@ const PAPER: [(&str, &[u32], f64); 4] = [
     ("68 (25.7 cm)", &[68], 3.00),
 ];
 
+/// Frames per height.
+const FRAMES: u32 = 20;
+
+/// A small deterministic generator for the pose jitter.
+struct Lcg(u64);
+
+impl Lcg {
+    /// Uniform in [-r, r].
+    fn within(&mut self, r: f64) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        let u = (self.0 >> 11) as f64 / (1u64 << 53) as f64;
+        r * (2.0 * u - 1.0)
+    }
+}
+
 #[test]
 fn every_marker_size_is_detected_at_least_as_high_as_in_the_paper() {
     let pad = pad_state();
@@ -32,22 +52,32 @@ fn every_marker_size_is_detected_at_least_as_high_as_in_the_paper() {
         let cal = calibration(file);
         let mut detector = Detector::new(DetectSettings::default()).unwrap();
         let mut highest = [0.0f64; 4];
+        let mut jitter = Lcg(0x5eed);
         for &h in &heights {
-            let v = View {
-                height: h,
-                offset: [0.0, 0.0],
-                roll_deg: 0.0,
-                pitch_deg: 0.0,
-                yaw_deg: 0.0,
-            };
-            let (body, _) = place(&cam, &pad, &v);
-            let data = render(&mut cam, &pad, body);
-            let image =
-                Mat::new_rows_cols_with_data(cal.height as i32, cal.width as i32, &data).unwrap();
-            let found = detector.detect(&image, None, None).unwrap();
-            for (k, (_, ids, _)) in PAPER.iter().enumerate() {
-                // A size counts as detected when every marker of it in view is.
-                if ids.iter().all(|id| found.iter().any(|m| m.id == *id)) {
+            let mut seen = [0u32; 4];
+            for _ in 0..FRAMES {
+                let v = View {
+                    height: h,
+                    offset: [jitter.within(0.05), jitter.within(0.05)],
+                    roll_deg: jitter.within(3.0),
+                    pitch_deg: jitter.within(3.0),
+                    yaw_deg: jitter.within(180.0),
+                };
+                let (body, _) = place(&cam, &pad, &v);
+                let data = render(&mut cam, &pad, body);
+                let image =
+                    Mat::new_rows_cols_with_data(cal.height as i32, cal.width as i32, &data)
+                        .unwrap();
+                let found = detector.detect(&image, None, None).unwrap();
+                for (k, (_, ids, _)) in PAPER.iter().enumerate() {
+                    // A size counts as detected when every marker of it is.
+                    if ids.iter().all(|id| found.iter().any(|m| m.id == *id)) {
+                        seen[k] += 1;
+                    }
+                }
+            }
+            for k in 0..4 {
+                if f64::from(seen[k]) >= 0.95 * f64::from(FRAMES) {
                     highest[k] = highest[k].max(h);
                 }
             }
