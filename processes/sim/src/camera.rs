@@ -71,6 +71,9 @@ pub enum CameraError {
         "camera: texture atlas {0} x {1} px is above 32767 px a side (lower pad_texture_px_per_m)"
     )]
     AtlasTooLarge(usize, usize),
+    /// A drawn calibration is not a valid camera.
+    #[error("camera: {0}")]
+    Calibration(#[from] optics::CalibrationError),
     /// The output buffer does not hold exactly one frame.
     #[error("camera: output buffer holds {got} bytes, a frame is {want}")]
     BufferSize {
@@ -174,6 +177,87 @@ impl DownCameraParams {
     /// The mount: maps body-frame points into the optical frame.
     pub fn camera_from_body(&self) -> Isometry3<f64> {
         optics::down_camera_from_body(self.position_in_body_m)
+    }
+}
+
+/// How far a real camera is from its calibration and its drawing, per seed: the
+/// simulator renders with the perturbed intrinsics and mount while the pipeline reads
+/// the nominal calibration file and mount (standard deviations).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CameraErrors {
+    /// Focal lengths, relative (0.01 = 1 %).
+    pub focal_fraction: f64,
+    /// Principal point, px.
+    pub principal_point_px: f64,
+    /// Distortion coefficients k1, k2, p1, p2, k3 (absolute).
+    pub distortion: [f64; 5],
+    /// Mount rotation about each optical axis, deg.
+    pub mount_rotation_deg: f64,
+    /// Mount translation along each axis, m.
+    pub mount_translation_m: f64,
+}
+
+impl Default for CameraErrors {
+    /// A calibrated camera on a real airframe: 1 % focal length, 3 px principal point,
+    /// k1 0.01, k2 0.005, tangential 0.0005, 1 deg and 1 cm of mount.
+    fn default() -> Self {
+        Self {
+            focal_fraction: 0.01,
+            principal_point_px: 3.0,
+            distortion: [0.01, 0.005, 0.0005, 0.0005, 0.0],
+            mount_rotation_deg: 1.0,
+            mount_translation_m: 0.01,
+        }
+    }
+}
+
+impl CameraErrors {
+    /// None at all: the renderer's camera is the calibration (tests of the detector).
+    pub fn none() -> Self {
+        Self {
+            focal_fraction: 0.0,
+            principal_point_px: 0.0,
+            distortion: [0.0; 5],
+            mount_rotation_deg: 0.0,
+            mount_translation_m: 0.0,
+        }
+    }
+
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        params::in_range("focal_fraction", self.focal_fraction, 0.0, 0.1)?;
+        params::in_range("principal_point_px", self.principal_point_px, 0.0, 50.0)?;
+        for (i, d) in self.distortion.iter().enumerate() {
+            params::in_range(&format!("distortion[{i}]"), *d, 0.0, 0.2)?;
+        }
+        params::in_range("mount_rotation_deg", self.mount_rotation_deg, 0.0, 10.0)?;
+        params::in_range("mount_translation_m", self.mount_translation_m, 0.0, 0.1)
+    }
+
+    /// The true calibration and mount error drawn for `seed` around `nominal`.
+    pub fn draw(
+        &self,
+        nominal: &CameraCalibration,
+        seed: u64,
+    ) -> Result<(CameraCalibration, Isometry3<f64>), CameraError> {
+        let mut rng = Pcg32::with_stream(seed, 21);
+        let mut n = |std: f64| std * rng.normal();
+        let fx = nominal.fx * (1.0 + n(self.focal_fraction));
+        let fy = nominal.fy * (1.0 + n(self.focal_fraction));
+        let cx = nominal.cx + n(self.principal_point_px);
+        let cy = nominal.cy + n(self.principal_point_px);
+        let mut distortion = nominal.distortion;
+        for (d, std) in distortion.iter_mut().zip(self.distortion) {
+            *d += n(std);
+        }
+        let truth =
+            CameraCalibration::new(nominal.width, nominal.height, fx, fy, cx, cy, distortion)?;
+        let r = self.mount_rotation_deg.to_radians();
+        let rotation = UnitQuaternion::from_euler_angles(n(r), n(r), n(r));
+        let t = self.mount_translation_m;
+        let translation = Translation3::new(n(t), n(t), n(t));
+        Ok((truth, Isometry3::from_parts(translation, rotation)))
     }
 }
 
@@ -606,6 +690,12 @@ impl DownCamera {
     /// The camera mount (body to optical frame).
     pub fn camera_from_body(&self) -> Isometry3<f64> {
         self.camera_from_body
+    }
+
+    /// Moves the true mount by `error` (in the optical frame): the camera as built,
+    /// against the nominal mount the pipeline is configured with.
+    pub fn set_mount_error(&mut self, error: Isometry3<f64>) {
+        self.camera_from_body = error.inverse() * self.params.camera_from_body();
     }
 
     /// Renders one frame. `body` is the true motion at the middle of the

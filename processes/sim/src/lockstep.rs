@@ -143,7 +143,16 @@ impl Simulator {
             scenario.scenario.depth.rate_hz,
             seed,
         );
-        sim.down_camera = Some(Box::new(DownCamera::new(down, calibration, &pad)?));
+        // The camera as built differs from its calibration file and drawing (the
+        // pipeline reads those): per seed, within the scenario's camera errors.
+        let (truth, mount_error) = scenario
+            .scenario
+            .camera
+            .errors
+            .draw(&calibration, seed.wrapping_add(4))?;
+        let mut camera = DownCamera::new(down, truth, &pad)?;
+        camera.set_mount_error(mount_error);
+        sim.down_camera = Some(Box::new(camera));
         sim.depth_camera = Some(Box::new(DepthCamera::new(depth)?));
         Ok(sim)
     }

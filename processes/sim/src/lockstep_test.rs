@@ -210,3 +210,38 @@ fn the_camera_pipeline_hands_frames_back_in_order_at_their_publish_time() {
     assert_eq!(delivered + ready.len(), 4, "30 Hz over 0.16 s");
     assert!(delivered >= 3);
 }
+
+#[test]
+fn the_rendering_camera_differs_from_its_calibration_file_by_a_seeded_realistic_error() {
+    let scn = crate::scenario::load("paper-sim", &deploy()).unwrap();
+    let nominal = CameraCalibration::load(scn.calibration_path()).unwrap();
+    let camera = |seed| {
+        let sim = Simulator::new(&scn, seed).unwrap();
+        let cam = sim.down_camera().unwrap();
+        (cam.calibration().clone(), cam.camera_from_body())
+    };
+    let (a, mount_a) = camera(1);
+    let (again, mount_again) = camera(1);
+    let (b, _) = camera(2);
+    assert_eq!(
+        (&a, mount_a),
+        (&again, mount_again),
+        "the same seed, the same camera"
+    );
+    assert_ne!(a, b, "another seed, another camera");
+    for c in [&a, &b] {
+        assert!(
+            c.fx != nominal.fx && (c.fx / nominal.fx - 1.0).abs() < 0.05,
+            "{c:?}"
+        );
+        assert!((c.cx - nominal.cx).abs() < 15.0 && (c.cy - nominal.cy).abs() < 15.0);
+    }
+    let nominal_mount = scn.scenario.camera.sensor.camera_from_body();
+    let moved = (mount_a.translation.vector - nominal_mount.translation.vector).norm();
+    let turned = mount_a
+        .rotation
+        .angle_to(&nominal_mount.rotation)
+        .to_degrees();
+    assert!(moved > 0.0 && moved < 0.06, "{moved} m");
+    assert!(turned > 0.0 && turned < 6.0, "{turned} deg");
+}

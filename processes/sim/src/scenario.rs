@@ -12,7 +12,7 @@ use serde::Deserialize;
 use stack_config::{self as config, ConfigError, Invalid, Validate, check_range};
 
 use crate::autopilot::AutopilotParams;
-use crate::camera::DownCameraParams;
+use crate::camera::{CameraErrors, DownCameraParams};
 use crate::depth::DepthCameraParams;
 use crate::estimator_noise::EstimatorNoiseParams;
 use crate::ground_vehicle::GroundVehicleParams;
@@ -66,6 +66,9 @@ pub struct CameraParams {
     pub rate_hz: f64,
     /// Mount, exposure, latency, noise, pixel format.
     pub sensor: DownCameraParams,
+    /// How far the true camera is from the calibration file and the nominal mount the
+    /// pipeline reads, drawn per seed (defaults: a real calibrated camera).
+    pub errors: CameraErrors,
 }
 
 impl Default for CameraParams {
@@ -74,6 +77,7 @@ impl Default for CameraParams {
             calibration: "camera_down_640x480.yaml".into(),
             rate_hz: 30.0,
             sensor: DownCameraParams::default(),
+            errors: CameraErrors::default(),
         }
     }
 }
@@ -196,6 +200,10 @@ impl Validate for Scenario {
             .sensor
             .validate()
             .map_err(|e| from_param("camera.sensor", e))?;
+        self.camera
+            .errors
+            .validate()
+            .map_err(|e| from_param("camera.errors", e))?;
         check_range("depth.rate_hz", self.depth.rate_hz, 1.0, 90.0)?;
         self.depth
             .sensor
