@@ -218,7 +218,7 @@ fn the_rendering_camera_differs_from_its_calibration_file_by_a_seeded_realistic_
     let camera = |seed| {
         let sim = Simulator::new(&scn, seed).unwrap();
         let cam = sim.down_camera().unwrap();
-        (cam.calibration().clone(), cam.camera_from_body())
+        (*cam.calibration(), cam.camera_from_body())
     };
     let (a, mount_a) = camera(1);
     let (again, mount_again) = camera(1);
