@@ -222,9 +222,12 @@ fn the_aruco_benchmark_prints_the_documented_json() {
         "opencv_ms_p50_640x480",
         "ours_ms_p50_1280x720",
         "opencv_ms_p50_1280x720",
+        "opencv_tracked_ms_p50_640x480",
+        "opencv_tracked_ms_p50_1280x720",
     ] {
         let x = v[key].as_f64().unwrap_or(-1.0);
         assert!(x > 0.0, "{key} = {x}");
     }
     assert!(v["ours_found_640x480"].as_u64().unwrap_or(0) > 0);
+    assert!(["subpix", "contour"].contains(&v["opencv_refinement_640x480"].as_str().unwrap_or("")));
 }
