@@ -196,11 +196,17 @@ pub struct CameraErrors {
     pub mount_rotation_deg: f64,
     /// Mount translation along each axis, m.
     pub mount_translation_m: f64,
+    /// Offset of the frames' capture timestamps from the true mid-exposure time, drawn
+    /// once per seed (a driver stamping at readout, a clock not quite shared), ms.
+    pub clock_offset_ms: f64,
+    /// Jitter of each frame's timestamp around that offset, ms.
+    pub clock_jitter_ms: f64,
 }
 
 impl Default for CameraErrors {
     /// A calibrated camera on a real airframe: 1 % focal length, 3 px principal point,
-    /// k1 0.01, k2 0.005, tangential 0.0005, 1 deg and 1 cm of mount.
+    /// k1 0.01, k2 0.005, tangential 0.0005, 1 deg and 1 cm of mount, timestamps off
+    /// by 3 ms with 1 ms of jitter.
     fn default() -> Self {
         Self {
             focal_fraction: 0.01,
@@ -208,6 +214,8 @@ impl Default for CameraErrors {
             distortion: [0.01, 0.005, 0.0005, 0.0005, 0.0],
             mount_rotation_deg: 1.0,
             mount_translation_m: 0.01,
+            clock_offset_ms: 3.0,
+            clock_jitter_ms: 1.0,
         }
     }
 }
@@ -221,6 +229,8 @@ impl CameraErrors {
             distortion: [0.0; 5],
             mount_rotation_deg: 0.0,
             mount_translation_m: 0.0,
+            clock_offset_ms: 0.0,
+            clock_jitter_ms: 0.0,
         }
     }
 
@@ -232,7 +242,15 @@ impl CameraErrors {
             params::in_range(&format!("distortion[{i}]"), *d, 0.0, 0.2)?;
         }
         params::in_range("mount_rotation_deg", self.mount_rotation_deg, 0.0, 10.0)?;
-        params::in_range("mount_translation_m", self.mount_translation_m, 0.0, 0.1)
+        params::in_range("mount_translation_m", self.mount_translation_m, 0.0, 0.1)?;
+        params::in_range("clock_offset_ms", self.clock_offset_ms, 0.0, 50.0)?;
+        params::in_range("clock_jitter_ms", self.clock_jitter_ms, 0.0, 10.0)
+    }
+
+    /// The clock offset drawn for `seed`, ns (signed).
+    pub fn draw_clock_offset_ns(&self, seed: u64) -> i64 {
+        let mut rng = Pcg32::with_stream(seed, 22);
+        (self.clock_offset_ms * rng.normal() * 1e6) as i64
     }
 
     /// The true calibration and mount error drawn for `seed` around `nominal`.

@@ -12,9 +12,8 @@
 //! reads, sleeps, threads, IPC or printing; the caller drives fixed-step
 //! integration, so lockstep runs are deterministic for a given seed. The
 //! `sim` binary puts the same stage ([`stage::SimStage`]) behind a UDP socket
-//! on the wall clock; its [`camera_worker`] thread is a benchmark's and the
-//! lockstep runner's option. Reading a scenario file ([`scenario::load`]) is
-//! the one I/O.
+//! on the wall clock. Reading a scenario file ([`scenario::load`]) is the one
+//! I/O.
 //!
 //! Frames: world ENU (x east, y north, z up, origin at the take-off point),
 //! body FLU (x forward, y left, z up); transforms are named by what they map
@@ -22,7 +21,6 @@
 
 pub mod autopilot;
 pub mod camera;
-pub mod camera_worker;
 pub mod depth;
 pub mod estimator_noise;
 pub mod ground_vehicle;

@@ -122,6 +122,8 @@ pub struct Simulator {
     depth: Schedule,
     events_seen: usize,
     seed: u64,
+    /// The camera clock's error: a fixed offset and the jitter's draw, ns.
+    camera_clock: (i64, f64, crate::rng::Pcg32),
 }
 
 impl Simulator {
@@ -153,6 +155,9 @@ impl Simulator {
         let mut camera = DownCamera::new(down, truth, &pad)?;
         camera.set_mount_error(mount_error);
         sim.down_camera = Some(Box::new(camera));
+        let errors = &scenario.scenario.camera.errors;
+        sim.camera_clock.0 = errors.draw_clock_offset_ns(seed.wrapping_add(4));
+        sim.camera_clock.1 = errors.clock_jitter_ms * 1e6;
         sim.depth_camera = Some(Box::new(DepthCamera::new(depth)?));
         Ok(sim)
     }
@@ -175,6 +180,7 @@ impl Simulator {
             depth: Schedule::new(depth_hz, (1.5e9 / depth_hz.max(1.0)) as u64),
             events_seen: 0,
             seed,
+            camera_clock: (0, 0.0, crate::rng::Pcg32::with_stream(seed, 23)),
         }
     }
 
@@ -227,12 +233,6 @@ impl Simulator {
         (body, self.world.pad())
     }
 
-    /// Moves the downward camera out, e.g. onto a [`crate::camera_worker::CameraWorker`];
-    /// `render_camera_into` then returns `None`.
-    pub fn take_down_camera(&mut self) -> Option<DownCamera> {
-        self.down_camera.take().map(|c| *c)
-    }
-
     /// Renders the downward camera at the current true pose into `out` (exactly
     /// `down_camera().frame_len()` bytes); `None` without a camera.
     pub fn render_camera_into(&mut self, out: &mut [u8]) -> Result<Option<Shot>, SimError> {
@@ -242,9 +242,15 @@ impl Simulator {
             return Ok(None);
         };
         let blur_samples = cam.render_into(&body, pad.as_ref(), out)?;
+        let publish_ns = now + (cam.params().latency_s.max(0.0) * 1e9) as u64;
+        // The frame's timestamp is the camera's clock: off by the drawn offset and
+        // jitter, never after the frame is published.
+        let (offset, jitter, rng) = &mut self.camera_clock;
+        let error = *offset + (*jitter * rng.normal()) as i64;
+        let capture_ns = now.saturating_add_signed(error).min(publish_ns);
         Ok(Some(Shot {
-            capture_ns: now,
-            publish_ns: now + (cam.params().latency_s.max(0.0) * 1e9) as u64,
+            capture_ns,
+            publish_ns,
             blur_samples,
         }))
     }
