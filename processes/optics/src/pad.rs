@@ -105,6 +105,18 @@ pub struct Board {
     pub max_m: [f64; 2],
 }
 
+impl Board {
+    /// How far the pad-frame point `(x, y)` is outside the board, m (0 inside or on the
+    /// edge; NaN for a NaN point).
+    pub fn outside_m(&self, x: f64, y: f64) -> f64 {
+        let d = |v: f64, i: usize| (self.min_m[i] - v).max(v - self.max_m[i]).max(0.0);
+        if x.is_nan() || y.is_nan() {
+            return f64::NAN;
+        }
+        d(x, 0).hypot(d(y, 1))
+    }
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct PadFile {

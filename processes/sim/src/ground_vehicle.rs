@@ -624,20 +624,17 @@ impl GroundVehicle {
         let Some(l) = &self.params.lane_change else {
             return (0.0, 0.0, 0.0);
         };
+        // Quintic smoothstep: its rate and acceleration vanish at both ends, so the
+        // clamped parameter needs no case of its own before or after the change.
         let u = ((t_s - l.at_s) / l.duration_s).clamp(0.0, 1.0);
-        let inside = t_s > l.at_s && t_s < l.at_s + l.duration_s;
         let s = u * u * u * (10.0 - 15.0 * u + 6.0 * u * u);
         let ds = 30.0 * u * u * (1.0 - u) * (1.0 - u);
         let dds = 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u);
-        if inside {
-            (
-                l.offset_m * s,
-                l.offset_m * ds / l.duration_s,
-                l.offset_m * dds / (l.duration_s * l.duration_s),
-            )
-        } else {
-            (l.offset_m * s, 0.0, 0.0)
-        }
+        (
+            l.offset_m * s,
+            l.offset_m * ds / l.duration_s,
+            l.offset_m * dds / (l.duration_s * l.duration_s),
+        )
     }
 
     /// True if world point `p` is above or below the pad footprint (inside the

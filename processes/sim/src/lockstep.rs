@@ -22,6 +22,17 @@ use crate::px4::commander::{Commander, VehicleStatus};
 use crate::scenario::LoadedScenario;
 use crate::world::{Event, TimedEvent, World, WorldError};
 
+/// How far the camera's timestamps are from the true capture time.
+#[derive(Debug, Clone)]
+struct CameraClock {
+    /// Fixed per run, ns.
+    offset_ns: i64,
+    /// Standard deviation per frame, ns.
+    jitter_ns: f64,
+    /// The jitter's draw.
+    rng: crate::rng::Pcg32,
+}
+
 /// Physics step: 2 ms (500 Hz).
 pub const PHYSICS_STEP_NS: u64 = 2_000_000;
 
@@ -122,8 +133,8 @@ pub struct Simulator {
     depth: Schedule,
     events_seen: usize,
     seed: u64,
-    /// The camera clock's error: a fixed offset and the jitter's draw, ns.
-    camera_clock: (i64, f64, crate::rng::Pcg32),
+    /// The camera clock's error.
+    camera_clock: CameraClock,
 }
 
 impl Simulator {
@@ -156,8 +167,8 @@ impl Simulator {
         camera.set_mount_error(mount_error);
         sim.down_camera = Some(Box::new(camera));
         let errors = &scenario.scenario.camera.errors;
-        sim.camera_clock.0 = errors.draw_clock_offset_ns(seed.wrapping_add(4));
-        sim.camera_clock.1 = errors.clock_jitter_ms * 1e6;
+        sim.camera_clock.offset_ns = errors.draw_clock_offset_ns(seed.wrapping_add(4));
+        sim.camera_clock.jitter_ns = errors.clock_jitter_ms * 1e6;
         sim.depth_camera = Some(Box::new(DepthCamera::new(depth)?));
         Ok(sim)
     }
@@ -180,7 +191,11 @@ impl Simulator {
             depth: Schedule::new(depth_hz, (1.5e9 / depth_hz.max(1.0)) as u64),
             events_seen: 0,
             seed,
-            camera_clock: (0, 0.0, crate::rng::Pcg32::with_stream(seed, 23)),
+            camera_clock: CameraClock {
+                offset_ns: 0,
+                jitter_ns: 0.0,
+                rng: crate::rng::Pcg32::with_stream(seed, 23),
+            },
         }
     }
 
@@ -245,8 +260,8 @@ impl Simulator {
         let publish_ns = now + (cam.params().latency_s.max(0.0) * 1e9) as u64;
         // The frame's timestamp is the camera's clock: off by the drawn offset and
         // jitter, never after the frame is published.
-        let (offset, jitter, rng) = &mut self.camera_clock;
-        let error = *offset + (*jitter * rng.normal()) as i64;
+        let c = &mut self.camera_clock;
+        let error = c.offset_ns + (c.jitter_ns * c.rng.normal()) as i64;
         let capture_ns = now.saturating_add_signed(error).min(publish_ns);
         Ok(Some(Shot {
             capture_ns,

@@ -84,31 +84,13 @@ pub const BOUNCE_MAX_S: f64 = 1.0;
 /// Relative speed below which the vehicle is at rest on the pad at the end, m/s.
 pub const AT_REST_MPS: f64 = 0.1;
 
-/// The printed board every foot must be on, in the pad frame (x, y), m.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Board {
-    /// Lower corner.
-    pub min_m: [f64; 2],
-    /// Upper corner.
-    pub max_m: [f64; 2],
-}
-
-impl Board {
-    /// How far the point is outside the board, m (0 inside or on the edge).
-    pub fn outside_m(&self, p: Point2) -> f64 {
-        let p = [p.x, p.y];
-        let d = |i: usize| (self.min_m[i] - p[i]).max(p[i] - self.max_m[i]).max(0.0);
-        d(0).hypot(d(1))
-    }
-}
-
 /// What the referee judges by: the touchdown limits and the board.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Rules {
     /// Touchdown speed and tilt limits.
     pub limits: TouchdownLimits,
-    /// The board (deploy/config/pad.toml).
-    pub board: Board,
+    /// The printed board every foot must be on (deploy/config/pad.toml), pad frame.
+    pub board: optics::Board,
 }
 
 impl Rules {
@@ -117,10 +99,7 @@ impl Rules {
         let pad = optics::pad::PadModel::load(scn.pad_path())?;
         Ok(Self {
             limits: scn.touchdown,
-            board: Board {
-                min_m: pad.board.min_m,
-                max_m: pad.board.max_m,
-            },
+            board: pad.board,
         })
     }
 }
@@ -425,7 +404,7 @@ pub fn verdict(
     if let Some((k, out)) = s
         .gear_pad
         .iter()
-        .map(|f| rules.board.outside_m(*f))
+        .map(|f| rules.board.outside_m(f.x, f.y))
         .enumerate()
         .find(|(_, d)| !within(*d, 0.0))
     {

@@ -7,8 +7,9 @@
 
 use ipc_types::msg::{FsmStatus, MissionState, Text};
 use landing::flight_log::Outcome;
-use landing::run_eval::{Board, Referee, Rules, TouchdownLimits, verdict};
+use landing::run_eval::{Referee, Rules, TouchdownLimits, verdict};
 use nalgebra::{UnitQuaternion, Vector3};
+use optics::Board;
 use sim::estimator_noise::EstimatorNoiseParams;
 use sim::ground_vehicle::{GroundVehicleParams, SpeedProfile};
 use sim::lockstep::{truth_event, world_truth_state};
