@@ -106,7 +106,7 @@ impl Default for DepthMapConfig {
             input: Input::Sim,
             width: m.rays.width,
             height: m.rays.height,
-            camera_position_in_body_m: [0.1, 0.0, 0.0],
+            camera_position_in_body_m: [0.1, 0.0, 0.1],
             camera_rpy_deg: [0.0; 3],
             pixel_step: m.rays.pixel_step,
             max_ray_m: m.rays.max_ray_m,

@@ -4,11 +4,11 @@
 //! and noise growing with the square of the range as stereo noise does.
 //!
 //! Rays are cast against the ground plane z = 0 analytically and against the
-//! box obstacles with parry's `Cuboid`; a box is only tested for the pixels
-//! inside its projected screen rectangle, so an obstacle costs in proportion to
-//! its size on screen.
+//! boxes (obstacles, the ground vehicle's body) with parry's `Cuboid`; a box is
+//! only tested for the pixels inside its projected screen rectangle, so a box
+//! costs in proportion to its size on screen.
 
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use parry3d::math::Vector as PVec;
 use parry3d::query::{Ray, RayCast};
 use parry3d::shape::Cuboid;
@@ -19,7 +19,7 @@ pub const DEPTH_SCALE_M: f64 = 0.001;
 
 use crate::noise::{MAX_SLICE, PixelNoise};
 use crate::params::{self, ParamError};
-use crate::world::Aabb;
+use crate::world::Obb;
 
 /// Configuration of the forward depth camera (the `[camera_depth]` section).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -58,7 +58,7 @@ impl Default for DepthCameraParams {
             min_depth_m: 0.2,
             max_depth_m: 10.0,
             noise_k_per_m: 0.003,
-            position_in_body_m: [0.1, 0.0, 0.0],
+            position_in_body_m: [0.1, 0.0, 0.1],
             latency_s: 0.033,
             seed: 2,
         }
@@ -204,8 +204,8 @@ impl DepthCamera {
         self.camera_from_body
     }
 
-    /// Renders the depth image seen from `world_from_body` with these obstacles.
-    pub fn render(&mut self, world_from_body: &Isometry3<f64>, obstacles: &[Aabb]) -> DepthFrame {
+    /// Renders the depth image seen from `world_from_body` with these boxes.
+    pub fn render(&mut self, world_from_body: &Isometry3<f64>, obstacles: &[Obb]) -> DepthFrame {
         let mut out = vec![0u16; self.frame_len()];
         self.render_into(world_from_body, obstacles, &mut out);
         DepthFrame {
@@ -226,7 +226,7 @@ impl DepthCamera {
     pub fn render_into(
         &mut self,
         world_from_body: &Isometry3<f64>,
-        obstacles: &[Aabb],
+        obstacles: &[Obb],
         out: &mut [u16],
     ) {
         let world_from_camera = world_from_body * self.camera_from_body.inverse();
@@ -251,19 +251,15 @@ impl DepthCamera {
             let Some((u0, u1, v0, v1)) = self.screen_rect(&world_from_camera, b) else {
                 continue;
             };
-            let centre = Vector3::new(
-                (b.min_m[0] + b.max_m[0]) / 2.0,
-                (b.min_m[1] + b.max_m[1]) / 2.0,
-                (b.min_m[2] + b.max_m[2]) / 2.0,
-            );
-            let half = PVec::new(
-                ((b.max_m[0] - b.min_m[0]) / 2.0) as f32,
-                ((b.max_m[1] - b.min_m[1]) / 2.0) as f32,
-                ((b.max_m[2] - b.min_m[2]) / 2.0) as f32,
-            );
+            let half = PVec::new(b.half_m[0] as f32, b.half_m[1] as f32, b.half_m[2] as f32);
             let cuboid = Cuboid::new(half);
-            let local = o - centre;
+            // The ray in the box's frame: origin and the rotation of the directions.
+            let local = b.world_from_box.inverse_transform_point(&o.into());
             let origin = PVec::new(local.x as f32, local.y as f32, local.z as f32);
+            let box_from_world = b.world_from_box.rotation.inverse().to_rotation_matrix();
+            let bm = box_from_world.matrix() * rot.matrix();
+            let rb: [[f32; 3]; 3] =
+                std::array::from_fn(|i| std::array::from_fn(|j| bm[(i, j)] as f32));
             for v in v0..=v1 {
                 for u in u0..=u1 {
                     let i = v * w + u;
@@ -272,9 +268,9 @@ impl DepthCamera {
                         continue;
                     };
                     let dir = PVec::new(
-                        r[0][0] * rx + r[0][1] * ry + r[0][2],
-                        r[1][0] * rx + r[1][1] * ry + r[1][2],
-                        r[2][0] * rx + r[2][1] * ry + r[2][2],
+                        rb[0][0] * rx + rb[0][1] * ry + rb[0][2],
+                        rb[1][0] * rx + rb[1][1] * ry + rb[1][2],
+                        rb[2][0] * rx + rb[2][1] * ry + rb[2][2],
                     );
                     let ray = Ray::new(origin, dir);
                     if let Some(t) = cuboid.cast_local_ray(&ray, d.min(far), true) {
@@ -310,7 +306,7 @@ impl DepthCamera {
     fn screen_rect(
         &self,
         world_from_camera: &Isometry3<f64>,
-        b: &Aabb,
+        b: &Obb,
     ) -> Option<(usize, usize, usize, usize)> {
         let (w, h) = (f64::from(self.params.width), f64::from(self.params.height));
         let near = 1e-3;
@@ -318,11 +314,24 @@ impl DepthCamera {
         let (mut umin, mut umax, mut vmin, mut vmax) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
         let mut straddles = false;
         for k in 0..8 {
-            let p = Point3::new(
-                if k & 1 == 0 { b.min_m[0] } else { b.max_m[0] },
-                if k & 2 == 0 { b.min_m[1] } else { b.max_m[1] },
-                if k & 4 == 0 { b.min_m[2] } else { b.max_m[2] },
+            let corner = Point3::new(
+                if k & 1 == 0 {
+                    -b.half_m[0]
+                } else {
+                    b.half_m[0]
+                },
+                if k & 2 == 0 {
+                    -b.half_m[1]
+                } else {
+                    b.half_m[1]
+                },
+                if k & 4 == 0 {
+                    -b.half_m[2]
+                } else {
+                    b.half_m[2]
+                },
             );
+            let p = b.world_from_box * corner;
             let c = world_from_camera.inverse_transform_point(&p);
             if c.z <= near {
                 behind += 1;

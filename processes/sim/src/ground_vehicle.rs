@@ -18,6 +18,7 @@ use serde::Deserialize;
 use crate::params::{self, ParamError};
 use crate::quadrotor::Surface;
 use crate::rng::Pcg32;
+use crate::world::Obb;
 
 /// The highest ground-vehicle speed the simulator accepts: 60 km/h, in m/s.
 pub const MAX_GROUND_SPEED_M_S: f64 = 60.0 / 3.6;
@@ -398,13 +399,15 @@ pub struct PadState {
 }
 
 impl PadState {
-    /// The pad as a surface the quadrotor can land on.
-    pub fn surface(&self) -> Surface {
+    /// The pad as a surface the quadrotor can land on, `half_extent_m` in size
+    /// (the vehicle's roof; beyond it the gear misses).
+    pub fn surface(&self, half_extent_m: [f64; 2]) -> Surface {
         Surface {
             id: PAD_SURFACE_ID,
             world_from_surface: self.world_from_pad,
             linear_velocity: self.linear_velocity,
             angular_velocity: self.angular_velocity,
+            half_extent_m: Some(half_extent_m),
         }
     }
 }
@@ -635,6 +638,26 @@ impl GroundVehicle {
             l.offset_m * ds / l.duration_s,
             l.offset_m * dds / (l.duration_s * l.duration_s),
         )
+    }
+
+    /// The roof the quadrotor lands on (the pad's footprint) at `pad`.
+    pub fn roof(&self, pad: &PadState) -> Surface {
+        pad.surface(self.params.pad_half_size_m)
+    }
+
+    /// The vehicle's body: the box from the ground up to the pad on its roof, the
+    /// pad's footprint in size. The depth camera sees it; touching it is a crash.
+    pub fn body(&self, pad: &PadState) -> Obb {
+        let [hx, hy] = self.params.pad_half_size_m;
+        let h = self.params.pad_height_m;
+        let centre = Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, -h / 2.0),
+            UnitQuaternion::identity(),
+        );
+        Obb {
+            world_from_box: pad.world_from_pad * centre,
+            half_m: [hx, hy, h / 2.0],
+        }
     }
 
     /// True if world point `p` is above or below the pad footprint (inside the

@@ -276,7 +276,8 @@ impl Simulator {
         let truth = self.world.truth();
         let world_from_body =
             Isometry3::from_parts(Translation3::from(truth.position), truth.world_from_body);
-        cam.render_into(&world_from_body, self.world.obstacles(), out);
+        let boxes = self.world.boxes_in_view();
+        cam.render_into(&world_from_body, &boxes, out);
         let now = self.world.time_ns();
         Some(Shot {
             capture_ns: now,

@@ -4,19 +4,28 @@
 //! `T_i = c_T w_i^2` and drag torque `c_M w_i^2`, an X frame, linear drag on the
 //! air-relative velocity (so wind acts through drag), a full inertia matrix with
 //! the rigid-body and rotor gyroscopic terms, and a first-order lag between the
-//! commanded and the actual motor speed. Contact with the surface under the
-//! vehicle (ground, or the landing pad) is a perfectly inelastic, sticking
-//! contact: the vehicle cannot go below it, and once resting it moves rigidly
-//! with it until the thrust lifts it off.
+//! commanded and the actual motor speed. The landing gear touches the surfaces
+//! (the ground, the pad on the ground vehicle's roof) at its feet: each foot in
+//! contact is a stiff spring-damper along the surface normal (its damping set
+//! by the gear's restitution) and a stick-slip Coulomb friction spring along
+//! the surface, so a vehicle bounces, slides, tips over and can slide off a
+//! moving pad. The centre of mass sits above the feet, so friction can tip it.
 //!
 //! Frames: world ENU, body FLU, `world_from_body` maps body vectors to world.
 //! Motor order is PX4's quad X order (see [`QUAD_X_MOTORS`]).
 
-use nalgebra::{Isometry3, Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector2, Vector3};
 use serde::Deserialize;
 use thiserror::Error;
 
 use crate::params::{self, ParamError};
+
+/// Softest accepted foot stiffness, N/m: softer gear sinks centimetres into the pad.
+pub const MIN_GEAR_STIFFNESS_N_M: f64 = 200.0;
+
+/// Deepest a foot may be under a bounded surface (the pad on the vehicle's roof) and still
+/// touch it, m; deeper, the foot is beside the roof, not on it.
+pub const MAX_ROOF_PENETRATION_M: f64 = 0.1;
 
 /// Standard gravity, the value PX4 uses (`CONSTANTS_ONE_G`), so hover thrust
 /// computed here matches what a PX4 parameter would hold.
@@ -100,6 +109,15 @@ pub struct AirframeParams {
     /// body origin is the gear's lowest point). The referee wants every foot on the
     /// printed board.
     pub landing_gear_m: [[f64; 3]; 4],
+    /// Height of the centre of mass above the gear's lowest point, m: the lever that
+    /// friction at the feet has to tip the vehicle over.
+    pub com_height_m: f64,
+    /// Stiffness of each foot along the surface normal, N/m (the gear's compliance).
+    pub gear_stiffness_n_m: f64,
+    /// Coefficient of restitution of a foot hitting a surface (0: no bounce, 1: elastic).
+    pub gear_restitution: f64,
+    /// Coulomb friction coefficient between a foot and a surface.
+    pub gear_friction: f64,
 }
 
 impl Default for AirframeParams {
@@ -127,6 +145,12 @@ impl Default for AirframeParams {
                 [-0.10, -0.12, 0.0],
                 [-0.10, 0.12, 0.0],
             ],
+            com_height_m: 0.12,
+            // 2 mm static deflection: mg / (4 k).
+            gear_stiffness_n_m: 2000.0,
+            gear_restitution: 0.3,
+            // Plastic skid on a printed board.
+            gear_friction: 0.5,
         }
     }
 }
@@ -155,6 +179,10 @@ impl AirframeParams {
                 [-0.07, -0.07, 0.0],
                 [-0.07, 0.07, 0.0],
             ],
+            com_height_m: 0.05,
+            gear_stiffness_n_m: 1500.0,
+            gear_restitution: 0.3,
+            gear_friction: 0.5,
         }
     }
 
@@ -206,6 +234,15 @@ impl AirframeParams {
                 ));
             }
         }
+        params::in_range("com_height_m", self.com_height_m, 0.0, 2.0)?;
+        params::in_range(
+            "gear_stiffness_n_m",
+            self.gear_stiffness_n_m,
+            MIN_GEAR_STIFFNESS_N_M,
+            1.0e6,
+        )?;
+        params::in_range("gear_restitution", self.gear_restitution, 0.0, 0.95)?;
+        params::in_range("gear_friction", self.gear_friction, 0.0, 2.0)?;
         let ratio = self.thrust_to_weight();
         if ratio <= 1.2 {
             return Err(ParamError::new(
@@ -239,6 +276,24 @@ impl AirframeParams {
     /// Normalized per-motor thrust needed to hover (what PX4 calls MPC_THR_HOVER).
     pub fn hover_thrust_normalized(&self) -> f64 {
         1.0 / self.thrust_to_weight()
+    }
+
+    /// The centre of mass in body FLU, m (above the gear's lowest point, the body origin).
+    pub fn com_body(&self) -> Vector3<f64> {
+        Vector3::new(0.0, 0.0, self.com_height_m)
+    }
+
+    /// How far the feet sink under the vehicle's weight at rest, m.
+    pub fn static_deflection_m(&self) -> f64 {
+        self.mass_kg * GRAVITY_M_S2 / (4.0 * self.gear_stiffness_n_m)
+    }
+
+    /// Damping of each foot along the normal, N s/m, that gives the configured
+    /// restitution for a quarter of the mass bouncing on one foot's spring.
+    fn gear_damping_n_s_m(&self) -> f64 {
+        let e = self.gear_restitution.clamp(1e-3, 0.95);
+        let zeta = -e.ln() / (std::f64::consts::PI.powi(2) + e.ln().powi(2)).sqrt();
+        2.0 * zeta * (self.gear_stiffness_n_m * self.mass_kg / 4.0).sqrt()
     }
 
     /// Distance of each motor from the body x and y axes in m (arm projected on a diagonal).
@@ -338,8 +393,8 @@ impl VehicleState {
 /// the END of the step being simulated, and its velocity.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Surface {
-    /// Stable identifier, so a resting vehicle keeps following the same
-    /// surface across steps (by convention 0 is the ground).
+    /// Stable identifier, so a foot's friction anchor stays on the same surface
+    /// across steps (by convention 0 is the ground).
     pub id: u32,
     /// Pose of the surface frame (z up, out of the surface).
     pub world_from_surface: Isometry3<f64>,
@@ -347,6 +402,9 @@ pub struct Surface {
     pub linear_velocity: Vector3<f64>,
     /// Angular velocity of the surface in world, rad/s.
     pub angular_velocity: Vector3<f64>,
+    /// Half size along the surface's x and y, m: a foot outside it misses the
+    /// surface (the pad on a roof). `None`: unbounded (the ground).
+    pub half_extent_m: Option<[f64; 2]>,
 }
 
 /// Identifier of the ground surface.
@@ -360,6 +418,7 @@ impl Surface {
             world_from_surface: Isometry3::identity(),
             linear_velocity: Vector3::zeros(),
             angular_velocity: Vector3::zeros(),
+            half_extent_m: None,
         }
     }
 
@@ -385,6 +444,45 @@ impl Surface {
         self.linear_velocity + self.angular_velocity.cross(&(p - o))
     }
 
+    /// True if world point `p` is over (or under) the surface's extent.
+    pub fn covers(&self, p: &Vector3<f64>) -> bool {
+        let Some([hx, hy]) = self.half_extent_m else {
+            return true;
+        };
+        let local = self
+            .world_from_surface
+            .inverse_transform_point(&(*p).into());
+        local.x.abs() <= hx && local.y.abs() <= hy
+    }
+
+    /// How deep world point `p` is under the surface, m, if the surface is there to
+    /// touch: over its extent, and for a bounded surface no deeper than
+    /// [`MAX_ROOF_PENETRATION_M`] (deeper, the point is beside the roof).
+    fn penetration(&self, p: &Vector3<f64>) -> Option<f64> {
+        let local = self
+            .world_from_surface
+            .inverse_transform_point(&(*p).into());
+        let depth = -local.z;
+        if depth <= 0.0 {
+            return None;
+        }
+        match self.half_extent_m {
+            None => Some(depth),
+            Some([hx, hy]) => {
+                (local.x.abs() <= hx && local.y.abs() <= hy && depth <= MAX_ROOF_PENETRATION_M)
+                    .then_some(depth)
+            }
+        }
+    }
+
+    /// The surface `back_s` seconds before the pose it was given (its translation
+    /// moved back along its velocity), for the RK4 stages inside a step.
+    fn earlier(&self, back_s: f64) -> Self {
+        let mut s = *self;
+        s.world_from_surface.translation.vector -= self.linear_velocity * back_s;
+        s
+    }
+
     fn is_finite(&self) -> bool {
         self.world_from_surface
             .translation
@@ -393,6 +491,7 @@ impl Surface {
             .chain(self.world_from_surface.rotation.coords.iter())
             .chain(self.linear_velocity.iter())
             .chain(self.angular_velocity.iter())
+            .chain(self.half_extent_m.iter().flatten())
             .all(|v| v.is_finite())
     }
 }
@@ -402,8 +501,11 @@ impl Surface {
 pub struct Environment {
     /// Wind (air velocity) in world, m/s; acts through drag.
     pub wind_world: Vector3<f64>,
-    /// The surface under the vehicle at the end of the step.
+    /// The unbounded surface under everything (the ground) at the end of the step.
     pub surface: Surface,
+    /// A bounded surface above it (the pad on the ground vehicle's roof), if any, at
+    /// the end of the step; a foot over it touches it rather than the ground.
+    pub platform: Option<Surface>,
 }
 
 impl Default for Environment {
@@ -412,6 +514,28 @@ impl Default for Environment {
         Self {
             wind_world: Vector3::zeros(),
             surface: Surface::ground(),
+            platform: None,
+        }
+    }
+}
+
+impl Environment {
+    /// The surface a world point `p` touches, with its depth under it: the
+    /// platform where it is there to touch, else the ground.
+    fn touching(&self, p: &Vector3<f64>) -> Option<(&Surface, f64)> {
+        if let Some(platform) = &self.platform
+            && let Some(depth) = platform.penetration(p)
+        {
+            return Some((platform, depth));
+        }
+        self.surface.penetration(p).map(|d| (&self.surface, d))
+    }
+
+    fn earlier(&self, back_s: f64) -> Self {
+        Self {
+            wind_world: self.wind_world,
+            surface: self.surface.earlier(back_s),
+            platform: self.platform.map(|p| p.earlier(back_s)),
         }
     }
 }
@@ -419,9 +543,9 @@ impl Default for Environment {
 /// Whether the vehicle is flying or standing on a surface.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ContactState {
-    /// Free flight.
+    /// No foot touches anything.
     Airborne,
-    /// Standing on the surface with this id, moving rigidly with it.
+    /// At least one foot touches; the surface most feet touch (the pad on a tie).
     Resting {
         /// Id of the supporting surface.
         surface_id: u32,
@@ -433,15 +557,13 @@ pub enum ContactState {
 pub struct Impact {
     /// Id of the surface that was hit.
     pub surface_id: u32,
-    /// Velocity of the vehicle relative to the surface point it hit, world frame, m/s.
+    /// Velocity of the vehicle (the gear's lowest point) relative to the surface point
+    /// under it, world frame, m/s, at the start of the step the first foot touched
+    /// (before the gear's springs brake it).
     pub relative_velocity: Vector3<f64>,
     /// Angle between body up and the surface normal at the moment of impact, rad.
     pub tilt_rad: f64,
-    /// How far below the surface the free motion ended before it was put back
-    /// on top, m. Much more than one step of travel means the vehicle entered
-    /// the surface from the side (e.g. hit the ground vehicle's flank).
-    pub penetration_m: f64,
-    /// Where the vehicle came to rest (on the surface), world, m.
+    /// Where the vehicle touched (the body origin), world, m.
     pub position: Vector3<f64>,
 }
 
@@ -450,9 +572,9 @@ pub struct Impact {
 pub struct StepReport {
     /// Contact state at the end of the step.
     pub contact: ContactState,
-    /// Set when the vehicle hit the surface during this step.
+    /// Set when a foot touched a surface in this step after none touched anything.
     pub impact: Option<Impact>,
-    /// True when the vehicle left a surface during this step.
+    /// True when the last foot left its surface during this step.
     pub lifted_off: bool,
 }
 
@@ -477,14 +599,16 @@ pub enum QuadrotorError {
     Diverged,
 }
 
-/// The state while resting: the pose relative to the supporting surface is frozen.
+/// Where a foot's friction spring is tied: a point on one surface, in its frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Attachment {
+struct Anchor {
     surface_id: u32,
-    surface_from_body: Isometry3<f64>,
+    /// (x, y) in the surface frame, m.
+    at: [f64; 2],
 }
 
-/// Integration state (quaternion not necessarily unit inside RK4 stages).
+/// Integration state: the centre of mass moves, the body origin follows
+/// (quaternion not necessarily unit inside RK4 stages).
 #[derive(Debug, Clone, Copy)]
 struct Rigid {
     p: Vector3<f64>,
@@ -516,8 +640,10 @@ pub struct Quadrotor {
     params: AirframeParams,
     inertia: Matrix3<f64>,
     inertia_inv: Matrix3<f64>,
+    gear_damping: f64,
     state: VehicleState,
-    attachment: Option<Attachment>,
+    contact: ContactState,
+    anchors: [Option<Anchor>; 4],
 }
 
 impl Quadrotor {
@@ -537,19 +663,23 @@ impl Quadrotor {
                 "the inertia matrix must be invertible",
             )
         })?;
+        let gear_damping = params.gear_damping_n_s_m();
         let mut quad = Self {
             params,
             inertia,
             inertia_inv,
+            gear_damping,
             state,
-            attachment: None,
+            contact: ContactState::Airborne,
+            anchors: [None; 4],
         };
         quad.set_state(state, surface)?;
         Ok(quad)
     }
 
     /// Replaces the state (e.g. to start a scenario); if the vehicle is at or
-    /// below `surface` it is placed on it, resting.
+    /// below `surface` it is placed on it, level with it, its feet sunk by the
+    /// static deflection and moving with it: at rest.
     pub fn set_state(
         &mut self,
         state: VehicleState,
@@ -564,9 +694,10 @@ impl Quadrotor {
         self.state = state;
         self.state.world_from_body =
             UnitQuaternion::new_normalize(state.world_from_body.into_inner());
-        self.attachment = None;
+        self.contact = ContactState::Airborne;
+        self.anchors = [None; 4];
         if self.state.position.z <= surface.height_at(state.position.x, state.position.y) {
-            self.attach(surface);
+            self.place_on(surface);
         }
         Ok(())
     }
@@ -581,18 +712,14 @@ impl Quadrotor {
         &self.state
     }
 
-    /// Whether the vehicle is flying or resting on a surface.
+    /// Whether the vehicle is flying or touching a surface.
     pub fn contact(&self) -> ContactState {
-        match self.attachment {
-            Some(a) => ContactState::Resting {
-                surface_id: a.surface_id,
-            },
-            None => ContactState::Airborne,
-        }
+        self.contact
     }
 
     /// Advances the vehicle by `dt_s` seconds under `commands` (held constant
-    /// over the step) in `env`. Use dt <= 2 ms (>= 500 Hz).
+    /// over the step) in `env`. Use dt <= 2 ms (>= 500 Hz): the gear's springs
+    /// need it.
     pub fn step(
         &mut self,
         dt_s: f64,
@@ -616,53 +743,41 @@ impl Quadrotor {
                 "must be finite",
             ));
         }
-        if !env.surface.is_finite() {
+        if !env.surface.is_finite() || env.platform.is_some_and(|p| !p.is_finite()) {
             return Err(input_error("surface", "non-finite", "must be finite"));
         }
         let speed_cmd = self.speed_commands(commands);
-
-        let mut lifted_off = false;
-        if let Some(att) = self.attachment {
-            if att.surface_id == env.surface.id && !self.thrust_lifts_off(&env.surface, env) {
-                self.follow_surface(dt_s, &speed_cmd, att, &env.surface);
-                return Ok(StepReport {
-                    contact: self.contact(),
-                    impact: None,
-                    lifted_off: false,
-                });
-            }
-            self.attachment = None;
-            lifted_off = true;
-        }
-
-        let next = self.integrate(dt_s, &speed_cmd, &env.wind_world);
+        let next = self.integrate(dt_s, &speed_cmd, env);
         if !next.is_finite() {
             return Err(QuadrotorError::Diverged);
         }
+        let before = self.contact;
+        // The approach velocity: the gear's springs have already braked the step's end.
+        let approach = self.state.velocity;
         self.state = next;
+        self.update_contacts(env);
 
-        let surface = &env.surface;
-        let height = surface.height_at(self.state.position.x, self.state.position.y);
         let mut impact = None;
-        if self.state.position.z < height {
-            let penetration_m = height - self.state.position.z;
-            self.state.position.z = height;
-            let relative_velocity = self.state.velocity - surface.velocity_at(&self.state.position);
+        if let (ContactState::Airborne, ContactState::Resting { surface_id }) =
+            (before, self.contact)
+        {
+            let surface = match env.platform {
+                Some(p) if p.id == surface_id => p,
+                _ => env.surface,
+            };
+            let start = surface.earlier(dt_s);
             let body_up = self.state.world_from_body * Vector3::z();
-            let tilt_rad = body_up.dot(&surface.normal()).clamp(-1.0, 1.0).acos();
-            self.attach(surface);
             impact = Some(Impact {
-                surface_id: surface.id,
-                relative_velocity,
-                tilt_rad,
-                penetration_m,
+                surface_id,
+                relative_velocity: approach - start.velocity_at(&self.state.position),
+                tilt_rad: body_up.dot(&surface.normal()).clamp(-1.0, 1.0).acos(),
                 position: self.state.position,
             });
         }
         Ok(StepReport {
-            contact: self.contact(),
+            contact: self.contact,
             impact,
-            lifted_off,
+            lifted_off: before != ContactState::Airborne && self.contact == ContactState::Airborne,
         })
     }
 
@@ -698,44 +813,11 @@ impl Quadrotor {
         rot * (Vector3::new(0.0, 0.0, thrust) + drag_body)
     }
 
-    /// True when thrust and drag would accelerate the vehicle away from the surface.
-    fn thrust_lifts_off(&self, surface: &Surface, env: &Environment) -> bool {
-        let s = &self.state;
-        let f = self.aero_force_world(
-            &s.world_from_body,
-            &s.velocity,
-            &s.motor_speeds,
-            &env.wind_world,
-        );
-        let n = surface.normal();
-        f.dot(&n) / self.params.mass_kg > GRAVITY_M_S2 * n.z
-    }
-
-    /// One resting step: motors spin up or down, the pose rides on the surface.
-    fn follow_surface(
-        &mut self,
-        dt_s: f64,
-        speed_cmd: &[f64; 4],
-        att: Attachment,
-        surface: &Surface,
-    ) {
-        let decay = (-dt_s / self.params.motor_time_constant_s).exp();
-        for (w, c) in self.state.motor_speeds.iter_mut().zip(speed_cmd.iter()) {
-            *w = c + (*w - c) * decay;
-        }
-        let pose = surface.world_from_surface * att.surface_from_body;
-        self.state.position = pose.translation.vector;
-        self.state.world_from_body = pose.rotation;
-        self.state.velocity = surface.velocity_at(&self.state.position);
-        self.state.body_rates = pose.rotation.inverse() * surface.angular_velocity;
-    }
-
-    /// Puts the vehicle on `surface` (already at its height), level with it,
-    /// keeping its heading, moving with it.
-    fn attach(&mut self, surface: &Surface) {
+    /// Puts the vehicle on `surface` at rest: level with it, keeping its heading,
+    /// the feet sunk by the static deflection, moving with it.
+    fn place_on(&mut self, surface: &Surface) {
         let n = surface.normal();
         let s = &mut self.state;
-        s.position.z = surface.height_at(s.position.x, s.position.y);
         let forward = s.world_from_body * Vector3::x();
         let mut x = forward - n * forward.dot(&n);
         if x.norm() < 1e-6 {
@@ -750,28 +832,136 @@ impl Quadrotor {
         let rot =
             UnitQuaternion::from_rotation_matrix(&Rotation3::from_basis_unchecked(&[x, y, n]));
         s.world_from_body = rot;
+        s.position.z = surface.height_at(s.position.x, s.position.y);
+        s.position -= n * self.params.static_deflection_m();
         s.velocity = surface.velocity_at(&s.position);
         s.body_rates = rot.inverse() * surface.angular_velocity;
-        let pose = Isometry3::from_parts(Translation3::from(s.position), rot);
-        self.attachment = Some(Attachment {
-            surface_id: surface.id,
-            surface_from_body: surface.world_from_surface.inverse() * pose,
-        });
+        let env = Environment {
+            surface: *surface,
+            ..Environment::default()
+        };
+        self.update_contacts(&env);
     }
 
-    /// Classic RK4 over position, velocity, attitude, body rates and motor speeds.
-    fn integrate(&self, dt: f64, speed_cmd: &[f64; 4], wind: &Vector3<f64>) -> VehicleState {
+    /// After a step: which surface each foot touches, the friction anchors (new
+    /// ones where a foot just touched, moved where a foot slid), the contact state.
+    fn update_contacts(&mut self, env: &Environment) {
+        let s = self.state;
+        let (mut on_ground, mut on_platform) = (0, 0);
+        for i in 0..4 {
+            let foot =
+                s.position + s.world_from_body * Vector3::from(self.params.landing_gear_m[i]);
+            let Some((surface, depth)) = env.touching(&foot) else {
+                self.anchors[i] = None;
+                continue;
+            };
+            if surface.id == env.surface.id {
+                on_ground += 1;
+            } else {
+                on_platform += 1;
+            }
+            let local = surface
+                .world_from_surface
+                .inverse_transform_point(&foot.into());
+            let anchor = match self.anchors[i] {
+                Some(a) if a.surface_id == surface.id => a,
+                _ => Anchor {
+                    surface_id: surface.id,
+                    at: [local.x, local.y],
+                },
+            };
+            // Slide: the anchor follows the foot so the spring holds no more
+            // than friction allows under the foot's static load.
+            let stretch = Vector2::new(local.x - anchor.at[0], local.y - anchor.at[1]);
+            // |stretch| k_t <= mu k depth, and the friction spring k_t is k.
+            let limit = self.params.gear_friction * depth;
+            let at = if stretch.norm() > limit {
+                let kept = stretch.normalize() * limit;
+                [local.x - kept.x, local.y - kept.y]
+            } else {
+                anchor.at
+            };
+            self.anchors[i] = Some(Anchor {
+                surface_id: surface.id,
+                at,
+            });
+        }
+        self.contact = match (on_ground, on_platform) {
+            (0, 0) => ContactState::Airborne,
+            (g, p) if p >= g => ContactState::Resting {
+                surface_id: env.platform.map_or(GROUND_SURFACE_ID, |p| p.id),
+            },
+            _ => ContactState::Resting {
+                surface_id: env.surface.id,
+            },
+        };
+    }
+
+    /// Force of the gear on the body at the feet, world, N, and its torque about
+    /// the centre of mass, body, N m, for a body at `s` (centre of mass state).
+    fn gear_wrench(
+        &self,
+        s: &Rigid,
+        rot: &UnitQuaternion<f64>,
+        env: &Environment,
+    ) -> (Vector3<f64>, Vector3<f64>) {
+        let p = &self.params;
+        let com = p.com_body();
+        let (mut force, mut torque) = (Vector3::zeros(), Vector3::zeros());
+        for (i, foot_body) in p.landing_gear_m.iter().enumerate() {
+            let r = Vector3::from(*foot_body) - com;
+            let foot = s.p + rot * r;
+            let Some((surface, depth)) = env.touching(&foot) else {
+                continue;
+            };
+            let n = surface.normal();
+            let v_rel = s.v + rot * s.w.cross(&r) - surface.velocity_at(&foot);
+            let v_n = v_rel.dot(&n);
+            let f_n = (p.gear_stiffness_n_m * depth - self.gear_damping * v_n).max(0.0);
+            if f_n == 0.0 {
+                continue;
+            }
+            let v_t = v_rel - n * v_n;
+            let max_t = p.gear_friction * f_n;
+            let mut f_t = match self.anchors[i] {
+                Some(a) if a.surface_id == surface.id => {
+                    let local = surface
+                        .world_from_surface
+                        .inverse_transform_point(&foot.into());
+                    let stretch = surface.world_from_surface.rotation
+                        * Vector3::new(local.x - a.at[0], local.y - a.at[1], 0.0);
+                    -stretch * p.gear_stiffness_n_m - v_t * self.gear_damping
+                }
+                // The first instant of a touch: kinetic friction against the slip.
+                _ => -v_t / v_t.norm().max(FRICTION_SLIP_M_S) * max_t,
+            };
+            if f_t.norm() > max_t {
+                f_t *= max_t / f_t.norm();
+            }
+            let f = n * f_n + f_t;
+            force += f;
+            torque += r.cross(&(rot.inverse() * f));
+        }
+        (force, torque)
+    }
+
+    /// Classic RK4 over the centre of mass, attitude, body rates and motor speeds;
+    /// the state reports the body origin (the gear's lowest point).
+    fn integrate(&self, dt: f64, speed_cmd: &[f64; 4], env: &Environment) -> VehicleState {
+        let com = self.params.com_body();
+        let rot0 = self.state.world_from_body;
         let s0 = Rigid {
-            p: self.state.position,
-            v: self.state.velocity,
-            q: self.state.world_from_body.into_inner(),
+            p: self.state.position + rot0 * com,
+            v: self.state.velocity + rot0 * self.state.body_rates.cross(&com),
+            q: rot0.into_inner(),
             w: self.state.body_rates,
             m: self.state.motor_speeds,
         };
-        let k1 = self.derivative(&s0, speed_cmd, wind);
-        let k2 = self.derivative(&s0.add_scaled(&k1, dt / 2.0), speed_cmd, wind);
-        let k3 = self.derivative(&s0.add_scaled(&k2, dt / 2.0), speed_cmd, wind);
-        let k4 = self.derivative(&s0.add_scaled(&k3, dt), speed_cmd, wind);
+        let (start, mid) = (env.earlier(dt), env.earlier(dt / 2.0));
+        let k1 = self.derivative(&s0, speed_cmd, &start);
+        let k2 = self.derivative(&s0.add_scaled(&k1, dt / 2.0), speed_cmd, &mid);
+        let k3 = self.derivative(&s0.add_scaled(&k2, dt / 2.0), speed_cmd, &mid);
+        let k4 = self.derivative(&s0.add_scaled(&k3, dt), speed_cmd, env);
         let s = s0
             .add_scaled(&k1, dt / 6.0)
             .add_scaled(&k2, dt / 3.0)
@@ -781,28 +971,30 @@ impl Quadrotor {
         for w in motor_speeds.iter_mut() {
             *w = w.max(0.0);
         }
+        let rot = UnitQuaternion::new_normalize(s.q);
         VehicleState {
-            position: s.p,
-            velocity: s.v,
-            world_from_body: UnitQuaternion::new_normalize(s.q),
+            position: s.p - rot * com,
+            velocity: s.v - rot * s.w.cross(&com),
+            world_from_body: rot,
             body_rates: s.w,
             motor_speeds,
         }
     }
 
     /// Time derivative of the integration state.
-    fn derivative(&self, s: &Rigid, speed_cmd: &[f64; 4], wind: &Vector3<f64>) -> Rigid {
+    fn derivative(&self, s: &Rigid, speed_cmd: &[f64; 4], env: &Environment) -> Rigid {
         let p = &self.params;
         let rot = UnitQuaternion::new_normalize(s.q);
         let mut motor_speeds = s.m;
         for w in motor_speeds.iter_mut() {
             *w = w.max(0.0);
         }
-        let force = self.aero_force_world(&rot, &s.v, &motor_speeds, wind);
+        let (gear_force, gear_torque) = self.gear_wrench(s, &rot, env);
+        let force = self.aero_force_world(&rot, &s.v, &motor_speeds, &env.wind_world) + gear_force;
         let accel = force / p.mass_kg - Vector3::new(0.0, 0.0, GRAVITY_M_S2);
 
         let mut motor_accel = [0.0; 4];
-        let mut torque = Vector3::zeros();
+        let mut torque = gear_torque;
         let mut rotor_momentum = 0.0;
         let mut rotor_momentum_rate = 0.0;
         for i in 0..4 {
@@ -833,6 +1025,10 @@ impl Quadrotor {
         }
     }
 }
+
+/// Slip speed below which kinetic friction at a fresh touch is scaled down, m/s
+/// (keeps the first step of a touch from chattering).
+const FRICTION_SLIP_M_S: f64 = 0.01;
 
 fn input_error(what: &'static str, value: impl ToString, allowed: &'static str) -> QuadrotorError {
     QuadrotorError::Input {

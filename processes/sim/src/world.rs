@@ -9,7 +9,7 @@
 //! events (touchdown, lift-off, crash, collision) that only the evaluator may
 //! see; the pipeline never does.
 
-use nalgebra::{Vector2, Vector3};
+use nalgebra::{Isometry3, Vector2, Vector3};
 use serde::Deserialize;
 use thiserror::Error;
 
@@ -29,6 +29,13 @@ pub const MAX_STEP_NS: u64 = 2_000_000;
 /// How long the vehicle must be out of contact before it counts as airborne
 /// (and a later contact as a new touchdown), so a skip on landing is one event.
 pub const AIRBORNE_DEBOUNCE_NS: u64 = 200_000_000;
+
+/// How far the gear may sink below the roof before touching the vehicle's body
+/// counts as hitting its side, m: more than the gear's deflection on a 3 m/s touch (4 cm).
+pub const BODY_CONTACT_TOLERANCE_M: f64 = 0.06;
+
+/// Propeller radius as a fraction of the arm length (10" props on 0.225 m arms).
+const ROTOR_RADIUS_FRACTION: f64 = 0.55;
 
 /// An axis-aligned box obstacle in world ENU.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
@@ -64,6 +71,40 @@ impl Aabb {
             }
         }
         Ok(())
+    }
+}
+
+/// A box in any orientation: the ground vehicle's body, or an obstacle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Obb {
+    /// Pose of the box centre; the box's axes are its frame's axes.
+    pub world_from_box: Isometry3<f64>,
+    /// Half the size along the box's x, y, z, m.
+    pub half_m: [f64; 3],
+}
+
+impl Obb {
+    /// True if a sphere of `radius` around `centre` touches or enters the box.
+    pub fn intersects_sphere(&self, centre: &Vector3<f64>, radius: f64) -> bool {
+        let local = self
+            .world_from_box
+            .inverse_transform_point(&(*centre).into());
+        let mut d2 = 0.0;
+        for i in 0..3 {
+            let c = local[i].clamp(-self.half_m[i], self.half_m[i]);
+            d2 += (local[i] - c).powi(2);
+        }
+        d2 <= radius * radius
+    }
+}
+
+impl From<&Aabb> for Obb {
+    fn from(b: &Aabb) -> Self {
+        let centre = Vector3::from_fn(|i, _| (b.min_m[i] + b.max_m[i]) / 2.0);
+        Self {
+            world_from_box: Isometry3::translation(centre.x, centre.y, centre.z),
+            half_m: std::array::from_fn(|i| (b.max_m[i] - b.min_m[i]) / 2.0),
+        }
     }
 }
 
@@ -176,7 +217,8 @@ pub enum CrashReason {
         /// Tilt from vertical, deg.
         tilt_deg: f64,
     },
-    /// Flew into the side of the ground vehicle (came from below the pad surface).
+    /// Touched the ground vehicle's body below its roof (its side, or the roof's edge
+    /// from below).
     HitGroundVehicle,
 }
 
@@ -451,6 +493,15 @@ impl World {
         &self.obstacles
     }
 
+    /// Every box a camera sees now: the obstacles and the ground vehicle's body.
+    pub fn boxes_in_view(&self) -> Vec<Obb> {
+        let mut boxes: Vec<Obb> = self.obstacles.iter().map(Obb::from).collect();
+        if let Some(g) = &self.ground_vehicle {
+            boxes.push(g.body(&g.state_at(self.time_s())));
+        }
+        boxes
+    }
+
     /// Every event so far, oldest first.
     pub fn events(&self) -> &[TimedEvent] {
         &self.events
@@ -515,7 +566,7 @@ impl World {
         if let Some(g) = &self.ground_vehicle {
             let pad = g.state_at(t_s);
             if g.is_over_pad(&pad, p) {
-                return pad.surface();
+                return g.roof(&pad);
             }
         }
         Surface::ground()
@@ -527,50 +578,38 @@ impl World {
         commands: &MotorCommands,
     ) -> Result<&[TimedEvent], WorldError> {
         self.step_events_from = self.events.len();
-        let dt_s = dt_ns as f64 * 1e-9;
         let wind = self.wind.velocity_at(self.time_s());
         let end_ns = self.time_ns.saturating_add(dt_ns);
         let end_s = end_ns as f64 * 1e-9;
-        let s = self.quad.state();
-        // Decide the surface from where the vehicle will be at the end of the step.
-        let predicted = s.position + s.velocity * dt_s;
-        let surface = match self.quad.contact() {
-            // A resting vehicle stays on its surface (it moves with it).
-            ContactState::Resting { surface_id } if surface_id == PAD_SURFACE_ID => self
-                .ground_vehicle
-                .as_ref()
-                .map_or_else(Surface::ground, |g| g.state_at(end_s).surface()),
-            _ => self.surface_under(&predicted, end_s),
-        };
+        let pad_end = self.ground_vehicle.as_ref().map(|g| g.state_at(end_s));
         let env = Environment {
             wind_world: wind,
-            surface,
+            surface: Surface::ground(),
+            platform: self
+                .ground_vehicle
+                .as_ref()
+                .zip(pad_end.as_ref())
+                .map(|(g, pad)| g.roof(pad)),
         };
+        let dt_s = dt_ns as f64 * 1e-9;
         let report = self.quad.step(dt_s, commands, &env)?;
         self.time_ns = end_ns;
 
         if report.lifted_off {
             self.left_contact_ns = Some(self.time_ns);
-            self.last_surface_id = surface.id;
         }
         if let Some(impact) = report.impact {
             self.left_contact_ns = None;
             let on_pad = impact.surface_id == PAD_SURFACE_ID;
-            let normal = surface.normal();
-            let normal_speed = -impact.relative_velocity.dot(&normal);
-            let side_hit = on_pad
-                && impact.penetration_m > 0.05 + impact.relative_velocity.norm() * dt_s * 2.0;
-            let crash = if side_hit {
-                Some(CrashReason::HitGroundVehicle)
-            } else if normal_speed > self.crash.max_impact_speed_m_s {
+            let surface = match env.platform {
+                Some(p) if on_pad => p,
+                _ => env.surface,
+            };
+            let normal_speed = -impact.relative_velocity.dot(&surface.normal());
+            let crash = if normal_speed > self.crash.max_impact_speed_m_s {
                 Some(CrashReason::HardImpact {
                     on_pad,
                     normal_speed_m_s: normal_speed,
-                })
-            } else if impact.tilt_rad.to_degrees() > self.crash.max_contact_tilt_deg {
-                Some(CrashReason::TiltedContact {
-                    on_pad,
-                    tilt_deg: impact.tilt_rad.to_degrees(),
                 })
             } else {
                 None
@@ -598,7 +637,26 @@ impl World {
                 });
             }
             self.airborne = false;
-            self.last_surface_id = impact.surface_id;
+        }
+        if let ContactState::Resting { surface_id } = report.contact {
+            self.last_surface_id = surface_id;
+            // Tipped over onto its arms: on the ground, the tilt is the contact's.
+            let surface = match env.platform {
+                Some(p) if p.id == surface_id => p,
+                _ => env.surface,
+            };
+            let body_up = self.quad.state().world_from_body * Vector3::z();
+            let tilt_deg = body_up
+                .dot(&surface.normal())
+                .clamp(-1.0, 1.0)
+                .acos()
+                .to_degrees();
+            if tilt_deg > self.crash.max_contact_tilt_deg {
+                self.declare_crash(CrashReason::TiltedContact {
+                    on_pad: surface_id == PAD_SURFACE_ID,
+                    tilt_deg,
+                });
+            }
         }
         if !self.airborne
             && self.quad.contact() == ContactState::Airborne
@@ -619,6 +677,11 @@ impl World {
 
         let position = self.quad.state().position;
         let radius = self.quad.params().collision_radius_m;
+        if let (Some(g), Some(pad)) = (&self.ground_vehicle, &pad_end)
+            && self.touches_vehicle_body(&g.body(pad), pad)
+        {
+            self.declare_crash(CrashReason::HitGroundVehicle);
+        }
         for i in 0..self.obstacles.len() {
             let hit = self.obstacles[i].intersects_sphere(&position, radius);
             if hit && !self.touching[i] {
@@ -627,6 +690,27 @@ impl World {
             self.touching[i] = hit;
         }
         Ok(&self.events[self.step_events_from..])
+    }
+
+    /// True if the gear or a rotor is in the ground vehicle's body below its roof: a
+    /// foot standing on the roof touches only its top face; one below the roof (beside
+    /// it) or a rotor disc there touches its side.
+    fn touches_vehicle_body(&self, body: &Obb, pad: &PadState) -> bool {
+        let s = self.quad.state();
+        let air = self.quad.params();
+        let feet = air.landing_gear_m.map(|f| (Vector3::from(f), 0.0));
+        let rotors: [(Vector3<f64>, f64); 4] = std::array::from_fn(|i| {
+            (
+                air.motor_position_body(i) + air.com_body(),
+                ROTOR_RADIUS_FRACTION * air.arm_length_m,
+            )
+        });
+        feet.iter().chain(rotors.iter()).any(|(p_body, radius)| {
+            let p = s.position + s.world_from_body * p_body;
+            let below_roof =
+                pad.world_from_pad.inverse_transform_point(&p.into()).z < -BODY_CONTACT_TOLERANCE_M;
+            below_roof && body.intersects_sphere(&p, *radius)
+        })
     }
 
     fn declare_crash(&mut self, reason: CrashReason) {

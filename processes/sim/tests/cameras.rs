@@ -14,7 +14,7 @@ use optics::{CameraCalibration, PadModel};
 use sim::camera::{BodyMotion, DownCamera, DownCameraParams, Frame, PixelFormat};
 use sim::depth::{DepthCamera, DepthCameraParams};
 use sim::ground_vehicle::PadState;
-use sim::world::Aabb;
+use sim::world::{Aabb, Obb};
 
 fn config(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -349,7 +349,7 @@ fn a_box_3_m_ahead_appears_at_3_m_in_the_centre_of_the_depth_image() {
         min_m: [-0.3, face_y, 0.0],
         max_m: [0.3, face_y + 0.6, 2.4],
     };
-    let frame = cam.render(&body, &[obstacle]);
+    let frame = cam.render(&body, &[Obb::from(&obstacle)]);
     let mut centre = Vec::new();
     for v in 230..250 {
         for u in 310..330 {
@@ -366,6 +366,39 @@ fn a_box_3_m_ahead_appears_at_3_m_in_the_centre_of_the_depth_image() {
         None,
         "above the horizon there is nothing"
     );
+}
+
+#[test]
+fn the_ground_vehicles_body_turned_45_degrees_shows_its_corner_to_the_depth_camera() {
+    use sim::ground_vehicle::{GroundVehicleParams, PathParams, SpeedProfile};
+    use sim::world::{World, WorldParams};
+    for (heading_deg, nearest_x) in [(0.0_f64, 3.0 - 0.5), (45.0, 3.0 - 0.5 * 2f64.sqrt())] {
+        let world = World::new(WorldParams {
+            ground_vehicle: Some(GroundVehicleParams {
+                path: PathParams::Straight {
+                    start_m: [3.0, 0.0],
+                    heading_rad: heading_deg.to_radians(),
+                },
+                speed: SpeedProfile::Constant { speed_m_s: 0.0 },
+                ..GroundVehicleParams::default()
+            }),
+            ..WorldParams::default()
+        })
+        .unwrap();
+        let boxes = world.boxes_in_view();
+        assert_eq!(boxes.len(), 1, "the body is the only box");
+        let mut cam = DepthCamera::new(DepthCameraParams::default()).unwrap();
+        // The camera (10 cm ahead of and above the body origin) at the roof's half
+        // height (0.2 m), looking east at the body.
+        let body = level_body(0.0, 0.0, 0.1, 0.0);
+        let frame = cam.render(&body, &boxes);
+        let d = frame.depth_m(320, 240).unwrap();
+        let expected = nearest_x - 0.1;
+        assert!(
+            (d - expected).abs() < 0.03,
+            "heading {heading_deg}: depth {d}, the body's nearest face or corner is {expected} m away"
+        );
+    }
 }
 
 #[test]
@@ -397,7 +430,7 @@ fn the_ground_appears_where_it_should_and_out_of_range_reads_zero() {
         min_m: [5.15, 4.0, 0.0],
         max_m: [5.2, 6.0, 3.0],
     };
-    let blocked = cam.render(&body, &[near]);
+    let blocked = cam.render(&body, &[Obb::from(&near)]);
     assert_eq!(blocked.depth_m(320, 240), None);
 }
 
@@ -410,7 +443,7 @@ fn depth_noise_grows_with_range() {
             min_m: [d + 0.1, -20.0, 0.0],
             max_m: [d + 1.0, 20.0, 20.0],
         };
-        let f = cam.render(&body, &[wall]);
+        let f = cam.render(&body, &[Obb::from(&wall)]);
         let v: Vec<f64> = (200..280)
             .flat_map(|v| (280..360).map(move |u| (u, v)))
             .map(|(u, v)| f.depth_m(u, v).unwrap())
@@ -493,7 +526,7 @@ fn render_bench() {
     let mut times = Vec::new();
     for _ in 0..100 {
         let t = Instant::now();
-        let f = depth.render(&body, &boxes);
+        let f = depth.render(&body, &boxes.map(|b| Obb::from(&b)));
         times.push(t.elapsed().as_secs_f64() * 1e3);
         std::hint::black_box(f);
     }

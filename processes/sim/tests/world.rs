@@ -66,8 +66,8 @@ fn the_quadrotor_resting_on_the_ground_with_motors_off_stays_still() {
     let events = fly(&mut w, 10.0);
     assert!(events.is_empty(), "{events:?}");
     assert_eq!(w.contact(), ContactState::Resting { surface_id: 0 });
-    assert_eq!(w.truth().position, start.position);
-    assert_eq!(w.truth().velocity, Vector3::zeros());
+    assert!((w.truth().position - start.position).norm() < 1e-12);
+    assert!(w.truth().velocity.norm() < 1e-12);
     assert!(w.truth().is_finite());
 }
 
@@ -90,7 +90,12 @@ fn falling_from_5_m_with_motors_off_is_a_crash() {
     }
     assert!(w.crashed());
     assert!(!w.armed());
-    assert!(w.truth().position.z >= 0.0);
+    // At rest on its gear again after the bounces.
+    assert!(
+        w.truth().position.z.abs() < 0.01,
+        "{:?}",
+        w.truth().position
+    );
     // A crash is not a touchdown.
     assert!(
         !events
@@ -157,11 +162,12 @@ fn touching_down_at_0_3_m_s_on_the_moving_pad_reports_the_relative_velocity() {
     let local = pad
         .world_from_pad
         .inverse_transform_point(&w.truth().position.into());
+    let sunk = w.airframe().static_deflection_m();
     assert!(
-        local.coords.norm() < 0.1 && local.z.abs() < 1e-9,
+        local.coords.norm() < 0.1 && (local.z + sunk).abs() < 1e-4,
         "{local:?}"
     );
-    assert!((w.truth().velocity - pad.linear_velocity).norm() < 1e-9);
+    assert!((w.truth().velocity - pad.linear_velocity).norm() < 1e-3);
 }
 
 #[test]

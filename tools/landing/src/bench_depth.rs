@@ -17,7 +17,7 @@ use ipc_types::msg::{CellState, Intrinsics};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use serde_json::json;
 use sim::depth::{DepthCamera, DepthCameraParams};
-use sim::world::Aabb;
+use sim::world::{Aabb, Obb};
 
 use crate::stats::percentile;
 
@@ -105,6 +105,7 @@ pub fn run(args: &DepthArgs) -> Result<()> {
     let (w, h) = (cam.params().width, cam.params().height);
     let body_from_camera = cfg.body_from_camera();
     let mut depth = vec![0u16; cam.frame_len()];
+    let boxes: Vec<Obb> = OBSTACLES.iter().map(Obb::from).collect();
     let mut wire = vec![0u8; map.cell_count()];
     let mut t = Times::default();
     let mut exact_ms = Vec::new();
@@ -116,7 +117,7 @@ pub fn run(args: &DepthArgs) -> Result<()> {
     for i in 0..args.frames {
         let time = i as f64 / 30.0;
         let body = body_at(time);
-        cam.render_into(&body, &OBSTACLES, &mut depth);
+        cam.render_into(&body, &boxes, &mut depth);
         let view = DepthView::new(
             w,
             h,

@@ -5,7 +5,7 @@ use depth_map::{DepthPixels, DepthView, MapSettings, OccupancyMap, body_from_for
 use ipc_types::msg::Intrinsics;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use sim::depth::{DepthCamera, DepthCameraParams};
-use sim::world::Aabb;
+use sim::world::{Aabb, Obb};
 
 /// The obstacle-demo box: 0.6 m deep, 1.2 m wide, 1.2 m tall, 2.5 m ahead of the origin.
 pub const BOX: Aabb = Aabb {
@@ -38,11 +38,12 @@ pub fn body(p: [f64; 3], yaw: f64) -> Isometry3<f64> {
 
 /// Where the depth camera is for body pose `b` (the default mount).
 pub fn world_from_camera(b: &Isometry3<f64>) -> Isometry3<f64> {
-    b * body_from_forward_camera([0.1, 0.0, 0.0], [0.0; 3])
+    b * body_from_forward_camera([0.1, 0.0, 0.1], [0.0; 3])
 }
 
 pub fn render(cam: &mut DepthCamera, b: &Isometry3<f64>, boxes: &[Aabb]) -> Vec<u16> {
-    cam.render(b, boxes).depth_mm
+    let boxes: Vec<Obb> = boxes.iter().map(Obb::from).collect();
+    cam.render(b, &boxes).depth_mm
 }
 
 pub fn view<'a>(cam: &DepthCamera, depth: &'a [u16]) -> DepthView<'a> {
