@@ -70,7 +70,9 @@ pub struct AutopilotParams {
     pub mpc_acc_down_max: f64,
     /// Maximum tilt in flight, deg (PX4 default 45).
     pub mpc_tiltmax_air: f64,
-    /// Normalized thrust that hovers the vehicle (PX4 MPC_THR_HOVER).
+    /// Normalized thrust that hovers the vehicle as its airframe file says (PX4
+    /// MPC_THR_HOVER): the controller starts from it, the hover thrust estimator
+    /// corrects it in flight.
     pub mpc_thr_hover: f64,
     /// Minimum collective thrust in flight (PX4 default 0.12).
     pub mpc_thr_min: f64,
@@ -120,6 +122,33 @@ pub struct AutopilotParams {
     pub mc_yr_int_lim: f64,
     /// Cut-off of the gyro-derivative low-pass for the rate D term, Hz (PX4 default 30).
     pub imu_dgyro_cutoff: f64,
+    /// 1: the position controller uses the hover thrust estimate once it is valid
+    /// instead of MPC_THR_HOVER; 0: MPC_THR_HOVER only (PX4 default 1).
+    pub mpc_use_hte: u8,
+    /// Hover thrust process noise, normalized thrust per s (PX4 HTE_HT_NOISE, 0.0036).
+    pub hte_ht_noise: f64,
+    /// Innovation gate of the acceleration fusion, standard deviations (PX4 HTE_ACC_GATE, 3).
+    pub hte_acc_gate: f64,
+    /// Initial 1-sigma hover thrust uncertainty, normalized thrust (PX4 HTE_HT_ERR_INIT, 0.1).
+    pub hte_ht_err_init: f64,
+    /// Horizontal speed above which measurements are de-weighted, m/s (PX4 HTE_VXY_THR, 10).
+    pub hte_vxy_thr: f64,
+    /// Vertical speed above which measurements are de-weighted, m/s (PX4 HTE_VZ_THR, 2).
+    pub hte_vz_thr: f64,
+    /// Largest deviation of the estimate from MPC_THR_HOVER (PX4 HTE_THR_RANGE, 0.2).
+    pub hte_thr_range: f64,
+    /// Vertical speed below which the land detector sees no vertical motion, m/s (PX4
+    /// LNDMC_Z_VEL_MAX, 0.25).
+    pub lndmc_z_vel_max: f64,
+    /// Horizontal speed above which the land detector sees motion, m/s (PX4
+    /// LNDMC_XY_VEL_MAX, 1.5).
+    pub lndmc_xy_vel_max: f64,
+    /// Roll-pitch rate above which the land detector sees rotation, deg/s (PX4
+    /// LNDMC_ROT_MAX, 20).
+    pub lndmc_rot_max: f64,
+    /// Time through the three land detector stages (ground contact, maybe landed,
+    /// landed), s (PX4 LNDMC_TRIG_TIME, 1).
+    pub lndmc_trig_time: f64,
 }
 
 impl Default for AutopilotParams {
@@ -208,6 +237,17 @@ impl AutopilotParams {
             mc_pr_int_lim: 0.3,
             mc_yr_int_lim: 0.3,
             imu_dgyro_cutoff: 30.0,
+            mpc_use_hte: 1,
+            hte_ht_noise: 0.0036,
+            hte_acc_gate: 3.0,
+            hte_ht_err_init: 0.1,
+            hte_vxy_thr: 10.0,
+            hte_vz_thr: 2.0,
+            hte_thr_range: 0.2,
+            lndmc_z_vel_max: 0.25,
+            lndmc_xy_vel_max: 1.5,
+            lndmc_rot_max: 20.0,
+            lndmc_trig_time: 1.0,
         }
     }
 
@@ -250,6 +290,9 @@ impl AutopilotParams {
             ("MC_PITCHRATE_P", self.mc_pitchrate_p),
             ("MC_YAWRATE_P", self.mc_yawrate_p),
             ("IMU_DGYRO_CUTOFF", self.imu_dgyro_cutoff),
+            ("LNDMC_Z_VEL_MAX", self.lndmc_z_vel_max),
+            ("LNDMC_XY_VEL_MAX", self.lndmc_xy_vel_max),
+            ("LNDMC_ROT_MAX", self.lndmc_rot_max),
         ];
         for (name, value) in positive {
             params::positive(name, value)?;
@@ -277,6 +320,21 @@ impl AutopilotParams {
         params::in_range("MPC_THR_MIN", self.mpc_thr_min, 0.0, 0.5)?;
         params::in_range("MPC_THR_MAX", self.mpc_thr_max, 0.5, 1.0)?;
         params::in_range("MPC_THR_XY_MARG", self.mpc_thr_xy_marg, 0.0, 0.5)?;
+        // PX4's ranges (hover_thrust_estimator_params.yaml, land_detector_params_mc.yaml).
+        params::in_range("HTE_HT_NOISE", self.hte_ht_noise, 0.0001, 1.0)?;
+        params::in_range("HTE_ACC_GATE", self.hte_acc_gate, 1.0, 10.0)?;
+        params::in_range("HTE_HT_ERR_INIT", self.hte_ht_err_init, 0.0, 1.0)?;
+        params::in_range("HTE_VXY_THR", self.hte_vxy_thr, 1.0, 20.0)?;
+        params::in_range("HTE_VZ_THR", self.hte_vz_thr, 1.0, 10.0)?;
+        params::in_range("HTE_THR_RANGE", self.hte_thr_range, 0.01, 0.4)?;
+        params::in_range("LNDMC_TRIG_TIME", self.lndmc_trig_time, 0.1, 10.0)?;
+        if self.mpc_use_hte > 1 {
+            return Err(ParamError::new(
+                "MPC_USE_HTE",
+                self.mpc_use_hte,
+                "must be 0 (MPC_THR_HOVER only) or 1 (hover thrust estimate)",
+            ));
+        }
         if !(self.mpc_thr_hover.is_finite()
             && self.mpc_thr_hover > self.mpc_thr_min
             && self.mpc_thr_hover < self.mpc_thr_max)
