@@ -19,6 +19,16 @@
 //! ESTIMATED state, never the truth. Outputs are always finite: non-finite
 //! inputs give a defined safe output and a flag in [`ControlStatus`].
 //!
+//! Like PX4, the autopilot does not know its vehicle: it starts from the airframe
+//! file's MPC_THR_HOVER and runs PX4's hover thrust estimator
+//! ([`crate::hover_thrust`]), whose valid estimate replaces MPC_THR_HOVER in the
+//! position controller (MPC_USE_HTE = 1); and it decides that it has landed with
+//! PX4's land detector ([`crate::land_detector`]) from its own estimate and
+//! commands. Around the ground it follows PX4's position controller: landed and no
+//! setpoint asking to climb, the thrust is zero; in flight with ground contact
+//! detected, it is MPC_THR_MIN with the velocity integrators reset, which is what
+//! lets the detector go on to "landed".
+//!
 //! Units follow PX4: angles in parameters are in degrees (MPC_TILTMAX_AIR,
 //! MC_*RATE_MAX), the velocity gains are the `_ACC` variants (m/s^2 per m/s),
 //! thrust is normalized per motor in `[0, 1]`, torques are normalized.
@@ -26,6 +36,8 @@
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use serde::Deserialize;
 
+use crate::hover_thrust::{HoverThrustEstimator, HoverThrustInput};
+use crate::land_detector::{LandDetected, LandDetector, LandDetectorInput};
 use crate::params::{self, ParamError};
 use crate::quadrotor::{AirframeParams, GRAVITY_M_S2, QUAD_X_MOTORS, VehicleState};
 
@@ -363,7 +375,8 @@ pub struct EstimatedState {
     pub world_from_body: UnitQuaternion<f64>,
     /// Body rates in body FLU, rad/s.
     pub body_rates: Vector3<f64>,
-    /// PX4's land-detector output: while landed the integrators are frozen.
+    /// PX4's land-detector output (`vehicle_land_detected.landed`): the autopilot's
+    /// own detector's, never the true contact; while landed the integrators are frozen.
     pub landed: bool,
 }
 
@@ -521,7 +534,22 @@ impl FilteredDerivative {
     }
 }
 
-/// The cascaded controller with its integrators and filters.
+/// PX4's take-off states from "ready for take-off" on (`Takeoff.cpp`; its spool-up is
+/// the commander's).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum TakeoffState {
+    /// On the ground: zero thrust until a setpoint asks to climb.
+    Ready,
+    /// Climbing away: normal control, but not yet flying. PX4 ramps the climb over
+    /// MPC_TKO_RAMP_T; here the ramp-up ends as soon as the land detector no longer
+    /// reports ground contact (the rotors carry the vehicle).
+    Rampup,
+    /// Flying: ground contact cuts the thrust to MPC_THR_MIN, "landed" ends it.
+    Flight,
+}
+
+/// The cascaded controller with its integrators and filters, its hover thrust
+/// estimator and its land detector.
 #[derive(Debug, Clone)]
 pub struct Autopilot {
     params: AutopilotParams,
@@ -531,26 +559,131 @@ pub struct Autopilot {
     rate_derivative: FilteredDerivative,
     yaw_hold: Option<f64>,
     saturation: TorqueSaturation,
+    /// The hover thrust the position controller uses now.
+    hover_thrust: f64,
+    hover_thrust_estimator: HoverThrustEstimator,
+    land_detector: LandDetector,
+    /// PX4's take-off state (`Takeoff.cpp`) from "ready for take-off" on.
+    takeoff: TakeoffState,
+    /// Time summed over the updates, ns (the estimator's and detector's clock).
+    clock_ns: u64,
+    /// Upward component of the thrust the last output allocated, normalized.
+    thrust_up: f64,
+    /// Vertical acceleration setpoint the last thrust was computed from, m/s^2.
+    last_acceleration_z: f64,
 }
 
 impl Autopilot {
     /// Builds a controller after validating its parameters.
+    /// It boots on the ground (landed), as PX4.
     pub fn new(params: AutopilotParams) -> Result<Self, ParamError> {
         params.validate()?;
         Ok(Self {
-            params,
             velocity_integral: Vector3::zeros(),
             rate_integral: Vector3::zeros(),
             velocity_derivative: FilteredDerivative::default(),
             rate_derivative: FilteredDerivative::default(),
             yaw_hold: None,
             saturation: TorqueSaturation::default(),
+            hover_thrust: params.mpc_thr_hover,
+            hover_thrust_estimator: HoverThrustEstimator::new(&params),
+            land_detector: LandDetector::new(&params),
+            takeoff: TakeoffState::Ready,
+            clock_ns: 0,
+            thrust_up: 0.0,
+            last_acceleration_z: 0.0,
+            params,
         })
     }
 
     /// The parameters in use.
     pub fn params(&self) -> &AutopilotParams {
         &self.params
+    }
+
+    /// The land detector's latest output: what PX4 publishes as
+    /// `vehicle_land_detected`, and what the estimate's `landed` must carry.
+    pub fn land_detected(&self) -> &LandDetected {
+        self.land_detector.output()
+    }
+
+    /// The hover thrust the position controller uses now: MPC_THR_HOVER on the
+    /// ground, the valid estimate in flight.
+    pub fn hover_thrust(&self) -> f64 {
+        self.hover_thrust
+    }
+
+    /// The hover thrust estimator, for logs and tests.
+    pub fn hover_thrust_estimator(&self) -> &HoverThrustEstimator {
+        &self.hover_thrust_estimator
+    }
+
+    /// Sets the land detector and the take-off state for a vehicle the simulator
+    /// places in the air (`in_air`) or on the ground, as if they had long settled
+    /// there: PX4 boots landed, but a vehicle placed in flight must not first drop.
+    pub fn place(&mut self, in_air: bool) {
+        self.land_detector.force(in_air);
+        self.takeoff = if in_air {
+            TakeoffState::Flight
+        } else {
+            TakeoffState::Ready
+        };
+        if !in_air {
+            self.hover_thrust = self.params.mpc_thr_hover;
+        }
+    }
+
+    /// What PX4 runs while disarmed, for `dt_s`: no control (integrators and filters
+    /// cleared), the land detector sees a disarmed vehicle (landed), the hover thrust
+    /// estimator restarts from MPC_THR_HOVER.
+    pub fn disarmed(&mut self, dt_s: f64, state: &EstimatedState) {
+        self.reset();
+        self.takeoff = TakeoffState::Ready;
+        self.hover_thrust = self.params.mpc_thr_hover;
+        self.thrust_up = 0.0;
+        if !(dt_s.is_finite() && dt_s > 0.0 && dt_s <= 1.0) {
+            return;
+        }
+        self.clock_ns = self.clock_ns.saturating_add((dt_s * 1e9).round() as u64);
+        let landed = self.land_detector.output().landed;
+        self.hover_thrust_estimator.update(
+            self.clock_ns,
+            dt_s,
+            &self.params,
+            &HoverThrustInput {
+                armed: false,
+                landed,
+                height_m: state.position.z,
+                velocity: state.velocity,
+                thrust_up: 0.0,
+            },
+        );
+        self.land_detector.update(
+            self.clock_ns,
+            &self.params,
+            &LandDetectorInput {
+                armed: false,
+                velocity: state.velocity,
+                body_rates: state.body_rates,
+                acceleration: None,
+                throttle: 0.0,
+                velocity_setpoint_z: None,
+                hover_thrust_estimate: None,
+            },
+        );
+    }
+
+    /// PX4's `PositionControl::updateHoverThrust`: a new hover thrust without a jump
+    /// in thrust, the difference moved into the vertical velocity integrator.
+    fn update_hover_thrust(&mut self, new: f64) {
+        if !(new.is_finite() && new > 0.0) || new == self.hover_thrust {
+            return;
+        }
+        let a = self.last_acceleration_z;
+        let a_new = (a + GRAVITY_M_S2) * self.hover_thrust / new - GRAVITY_M_S2;
+        self.velocity_integral.z =
+            (self.velocity_integral.z + a_new - a).clamp(-GRAVITY_M_S2, GRAVITY_M_S2);
+        self.hover_thrust = new;
     }
 
     /// Clears integrators, derivative filters and the held heading, e.g. on
@@ -592,12 +725,38 @@ impl Autopilot {
         if !(position_ok && velocity_ok && rates_ok) {
             status.invalid_state = true;
         }
-        let integrate = !state.landed && dt > 0.0;
+        self.clock_ns = self.clock_ns.saturating_add((dt * 1e9).round() as u64);
+        let sp = sanitize_setpoint(setpoint, &mut status);
+
+        // --- Take-off state and hover thrust (PX4 MulticopterPositionControl) ---
+        let land = *self.land_detector.output();
+        self.takeoff = match self.takeoff {
+            TakeoffState::Flight if land.landed => TakeoffState::Ready,
+            TakeoffState::Ready if position_ok && wants_takeoff(&sp, state) => TakeoffState::Rampup,
+            TakeoffState::Rampup if !land.ground_contact => TakeoffState::Flight,
+            other => other,
+        };
+        let flying = self.takeoff == TakeoffState::Flight;
+        if !flying {
+            self.hover_thrust = self.params.mpc_thr_hover;
+        } else if self.params.mpc_use_hte == 1
+            && let Some(h) = self.hover_thrust_estimator.valid_estimate()
+        {
+            self.update_hover_thrust(h);
+        }
+        // Not taken off, or flying with ground contact: no thrust corrections, only
+        // the minimum thrust (zero before take-off), and no integrator windup.
+        let idle_thrust = match self.takeoff {
+            TakeoffState::Ready => Some(0.0),
+            TakeoffState::Flight if land.ground_contact => Some(self.params.mpc_thr_min),
+            _ => None,
+        };
+        // The rate controller stops integrating once maybe landed (PX4 RateControl).
+        let integrate = !(state.landed || land.maybe_landed || land.landed) && dt > 0.0;
 
         // --- Position and velocity control (PX4 PositionControl) ---
-        let sp = sanitize_setpoint(setpoint, &mut status);
         let (velocity_setpoint, acceleration_setpoint, thrust_setpoint) =
-            self.position_velocity_control(dt, integrate, state, &sp, &mut status);
+            self.position_velocity_control(dt, integrate, idle_thrust, state, &sp, &mut status);
 
         // --- Attitude setpoint from thrust direction and yaw ---
         let current_yaw = yaw_of(&attitude);
@@ -632,6 +791,39 @@ impl Autopilot {
         let mix = mix(collective, &torque_setpoint);
         self.saturation = mix.saturation;
 
+        // --- Hover thrust estimator and land detector, for the next update ---
+        if dt > 0.0 && !status.invalid_state {
+            let thrust_up = mix.motors.iter().sum::<f64>() / 4.0 * (attitude * Vector3::z()).z;
+            self.hover_thrust_estimator.update(
+                self.clock_ns,
+                dt,
+                &self.params,
+                &HoverThrustInput {
+                    armed: true,
+                    landed: land.landed,
+                    height_m: state.position.z,
+                    velocity: state.velocity,
+                    // The thrust that acted over the step just measured.
+                    thrust_up: self.thrust_up,
+                },
+            );
+            self.thrust_up = thrust_up;
+            let hover_thrust_estimate = self.hover_thrust_estimator.valid_estimate();
+            self.land_detector.update(
+                self.clock_ns,
+                &self.params,
+                &LandDetectorInput {
+                    armed: true,
+                    velocity: state.velocity,
+                    body_rates: state.body_rates,
+                    acceleration: Some(self.velocity_derivative.value),
+                    throttle: collective,
+                    velocity_setpoint_z: sp.velocity[2],
+                    hover_thrust_estimate,
+                },
+            );
+        }
+
         let out = ControlOutput {
             motors: mix.motors,
             velocity_setpoint,
@@ -659,7 +851,7 @@ impl Autopilot {
     fn level_hover_output(&mut self, status: ControlStatus) -> ControlOutput {
         self.rate_derivative.reset();
         self.velocity_derivative.reset();
-        let hover = self.params.mpc_thr_hover;
+        let hover = self.hover_thrust;
         ControlOutput {
             motors: [hover; 4],
             velocity_setpoint: Vector3::zeros(),
@@ -675,10 +867,13 @@ impl Autopilot {
 
     /// Position P, velocity PID, acceleration to thrust, with PX4's limits
     /// and anti-windup. Returns (velocity sp, acceleration sp, thrust vector).
+    /// With `idle_thrust` the setpoint is ignored as PX4 ignores it on the ground: a
+    /// level thrust of that size, the velocity integrators reset.
     fn position_velocity_control(
         &mut self,
         dt: f64,
         integrate: bool,
+        idle_thrust: Option<f64>,
         state: &EstimatedState,
         sp: &Setpoint,
         status: &mut ControlStatus,
@@ -686,6 +881,22 @@ impl Autopilot {
         let p = &self.params;
         let position_ok = finite3(&state.position);
         let velocity_ok = finite3(&state.velocity);
+        if let Some(thrust) = idle_thrust {
+            // PX4 commands 100 m/s^2 down: the thrust saturates at its minimum.
+            if velocity_ok {
+                self.velocity_derivative
+                    .update(&state.velocity, dt, p.mpc_veld_lp);
+            } else {
+                self.velocity_derivative.reset();
+            }
+            self.velocity_integral = Vector3::zeros();
+            self.last_acceleration_z = -p.mpc_acc_down_max;
+            return (
+                Vector3::zeros(),
+                Vector3::new(0.0, 0.0, -p.mpc_acc_down_max),
+                Vector3::new(0.0, 0.0, thrust),
+            );
+        }
         let gains_pos = [p.mpc_xy_p, p.mpc_xy_p, p.mpc_z_p];
 
         // Velocity setpoint = feed-forward + P on position, per axis.
@@ -758,7 +969,8 @@ impl Autopilot {
         acc_limited.z = acc_limited.z.clamp(-p.mpc_acc_down_max, p.mpc_acc_up_max);
 
         // Acceleration -> thrust vector (PX4 _accelerationControl).
-        let hover = p.mpc_thr_hover;
+        let hover = self.hover_thrust;
+        self.last_acceleration_z = acc_limited.z;
         let mut body_z = Vector3::new(acc_limited.x, acc_limited.y, GRAVITY_M_S2 + acc_limited.z);
         body_z = if body_z.norm() > 1e-6 {
             body_z.normalize()
@@ -1038,6 +1250,15 @@ fn output_is_finite(o: &ControlOutput) -> bool {
         && o.attitude_setpoint.coords.iter().all(|c| c.is_finite())
         && finite3(&o.rate_setpoint)
         && finite3(&o.torque_setpoint)
+}
+
+/// Whether a setpoint asks a landed vehicle to take off (PX4 MulticopterPositionControl,
+/// offboard): a position above it, or an upward velocity or acceleration. The
+/// commander adds FlightTask's stricter gate in its AUTO modes.
+fn wants_takeoff(sp: &Setpoint, state: &EstimatedState) -> bool {
+    sp.position[2].is_some_and(|z| z > state.position.z)
+        || sp.velocity[2].is_some_and(|vz| vz > 0.0)
+        || sp.acceleration[2].is_some_and(|az| az > 0.0)
 }
 
 /// Drops non-finite setpoint fields (flagging them).
