@@ -76,9 +76,10 @@ pub struct AutopilotParams {
     /// the total acceleration setpoint, where PX4 applies it in its trajectory
     /// generators).
     pub mpc_acc_hor_max: f64,
-    /// Upward acceleration limit, m/s^2 (PX4 default 4).
+    /// Upward acceleration limit, m/s^2 (PX4 default 4; here on the commanded
+    /// vertical acceleration, the velocity integrator comes on top).
     pub mpc_acc_up_max: f64,
-    /// Downward acceleration limit, m/s^2 (PX4 default 3).
+    /// Downward acceleration limit, m/s^2 (PX4 default 3; like the upward one).
     pub mpc_acc_down_max: f64,
     /// Maximum tilt in flight, deg (PX4 default 45).
     pub mpc_tiltmax_air: f64,
@@ -966,7 +967,18 @@ impl Autopilot {
             acc_limited.x *= s;
             acc_limited.y *= s;
         }
-        acc_limited.z = acc_limited.z.clamp(-p.mpc_acc_down_max, p.mpc_acc_up_max);
+        // Vertically the limits bound the commanded motion (feed-forward, P and D),
+        // not the integrator's weight compensation: a vehicle heavier than its
+        // MPC_THR_HOVER keeps its full climb and descent, and one pressed onto the
+        // ground can wind its thrust down to where PX4's land detector sees it (PX4
+        // limits nothing here: its limits are in the trajectory generators).
+        let integral_z = if vel_defined[2] && velocity_ok {
+            self.velocity_integral.z
+        } else {
+            0.0
+        };
+        acc_limited.z =
+            (acc_sp.z - integral_z).clamp(-p.mpc_acc_down_max, p.mpc_acc_up_max) + integral_z;
 
         // Acceleration -> thrust vector (PX4 _accelerationControl).
         let hover = self.hover_thrust;
