@@ -19,6 +19,16 @@
 //! ESTIMATED state, never the truth. Outputs are always finite: non-finite
 //! inputs give a defined safe output and a flag in [`ControlStatus`].
 //!
+//! Like PX4, the autopilot does not know its vehicle: it starts from the airframe
+//! file's MPC_THR_HOVER and runs PX4's hover thrust estimator
+//! ([`crate::hover_thrust`]), whose valid estimate replaces MPC_THR_HOVER in the
+//! position controller (MPC_USE_HTE = 1); and it decides that it has landed with
+//! PX4's land detector ([`crate::land_detector`]) from its own estimate and
+//! commands. Around the ground it follows PX4's position controller: landed and no
+//! setpoint asking to climb, the thrust is zero; in flight with ground contact
+//! detected, it is MPC_THR_MIN with the velocity integrators reset, which is what
+//! lets the detector go on to "landed".
+//!
 //! Units follow PX4: angles in parameters are in degrees (MPC_TILTMAX_AIR,
 //! MC_*RATE_MAX), the velocity gains are the `_ACC` variants (m/s^2 per m/s),
 //! thrust is normalized per motor in `[0, 1]`, torques are normalized.
@@ -26,6 +36,8 @@
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use serde::Deserialize;
 
+use crate::hover_thrust::{HoverThrustEstimator, HoverThrustInput};
+use crate::land_detector::{LandDetected, LandDetector, LandDetectorInput};
 use crate::params::{self, ParamError};
 use crate::quadrotor::{AirframeParams, GRAVITY_M_S2, QUAD_X_MOTORS, VehicleState};
 
@@ -64,13 +76,16 @@ pub struct AutopilotParams {
     /// the total acceleration setpoint, where PX4 applies it in its trajectory
     /// generators).
     pub mpc_acc_hor_max: f64,
-    /// Upward acceleration limit, m/s^2 (PX4 default 4).
+    /// Upward acceleration limit, m/s^2 (PX4 default 4; here on the commanded
+    /// vertical acceleration, the velocity integrator comes on top).
     pub mpc_acc_up_max: f64,
-    /// Downward acceleration limit, m/s^2 (PX4 default 3).
+    /// Downward acceleration limit, m/s^2 (PX4 default 3; like the upward one).
     pub mpc_acc_down_max: f64,
     /// Maximum tilt in flight, deg (PX4 default 45).
     pub mpc_tiltmax_air: f64,
-    /// Normalized thrust that hovers the vehicle (PX4 MPC_THR_HOVER).
+    /// Normalized thrust that hovers the vehicle as its airframe file says (PX4
+    /// MPC_THR_HOVER): the controller starts from it, the hover thrust estimator
+    /// corrects it in flight.
     pub mpc_thr_hover: f64,
     /// Minimum collective thrust in flight (PX4 default 0.12).
     pub mpc_thr_min: f64,
@@ -120,6 +135,33 @@ pub struct AutopilotParams {
     pub mc_yr_int_lim: f64,
     /// Cut-off of the gyro-derivative low-pass for the rate D term, Hz (PX4 default 30).
     pub imu_dgyro_cutoff: f64,
+    /// 1: the position controller uses the hover thrust estimate once it is valid
+    /// instead of MPC_THR_HOVER; 0: MPC_THR_HOVER only (PX4 default 1).
+    pub mpc_use_hte: u8,
+    /// Hover thrust process noise, normalized thrust per s (PX4 HTE_HT_NOISE, 0.0036).
+    pub hte_ht_noise: f64,
+    /// Innovation gate of the acceleration fusion, standard deviations (PX4 HTE_ACC_GATE, 3).
+    pub hte_acc_gate: f64,
+    /// Initial 1-sigma hover thrust uncertainty, normalized thrust (PX4 HTE_HT_ERR_INIT, 0.1).
+    pub hte_ht_err_init: f64,
+    /// Horizontal speed above which measurements are de-weighted, m/s (PX4 HTE_VXY_THR, 10).
+    pub hte_vxy_thr: f64,
+    /// Vertical speed above which measurements are de-weighted, m/s (PX4 HTE_VZ_THR, 2).
+    pub hte_vz_thr: f64,
+    /// Largest deviation of the estimate from MPC_THR_HOVER (PX4 HTE_THR_RANGE, 0.2).
+    pub hte_thr_range: f64,
+    /// Vertical speed below which the land detector sees no vertical motion, m/s (PX4
+    /// LNDMC_Z_VEL_MAX, 0.25).
+    pub lndmc_z_vel_max: f64,
+    /// Horizontal speed above which the land detector sees motion, m/s (PX4
+    /// LNDMC_XY_VEL_MAX, 1.5).
+    pub lndmc_xy_vel_max: f64,
+    /// Roll-pitch rate above which the land detector sees rotation, deg/s (PX4
+    /// LNDMC_ROT_MAX, 20).
+    pub lndmc_rot_max: f64,
+    /// Time through the three land detector stages (ground contact, maybe landed,
+    /// landed), s (PX4 LNDMC_TRIG_TIME, 1).
+    pub lndmc_trig_time: f64,
 }
 
 impl Default for AutopilotParams {
@@ -208,6 +250,17 @@ impl AutopilotParams {
             mc_pr_int_lim: 0.3,
             mc_yr_int_lim: 0.3,
             imu_dgyro_cutoff: 30.0,
+            mpc_use_hte: 1,
+            hte_ht_noise: 0.0036,
+            hte_acc_gate: 3.0,
+            hte_ht_err_init: 0.1,
+            hte_vxy_thr: 10.0,
+            hte_vz_thr: 2.0,
+            hte_thr_range: 0.2,
+            lndmc_z_vel_max: 0.25,
+            lndmc_xy_vel_max: 1.5,
+            lndmc_rot_max: 20.0,
+            lndmc_trig_time: 1.0,
         }
     }
 
@@ -250,6 +303,9 @@ impl AutopilotParams {
             ("MC_PITCHRATE_P", self.mc_pitchrate_p),
             ("MC_YAWRATE_P", self.mc_yawrate_p),
             ("IMU_DGYRO_CUTOFF", self.imu_dgyro_cutoff),
+            ("LNDMC_Z_VEL_MAX", self.lndmc_z_vel_max),
+            ("LNDMC_XY_VEL_MAX", self.lndmc_xy_vel_max),
+            ("LNDMC_ROT_MAX", self.lndmc_rot_max),
         ];
         for (name, value) in positive {
             params::positive(name, value)?;
@@ -277,6 +333,21 @@ impl AutopilotParams {
         params::in_range("MPC_THR_MIN", self.mpc_thr_min, 0.0, 0.5)?;
         params::in_range("MPC_THR_MAX", self.mpc_thr_max, 0.5, 1.0)?;
         params::in_range("MPC_THR_XY_MARG", self.mpc_thr_xy_marg, 0.0, 0.5)?;
+        // PX4's ranges (hover_thrust_estimator_params.yaml, land_detector_params_mc.yaml).
+        params::in_range("HTE_HT_NOISE", self.hte_ht_noise, 0.0001, 1.0)?;
+        params::in_range("HTE_ACC_GATE", self.hte_acc_gate, 1.0, 10.0)?;
+        params::in_range("HTE_HT_ERR_INIT", self.hte_ht_err_init, 0.0, 1.0)?;
+        params::in_range("HTE_VXY_THR", self.hte_vxy_thr, 1.0, 20.0)?;
+        params::in_range("HTE_VZ_THR", self.hte_vz_thr, 1.0, 10.0)?;
+        params::in_range("HTE_THR_RANGE", self.hte_thr_range, 0.01, 0.4)?;
+        params::in_range("LNDMC_TRIG_TIME", self.lndmc_trig_time, 0.1, 10.0)?;
+        if self.mpc_use_hte > 1 {
+            return Err(ParamError::new(
+                "MPC_USE_HTE",
+                self.mpc_use_hte,
+                "must be 0 (MPC_THR_HOVER only) or 1 (hover thrust estimate)",
+            ));
+        }
         if !(self.mpc_thr_hover.is_finite()
             && self.mpc_thr_hover > self.mpc_thr_min
             && self.mpc_thr_hover < self.mpc_thr_max)
@@ -305,7 +376,8 @@ pub struct EstimatedState {
     pub world_from_body: UnitQuaternion<f64>,
     /// Body rates in body FLU, rad/s.
     pub body_rates: Vector3<f64>,
-    /// PX4's land-detector output: while landed the integrators are frozen.
+    /// PX4's land-detector output (`vehicle_land_detected.landed`): the autopilot's
+    /// own detector's, never the true contact; while landed the integrators are frozen.
     pub landed: bool,
 }
 
@@ -463,7 +535,22 @@ impl FilteredDerivative {
     }
 }
 
-/// The cascaded controller with its integrators and filters.
+/// PX4's take-off states from "ready for take-off" on (`Takeoff.cpp`; its spool-up is
+/// the commander's).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum TakeoffState {
+    /// On the ground: zero thrust until a setpoint asks to climb.
+    Ready,
+    /// Climbing away: normal control, but not yet flying. PX4 ramps the climb over
+    /// MPC_TKO_RAMP_T; here the ramp-up ends as soon as the land detector no longer
+    /// reports ground contact (the rotors carry the vehicle).
+    Rampup,
+    /// Flying: ground contact cuts the thrust to MPC_THR_MIN, "landed" ends it.
+    Flight,
+}
+
+/// The cascaded controller with its integrators and filters, its hover thrust
+/// estimator and its land detector.
 #[derive(Debug, Clone)]
 pub struct Autopilot {
     params: AutopilotParams,
@@ -473,26 +560,131 @@ pub struct Autopilot {
     rate_derivative: FilteredDerivative,
     yaw_hold: Option<f64>,
     saturation: TorqueSaturation,
+    /// The hover thrust the position controller uses now.
+    hover_thrust: f64,
+    hover_thrust_estimator: HoverThrustEstimator,
+    land_detector: LandDetector,
+    /// PX4's take-off state (`Takeoff.cpp`) from "ready for take-off" on.
+    takeoff: TakeoffState,
+    /// Time summed over the updates, ns (the estimator's and detector's clock).
+    clock_ns: u64,
+    /// Upward component of the thrust the last output allocated, normalized.
+    thrust_up: f64,
+    /// Vertical acceleration setpoint the last thrust was computed from, m/s^2.
+    last_acceleration_z: f64,
 }
 
 impl Autopilot {
     /// Builds a controller after validating its parameters.
+    /// It boots on the ground (landed), as PX4.
     pub fn new(params: AutopilotParams) -> Result<Self, ParamError> {
         params.validate()?;
         Ok(Self {
-            params,
             velocity_integral: Vector3::zeros(),
             rate_integral: Vector3::zeros(),
             velocity_derivative: FilteredDerivative::default(),
             rate_derivative: FilteredDerivative::default(),
             yaw_hold: None,
             saturation: TorqueSaturation::default(),
+            hover_thrust: params.mpc_thr_hover,
+            hover_thrust_estimator: HoverThrustEstimator::new(&params),
+            land_detector: LandDetector::new(&params),
+            takeoff: TakeoffState::Ready,
+            clock_ns: 0,
+            thrust_up: 0.0,
+            last_acceleration_z: 0.0,
+            params,
         })
     }
 
     /// The parameters in use.
     pub fn params(&self) -> &AutopilotParams {
         &self.params
+    }
+
+    /// The land detector's latest output: what PX4 publishes as
+    /// `vehicle_land_detected`, and what the estimate's `landed` must carry.
+    pub fn land_detected(&self) -> &LandDetected {
+        self.land_detector.output()
+    }
+
+    /// The hover thrust the position controller uses now: MPC_THR_HOVER on the
+    /// ground, the valid estimate in flight.
+    pub fn hover_thrust(&self) -> f64 {
+        self.hover_thrust
+    }
+
+    /// The hover thrust estimator, for logs and tests.
+    pub fn hover_thrust_estimator(&self) -> &HoverThrustEstimator {
+        &self.hover_thrust_estimator
+    }
+
+    /// Sets the land detector and the take-off state for a vehicle the simulator
+    /// places in the air (`in_air`) or on the ground, as if they had long settled
+    /// there: PX4 boots landed, but a vehicle placed in flight must not first drop.
+    pub fn place(&mut self, in_air: bool) {
+        self.land_detector.force(in_air);
+        self.takeoff = if in_air {
+            TakeoffState::Flight
+        } else {
+            TakeoffState::Ready
+        };
+        if !in_air {
+            self.hover_thrust = self.params.mpc_thr_hover;
+        }
+    }
+
+    /// What PX4 runs while disarmed, for `dt_s`: no control (integrators and filters
+    /// cleared), the land detector sees a disarmed vehicle (landed), the hover thrust
+    /// estimator restarts from MPC_THR_HOVER.
+    pub fn disarmed(&mut self, dt_s: f64, state: &EstimatedState) {
+        self.reset();
+        self.takeoff = TakeoffState::Ready;
+        self.hover_thrust = self.params.mpc_thr_hover;
+        self.thrust_up = 0.0;
+        if !(dt_s.is_finite() && dt_s > 0.0 && dt_s <= 1.0) {
+            return;
+        }
+        self.clock_ns = self.clock_ns.saturating_add((dt_s * 1e9).round() as u64);
+        let landed = self.land_detector.output().landed;
+        self.hover_thrust_estimator.update(
+            self.clock_ns,
+            dt_s,
+            &self.params,
+            &HoverThrustInput {
+                armed: false,
+                landed,
+                height_m: state.position.z,
+                velocity: state.velocity,
+                thrust_up: 0.0,
+            },
+        );
+        self.land_detector.update(
+            self.clock_ns,
+            &self.params,
+            &LandDetectorInput {
+                armed: false,
+                velocity: state.velocity,
+                body_rates: state.body_rates,
+                acceleration: None,
+                throttle: 0.0,
+                velocity_setpoint_z: None,
+                hover_thrust_estimate: None,
+            },
+        );
+    }
+
+    /// PX4's `PositionControl::updateHoverThrust`: a new hover thrust without a jump
+    /// in thrust, the difference moved into the vertical velocity integrator.
+    fn update_hover_thrust(&mut self, new: f64) {
+        if !(new.is_finite() && new > 0.0) || new == self.hover_thrust {
+            return;
+        }
+        let a = self.last_acceleration_z;
+        let a_new = (a + GRAVITY_M_S2) * self.hover_thrust / new - GRAVITY_M_S2;
+        self.velocity_integral.z =
+            (self.velocity_integral.z + a_new - a).clamp(-GRAVITY_M_S2, GRAVITY_M_S2);
+        self.hover_thrust = new;
     }
 
     /// Clears integrators, derivative filters and the held heading, e.g. on
@@ -534,12 +726,38 @@ impl Autopilot {
         if !(position_ok && velocity_ok && rates_ok) {
             status.invalid_state = true;
         }
-        let integrate = !state.landed && dt > 0.0;
+        self.clock_ns = self.clock_ns.saturating_add((dt * 1e9).round() as u64);
+        let sp = sanitize_setpoint(setpoint, &mut status);
+
+        // --- Take-off state and hover thrust (PX4 MulticopterPositionControl) ---
+        let land = *self.land_detector.output();
+        self.takeoff = match self.takeoff {
+            TakeoffState::Flight if land.landed => TakeoffState::Ready,
+            TakeoffState::Ready if position_ok && wants_takeoff(&sp, state) => TakeoffState::Rampup,
+            TakeoffState::Rampup if !land.ground_contact => TakeoffState::Flight,
+            other => other,
+        };
+        let flying = self.takeoff == TakeoffState::Flight;
+        if !flying {
+            self.hover_thrust = self.params.mpc_thr_hover;
+        } else if self.params.mpc_use_hte == 1
+            && let Some(h) = self.hover_thrust_estimator.valid_estimate()
+        {
+            self.update_hover_thrust(h);
+        }
+        // Not taken off, or flying with ground contact: no thrust corrections, only
+        // the minimum thrust (zero before take-off), and no integrator windup.
+        let idle_thrust = match self.takeoff {
+            TakeoffState::Ready => Some(0.0),
+            TakeoffState::Flight if land.ground_contact => Some(self.params.mpc_thr_min),
+            _ => None,
+        };
+        // The rate controller stops integrating once maybe landed (PX4 RateControl).
+        let integrate = !(state.landed || land.maybe_landed || land.landed) && dt > 0.0;
 
         // --- Position and velocity control (PX4 PositionControl) ---
-        let sp = sanitize_setpoint(setpoint, &mut status);
         let (velocity_setpoint, acceleration_setpoint, thrust_setpoint) =
-            self.position_velocity_control(dt, integrate, state, &sp, &mut status);
+            self.position_velocity_control(dt, integrate, idle_thrust, state, &sp, &mut status);
 
         // --- Attitude setpoint from thrust direction and yaw ---
         let current_yaw = yaw_of(&attitude);
@@ -574,6 +792,39 @@ impl Autopilot {
         let mix = mix(collective, &torque_setpoint);
         self.saturation = mix.saturation;
 
+        // --- Hover thrust estimator and land detector, for the next update ---
+        if dt > 0.0 && !status.invalid_state {
+            let thrust_up = mix.motors.iter().sum::<f64>() / 4.0 * (attitude * Vector3::z()).z;
+            self.hover_thrust_estimator.update(
+                self.clock_ns,
+                dt,
+                &self.params,
+                &HoverThrustInput {
+                    armed: true,
+                    landed: land.landed,
+                    height_m: state.position.z,
+                    velocity: state.velocity,
+                    // The thrust that acted over the step just measured.
+                    thrust_up: self.thrust_up,
+                },
+            );
+            self.thrust_up = thrust_up;
+            let hover_thrust_estimate = self.hover_thrust_estimator.valid_estimate();
+            self.land_detector.update(
+                self.clock_ns,
+                &self.params,
+                &LandDetectorInput {
+                    armed: true,
+                    velocity: state.velocity,
+                    body_rates: state.body_rates,
+                    acceleration: Some(self.velocity_derivative.value),
+                    throttle: collective,
+                    velocity_setpoint_z: sp.velocity[2],
+                    hover_thrust_estimate,
+                },
+            );
+        }
+
         let out = ControlOutput {
             motors: mix.motors,
             velocity_setpoint,
@@ -601,7 +852,7 @@ impl Autopilot {
     fn level_hover_output(&mut self, status: ControlStatus) -> ControlOutput {
         self.rate_derivative.reset();
         self.velocity_derivative.reset();
-        let hover = self.params.mpc_thr_hover;
+        let hover = self.hover_thrust;
         ControlOutput {
             motors: [hover; 4],
             velocity_setpoint: Vector3::zeros(),
@@ -617,10 +868,13 @@ impl Autopilot {
 
     /// Position P, velocity PID, acceleration to thrust, with PX4's limits
     /// and anti-windup. Returns (velocity sp, acceleration sp, thrust vector).
+    /// With `idle_thrust` the setpoint is ignored as PX4 ignores it on the ground: a
+    /// level thrust of that size, the velocity integrators reset.
     fn position_velocity_control(
         &mut self,
         dt: f64,
         integrate: bool,
+        idle_thrust: Option<f64>,
         state: &EstimatedState,
         sp: &Setpoint,
         status: &mut ControlStatus,
@@ -628,6 +882,22 @@ impl Autopilot {
         let p = &self.params;
         let position_ok = finite3(&state.position);
         let velocity_ok = finite3(&state.velocity);
+        if let Some(thrust) = idle_thrust {
+            // PX4 commands 100 m/s^2 down: the thrust saturates at its minimum.
+            if velocity_ok {
+                self.velocity_derivative
+                    .update(&state.velocity, dt, p.mpc_veld_lp);
+            } else {
+                self.velocity_derivative.reset();
+            }
+            self.velocity_integral = Vector3::zeros();
+            self.last_acceleration_z = -p.mpc_acc_down_max;
+            return (
+                Vector3::zeros(),
+                Vector3::new(0.0, 0.0, -p.mpc_acc_down_max),
+                Vector3::new(0.0, 0.0, thrust),
+            );
+        }
         let gains_pos = [p.mpc_xy_p, p.mpc_xy_p, p.mpc_z_p];
 
         // Velocity setpoint = feed-forward + P on position, per axis.
@@ -697,10 +967,22 @@ impl Autopilot {
             acc_limited.x *= s;
             acc_limited.y *= s;
         }
-        acc_limited.z = acc_limited.z.clamp(-p.mpc_acc_down_max, p.mpc_acc_up_max);
+        // Vertically the limits bound the commanded motion (feed-forward, P and D),
+        // not the integrator's weight compensation: a vehicle heavier than its
+        // MPC_THR_HOVER keeps its full climb and descent, and one pressed onto the
+        // ground can wind its thrust down to where PX4's land detector sees it (PX4
+        // limits nothing here: its limits are in the trajectory generators).
+        let integral_z = if vel_defined[2] && velocity_ok {
+            self.velocity_integral.z
+        } else {
+            0.0
+        };
+        acc_limited.z =
+            (acc_sp.z - integral_z).clamp(-p.mpc_acc_down_max, p.mpc_acc_up_max) + integral_z;
 
         // Acceleration -> thrust vector (PX4 _accelerationControl).
-        let hover = p.mpc_thr_hover;
+        let hover = self.hover_thrust;
+        self.last_acceleration_z = acc_limited.z;
         let mut body_z = Vector3::new(acc_limited.x, acc_limited.y, GRAVITY_M_S2 + acc_limited.z);
         body_z = if body_z.norm() > 1e-6 {
             body_z.normalize()
@@ -980,6 +1262,15 @@ fn output_is_finite(o: &ControlOutput) -> bool {
         && o.attitude_setpoint.coords.iter().all(|c| c.is_finite())
         && finite3(&o.rate_setpoint)
         && finite3(&o.torque_setpoint)
+}
+
+/// Whether a setpoint asks a landed vehicle to take off (PX4 MulticopterPositionControl,
+/// offboard): a position above it, or an upward velocity or acceleration. The
+/// commander adds FlightTask's stricter gate in its AUTO modes.
+fn wants_takeoff(sp: &Setpoint, state: &EstimatedState) -> bool {
+    sp.position[2].is_some_and(|z| z > state.position.z)
+        || sp.velocity[2].is_some_and(|vz| vz > 0.0)
+        || sp.acceleration[2].is_some_and(|az| az > 0.0)
 }
 
 /// Drops non-finite setpoint fields (flagging them).

@@ -12,6 +12,13 @@ fn level_state(position: Vector3<f64>) -> EstimatedState {
     }
 }
 
+/// An autopilot already flying (PX4 boots landed; these tests start in the air).
+fn flying() -> Autopilot {
+    let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+    ap.place(true);
+    ap
+}
+
 #[test]
 fn default_params_are_valid_and_match_px4_defaults() {
     let p = AutopilotParams::default();
@@ -121,7 +128,7 @@ fn yaw_error_is_corrected_with_reduced_priority() {
 
 #[test]
 fn hover_setpoint_at_the_current_position_gives_hover_thrust() {
-    let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+    let mut ap = flying();
     let out = ap.update(
         0.002,
         &level_state(Vector3::new(0.0, 0.0, 2.0)),
@@ -138,7 +145,7 @@ fn hover_setpoint_at_the_current_position_gives_hover_thrust() {
 
 #[test]
 fn an_empty_setpoint_brakes_and_is_flagged() {
-    let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+    let mut ap = flying();
     let mut s = level_state(Vector3::new(0.0, 0.0, 2.0));
     s.velocity = Vector3::new(2.0, 0.0, 0.0);
     let out = ap.update(0.002, &s, &Setpoint::default());
@@ -149,7 +156,7 @@ fn an_empty_setpoint_brakes_and_is_flagged() {
 
 #[test]
 fn the_velocity_setpoint_respects_the_speed_limits() {
-    let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+    let mut ap = flying();
     let s = level_state(Vector3::new(0.0, 0.0, 2.0));
     let out = ap.update(
         0.002,
@@ -180,7 +187,7 @@ fn landed_vehicles_do_not_wind_up_their_integrators() {
 
 #[test]
 fn reset_clears_the_integrators() {
-    let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+    let mut ap = flying();
     let s = level_state(Vector3::zeros());
     for _ in 0..100 {
         ap.update(
@@ -204,7 +211,7 @@ fn assert_all_finite(out: &ControlOutput) {
 #[test]
 fn non_finite_inputs_never_produce_nan_outputs() {
     let bad_values = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY];
-    let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+    let mut ap = flying();
     let good = level_state(Vector3::new(1.0, 2.0, 3.0));
     let sp = Setpoint::position(Vector3::new(0.0, 0.0, 3.0), 0.2)
         .with_velocity(Vector3::new(1.0, 0.0, 0.0))
@@ -262,7 +269,7 @@ fn a_lost_attitude_gives_level_hover_thrust_and_a_flag() {
 
 #[test]
 fn extreme_but_finite_inputs_stay_within_limits() {
-    let mut ap = Autopilot::new(AutopilotParams::default()).unwrap();
+    let mut ap = flying();
     let mut s = level_state(Vector3::new(1e12, -1e12, 1e9));
     s.velocity = Vector3::new(1e9, 1e9, -1e9);
     s.body_rates = Vector3::new(1e6, -1e6, 1e6);

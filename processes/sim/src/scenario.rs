@@ -20,6 +20,7 @@ use crate::params::ParamError;
 use crate::px4::commander::Faults;
 use crate::px4::commander::Px4Params;
 use crate::quadrotor::AirframeParams;
+use crate::rng::Pcg32;
 use crate::wind::WindParams;
 use crate::world::{Aabb, CrashThresholds, WorldParams};
 
@@ -141,6 +142,69 @@ pub struct Scenario {
     /// Faults the simulated autopilot injects (none by default).
     #[serde(default)]
     pub faults: Faults,
+    /// How far the flown vehicle is from its airframe file, drawn per seed.
+    #[serde(default)]
+    pub airframe_errors: AirframeErrors,
+}
+
+/// Offset of the mass draw's seed from the run's seed (noise uses the seed itself, wind
+/// +1, the driver +2), so no two random processes of a run share a generator.
+const MASS_SEED_OFFSET: u64 = 3;
+
+/// Stream of the mass draw's generator (no other consumer uses it).
+const MASS_STREAM: u64 = 31;
+
+/// How far the vehicle that flies is from its airframe file, drawn once per seed: the
+/// autopilot is tuned from the file (its MPC_THR_HOVER is the file's hover thrust), the
+/// physics flies the drawn vehicle, as a real vehicle's battery and payload make it
+/// heavier or lighter than its nominal build and PX4 has to estimate its hover thrust.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AirframeErrors {
+    /// Half-width of the true mass's uniform spread around the file's, as a fraction:
+    /// 0.1 draws it evenly within +-10 %; 0 flies the file's mass.
+    pub mass_spread: f64,
+}
+
+impl Default for AirframeErrors {
+    /// The true mass within +-10 % of the file's (a battery size, a payload).
+    fn default() -> Self {
+        Self { mass_spread: 0.1 }
+    }
+}
+
+impl AirframeErrors {
+    /// The file's airframe exactly (tests that need the nominal vehicle).
+    pub fn none() -> Self {
+        Self { mass_spread: 0.0 }
+    }
+
+    /// Checks the spread: at most 30 %, beyond which the file no longer describes the
+    /// vehicle (PX4's HTE_THR_RANGE would not reach its hover thrust either).
+    pub fn validate(&self) -> Result<(), ParamError> {
+        crate::params::in_range("mass_spread", self.mass_spread, 0.0, 0.3)
+    }
+
+    /// The true mass over the nominal one for `seed`: uniform in
+    /// `[1 - mass_spread, 1 + mass_spread)`, the same for the same seed.
+    pub fn draw_mass_factor(&self, seed: u64) -> f64 {
+        let mut rng = Pcg32::with_stream(seed.wrapping_add(MASS_SEED_OFFSET), MASS_STREAM);
+        1.0 + self.mass_spread * (2.0 * rng.uniform() - 1.0)
+    }
+
+    /// The airframe that flies for `seed`: `nominal` with the drawn mass. The inertia
+    /// is scaled by the same factor (the extra or missing mass is spread like the
+    /// frame's, so the radius of gyration is kept); the rotors, motors and drag are
+    /// the file's.
+    pub fn true_airframe(&self, nominal: &AirframeParams, seed: u64) -> AirframeParams {
+        let k = self.draw_mass_factor(seed);
+        AirframeParams {
+            mass_kg: nominal.mass_kg * k,
+            inertia_diag_kg_m2: nominal.inertia_diag_kg_m2.map(|j| j * k),
+            inertia_products_kg_m2: nominal.inertia_products_kg_m2.map(|j| j * k),
+            ..nominal.clone()
+        }
+    }
 }
 
 fn default_seed() -> u64 {
@@ -212,6 +276,9 @@ impl Validate for Scenario {
         self.faults
             .validate()
             .map_err(|e| from_param("faults", e))?;
+        self.airframe_errors
+            .validate()
+            .map_err(|e| from_param("airframe_errors", e))?;
         Ok(())
     }
 }
@@ -370,7 +437,7 @@ pub struct LoadedScenario {
     pub scenario: Scenario,
     /// Where it was read from.
     pub path: PathBuf,
-    /// The airframe's parameters.
+    /// The airframe file's (nominal) parameters, which the autopilot is tuned for.
     pub airframe: AirframeParams,
     /// The autopilot for this airframe (PX4 defaults tuned for it, with its limits).
     pub autopilot: AutopilotParams,
@@ -383,7 +450,8 @@ pub struct LoadedScenario {
 }
 
 impl LoadedScenario {
-    /// The world this scenario describes, with `seed` driving every random process.
+    /// The world this scenario describes, with `seed` driving every random process:
+    /// the physics flies [`Self::true_airframe`], the autopilot stays tuned for the file.
     pub fn world_params(&self, seed: u64) -> WorldParams {
         let s = &self.scenario;
         let mut noise = s.estimator_noise.clone();
@@ -395,7 +463,7 @@ impl LoadedScenario {
             d.seed = seed.wrapping_add(2);
         }
         WorldParams {
-            airframe: self.airframe.clone(),
+            airframe: self.true_airframe(seed),
             autopilot: Some(self.autopilot.clone()),
             estimator_noise: noise,
             wind,
@@ -405,6 +473,14 @@ impl LoadedScenario {
             initial_position_m: [0.0; 3],
             initial_yaw_rad: 0.0,
         }
+    }
+
+    /// The vehicle that flies for `seed`: the airframe file with the seed's mass error
+    /// (`[airframe_errors]`); [`Self::airframe`] stays what the autopilot was tuned for.
+    pub fn true_airframe(&self, seed: u64) -> AirframeParams {
+        self.scenario
+            .airframe_errors
+            .true_airframe(&self.airframe, seed)
     }
 
     /// The camera calibration file.

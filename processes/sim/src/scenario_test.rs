@@ -124,3 +124,61 @@ fn a_bad_fault_is_named_in_one_line() {
     assert!(e.contains("reject_landing"), "{e}");
     assert!(!e.contains('\n'), "{e}");
 }
+
+#[test]
+fn the_mass_draw_differs_between_seeds_repeats_for_a_seed_and_stays_within_its_spread() {
+    let errors = AirframeErrors::default();
+    let factors: Vec<f64> = (0..200).map(|seed| errors.draw_mass_factor(seed)).collect();
+    for (seed, k) in factors.iter().enumerate() {
+        assert!((0.9..1.1).contains(k), "seed {seed}: {k}");
+        assert_eq!(*k, errors.draw_mass_factor(seed as u64), "seed {seed}");
+    }
+    let mut distinct = factors.clone();
+    distinct.sort_by(f64::total_cmp);
+    distinct.dedup();
+    assert_eq!(distinct.len(), factors.len(), "every seed its own mass");
+    // Spread over the whole range, not bunched: both tails are reached.
+    assert!(
+        distinct[0] < 0.92 && distinct[distinct.len() - 1] > 1.08,
+        "{distinct:?}"
+    );
+}
+
+#[test]
+fn a_scenario_flies_the_drawn_mass_while_its_autopilot_keeps_the_files_hover_thrust() {
+    let s = load("paper-sim", &deploy()).expect("paper-sim");
+    let nominal = s.airframe.clone();
+    for seed in [1, 2, 3] {
+        let w = s.world_params(seed);
+        let k = s.scenario.airframe_errors.draw_mass_factor(seed);
+        assert!((w.airframe.mass_kg - nominal.mass_kg * k).abs() < 1e-12);
+        assert!(
+            (w.airframe.inertia_diag_kg_m2[0] - nominal.inertia_diag_kg_m2[0] * k).abs() < 1e-15
+        );
+        assert_eq!(w.airframe.thrust_coefficient, nominal.thrust_coefficient);
+        let autopilot = w.autopilot.expect("tuned autopilot");
+        assert_eq!(autopilot.mpc_thr_hover, nominal.hover_thrust_normalized());
+    }
+    assert_ne!(
+        s.world_params(1).airframe.mass_kg,
+        s.world_params(2).airframe.mass_kg
+    );
+}
+
+#[test]
+fn a_zero_mass_spread_flies_the_airframe_file_and_a_large_one_is_refused() {
+    let p = write(
+        &format!("{}\n[airframe_errors]\nmass_spread = 0.0\n", base()),
+        "mass-zero",
+    );
+    let s = load(p.to_str().expect("utf-8"), &deploy()).expect("loads");
+    assert_eq!(s.world_params(5).airframe, s.airframe);
+    let e = error_of(
+        &format!("{}\n[airframe_errors]\nmass_spread = 0.5\n", base()),
+        "mass-big",
+    );
+    assert!(
+        e.contains("airframe_errors.mass_spread") && e.contains("0.5"),
+        "{e}"
+    );
+}

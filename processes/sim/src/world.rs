@@ -388,6 +388,8 @@ impl World {
         self.left_contact_ns = if resting { None } else { Some(self.time_ns) };
         self.last_surface_id = surface.id;
         self.estimate = EstimatedState::from_truth(self.quad.state(), resting);
+        // A placement, not a flight: the land detector starts settled where the vehicle is.
+        self.autopilot.place(!resting);
         Ok(())
     }
 
@@ -517,13 +519,19 @@ impl World {
         self.autopilot.params()
     }
 
+    /// The autopilot, for its hover thrust estimate and land detector (logs, tests).
+    pub fn autopilot(&self) -> &Autopilot {
+        &self.autopilot
+    }
+
     /// Advances the world by `dt_ns` with the autopilot flying the current
     /// setpoint (motors stopped and controller idle while disarmed). Returns
     /// the events of this step.
     pub fn step(&mut self, dt_ns: u64) -> Result<&[TimedEvent], WorldError> {
         check_step(dt_ns)?;
         let dt_s = dt_ns as f64 * 1e-9;
-        let landed = self.quad.contact() != ContactState::Airborne;
+        // Landed is the autopilot's own land detector's word (PX4's), not the contact.
+        let landed = self.autopilot.land_detected().landed;
         self.estimate = self.noise.apply(dt_s, self.quad.state(), landed);
         let commands = if self.armed && !self.crashed {
             let control = self.autopilot.update(dt_s, &self.estimate, &self.setpoint);
@@ -534,7 +542,7 @@ impl World {
             }
         } else {
             // Like PX4, the controllers do not run while disarmed.
-            self.autopilot.reset();
+            self.autopilot.disarmed(dt_s, &self.estimate);
             self.last_control = None;
             MotorCommands::off()
         };
@@ -543,7 +551,8 @@ impl World {
 
     /// Advances the world by `dt_ns` with explicit motor commands, bypassing
     /// the autopilot (for tests and for an external controller). A crashed
-    /// vehicle's motors stay stopped.
+    /// vehicle's motors stay stopped. The autopilot, land detector included, does
+    /// not run: the estimate's `landed` keeps its last value.
     pub fn step_with_motors(
         &mut self,
         dt_ns: u64,
@@ -551,7 +560,7 @@ impl World {
     ) -> Result<&[TimedEvent], WorldError> {
         check_step(dt_ns)?;
         let dt_s = dt_ns as f64 * 1e-9;
-        let landed = self.quad.contact() != ContactState::Airborne;
+        let landed = self.autopilot.land_detected().landed;
         self.estimate = self.noise.apply(dt_s, self.quad.state(), landed);
         let mut commands = *commands;
         if self.crashed {

@@ -38,9 +38,12 @@ impl Loop {
         let w = airframe.hover_thrust_normalized().sqrt() * airframe.motor_speed_max_rad_s;
         state.motor_speeds = [w; 4];
         let quad = Quadrotor::new(airframe, state, &Surface::ground()).unwrap();
+        let mut autopilot = Autopilot::new(params).unwrap();
+        // Placed in the air, the autopilot flies at once; PX4 boots landed otherwise.
+        autopilot.place(quad.contact() == ContactState::Airborne);
         Self {
             quad,
-            autopilot: Autopilot::new(params).unwrap(),
+            autopilot,
             env: Environment::default(),
             time_s: 0.0,
             max_motor: 0.0,
@@ -54,7 +57,8 @@ impl Loop {
     }
 
     fn step(&mut self, setpoint: &Setpoint) {
-        let landed = self.quad.contact() != ContactState::Airborne;
+        // Landed is the autopilot's own land detector's word, as in the world.
+        let landed = self.autopilot.land_detected().landed;
         let est = EstimatedState::from_truth(self.quad.state(), landed);
         let out = self.autopilot.update(DT, &est, setpoint);
         for m in out.motors {

@@ -32,10 +32,6 @@ use crate::params::{self, ParamError};
 /// PX4's magic `param2` of ARM_DISARM that forces a disarm in the air.
 pub const FORCE_DISARM_MAGIC: f32 = 21196.0;
 
-/// How long the estimator must report ground contact before the vehicle
-/// counts as landed (PX4's land detector needs a moment too).
-pub const LAND_DETECT_NS: u64 = 500_000_000;
-
 /// Mean Earth radius PX4's map projection uses, m.
 const EARTH_RADIUS_M: f64 = 6_371_000.0;
 
@@ -402,8 +398,10 @@ pub struct Commander {
     crashed: bool,
     armed_at_ns: u64,
     has_flown: bool,
+    /// PX4's `vehicle_land_detected.landed` as last seen.
     landed: bool,
-    contact_since_ns: Option<u64>,
+    /// Since when landed has held, for COM_DISARM_LAND.
+    landed_since_ns: Option<u64>,
     last_setpoint_ns: Option<u64>,
     offboard_setpoint: Setpoint,
     hold_position: Vector3<f64>,
@@ -456,7 +454,7 @@ impl Commander {
             armed_at_ns: 0,
             has_flown: false,
             landed: true,
-            contact_since_ns: Some(0),
+            landed_since_ns: Some(0),
             last_setpoint_ns: None,
             offboard_setpoint: Setpoint::default(),
             hold_position: Vector3::zeros(),
@@ -874,13 +872,14 @@ impl Commander {
         self.send_telemetry(now_ns, vehicle);
     }
 
+    /// The landed state is the land detector's (the autopilot's, in the estimate),
+    /// taken as it comes: its hysteresis is the detector's own.
     fn detect_landing(&mut self, now_ns: u64, vehicle: &VehicleStatus) {
         if vehicle.estimate.landed {
-            let since = *self.contact_since_ns.get_or_insert(now_ns);
-            // Landed stays landed (PX4 boots landed); a touchdown needs the detector.
-            self.landed |= now_ns.saturating_sub(since) >= LAND_DETECT_NS;
+            self.landed_since_ns.get_or_insert(now_ns);
+            self.landed = true;
         } else {
-            self.contact_since_ns = None;
+            self.landed_since_ns = None;
             if self.landed && self.armed {
                 // Takeoff detected: PX4 sets home again (landDetectorUpdate).
                 self.has_flown = true;
@@ -955,8 +954,9 @@ impl Commander {
         }
     }
 
-    /// Motors at idle on the ground: hold xy, press down as AUTO.LAND does (thrust
-    /// below hover, so the land detector stays "landed").
+    /// Motors at idle on the ground: hold xy, press down as AUTO.LAND does (no
+    /// setpoint asking to climb, so the autopilot keeps its thrust at zero and its
+    /// land detector at "landed").
     fn ground_idle(&self, est: &EstimatedState) -> Setpoint {
         Setpoint {
             position: [Some(est.position.x), Some(est.position.y), None],
@@ -1039,9 +1039,9 @@ impl Commander {
         }
         if self.has_flown {
             if self.params.com_disarm_land > 0.0
-                && let Some(since) = self.contact_since_ns
+                && let Some(since) = self.landed_since_ns
             {
-                let after = LAND_DETECT_NS + secs_to_ns(self.params.com_disarm_land);
+                let after = secs_to_ns(self.params.com_disarm_land);
                 if now_ns.saturating_sub(since) >= after {
                     self.disarm();
                     self.events.push(CommanderEvent::AutoDisarmLanded);

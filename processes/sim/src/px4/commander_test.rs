@@ -623,10 +623,12 @@ fn land_descends_then_disarms_after_com_disarm_land() {
     let sp = c.setpoint();
     assert_eq!(sp.position, [Some(1.0), Some(2.0), None]);
     assert_eq!(sp.velocity, [None, None, Some(-0.7)]);
-    // Touchdown at t = 1 s: landed after the land detector (0.5 s),
-    // disarmed COM_DISARM_LAND (2 s) after that.
-    let mut t = S;
-    while t < S + LAND_DETECT_NS + 2 * S - 10 * MS {
+    // The land detector (the autopilot's, through the estimate) reports landed from
+    // t = 1 s: on the ground at once, disarmed COM_DISARM_LAND (2 s) after that.
+    c.update(S, &ground());
+    assert_eq!(c.landed_state(), LandedState::OnGround);
+    let mut t = S + 2 * MS;
+    while t < S + 2 * S - 10 * MS {
         c.update(t, &ground());
         t += 2 * MS;
     }
@@ -637,7 +639,7 @@ fn land_descends_then_disarms_after_com_disarm_land() {
         FlightMode::AutoLand,
         "LAND while armed on the ground"
     );
-    c.update(S + LAND_DETECT_NS + 2 * S + 2 * MS, &ground());
+    c.update(S + 2 * S + 2 * MS, &ground());
     assert!(!c.armed());
     // After the disarm: the last mode asked for that does not prevent arming
     // (here the boot mode, Hold); LAND never sticks.
