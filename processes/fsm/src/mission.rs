@@ -877,7 +877,14 @@ impl Fsm {
         } else {
             (est.position.z + flare).min(self.z_cmd)
         };
-        let rate = if self.z_cmd <= floor { 0.0 } else { rate };
+        // Dropping, the descent rate stays commanded below the floor too: PX4's land
+        // detector sees ground contact only while a descent of at least 90 % of
+        // MPC_LAND_SPEED is asked for and none happens (MulticopterLandDetector).
+        let rate = if self.z_cmd <= floor && !self.dropping {
+            0.0
+        } else {
+            rate
+        };
         self.z_cmd = (self.z_cmd - rate * dt).max(floor);
         out.setpoint = Some(self.pad_setpoint(now_ns, &est, self.z_cmd, -rate));
     }
@@ -1021,15 +1028,22 @@ impl Fsm {
     fn pad_setpoint(&self, now_ns: u64, est: &PadEstimate, z: f64, vz: f64) -> Setpoint {
         let p = Vector3::new(est.position.x, est.position.y, z);
         let mut v = Vector3::new(est.velocity.x, est.velocity.y, est.velocity.z + vz);
+        let mut a = Vector3::zeros();
         if matches!(self.state, MissionState::Descend | MissionState::Land)
             && let Some(u) = self.position()
         {
             v.x += self.cfg.relative_gain * (est.position.x - u.x);
             v.y += self.cfg.relative_gain * (est.position.y - u.y);
+            let dv = (v - self.velocity()).xy() * self.cfg.relative_velocity_gain;
+            let dv = dv * (MAX_RELATIVE_ACCEL_M_S2 / dv.norm().max(MAX_RELATIVE_ACCEL_M_S2));
+            a = Vector3::new(dv.x, dv.y, 0.0);
         }
-        self.setpoint(now_ns, p, v, Vector3::zeros())
+        self.setpoint(now_ns, p, v, a)
     }
 }
+
+/// Cap of the pad-relative acceleration feed-forward, m/s^2.
+const MAX_RELATIVE_ACCEL_M_S2: f64 = 2.0;
 
 /// Heading of the body x axis from a quaternion (x, y, z, w), rad; 0 when degenerate.
 fn yaw_of(q: &[f64; 4]) -> f64 {

@@ -408,9 +408,11 @@ fn the_ground_appears_where_it_should_and_out_of_range_reads_zero() {
         ..DepthCameraParams::default()
     };
     let (fy, cy) = (params.focal_px().1, params.principal_point_px().1);
+    let mount_z = params.position_in_body_m[2];
     let mut cam = DepthCamera::new(params).unwrap();
+    // The camera 1 m above the ground (its mount is above the body origin).
     let height = 1.0;
-    let body = level_body(5.0, 5.0, height, 0.0);
+    let body = level_body(5.0, 5.0, height - mount_z, 0.0);
     let frame = cam.render(&body, &[]);
     // A row below the horizon looks down at angle atan(dy/fy): the ground is
     // at depth z = height * fy / dy along the optical axis.
@@ -423,7 +425,7 @@ fn the_ground_appears_where_it_should_and_out_of_range_reads_zero() {
     let far_row = (cy + height * fy / 12.0).floor() as u32;
     assert_eq!(frame.depth_mm[(far_row * 640 + 320) as usize], 0);
     // Too close: a camera 0.1 m above the ground sees it nearer than 0.2 m in the bottom rows.
-    let low = cam.render(&level_body(0.0, 0.0, 0.1, 0.0), &[]);
+    let low = cam.render(&level_body(0.0, 0.0, 0.1 - mount_z, 0.0), &[]);
     assert_eq!(low.depth_mm[(479 * 640 + 320) as usize], 0);
     // A box right in front of the lens (closer than 0.2 m) also reads zero.
     let near = Aabb {
