@@ -855,6 +855,10 @@ pub enum LinkRequestKind {
     Land = 5,
     /// AUTO.LOITER.
     Hold = 6,
+    /// Motors off now, in the air if need be (a forced disarm): the fsm saw the gear
+    /// touch the pad. PX4's land detector takes a second to agree, and until then the
+    /// controller tilts against feet that grip a moving pad.
+    Touchdown = 7,
 }
 
 impl LinkRequestKind {
@@ -868,6 +872,7 @@ impl LinkRequestKind {
             4 => Self::Offboard,
             5 => Self::Land,
             6 => Self::Hold,
+            7 => Self::Touchdown,
             _ => return None,
         })
     }

@@ -133,7 +133,7 @@ impl Default for FsmConfig {
             drop_rate_m_s: 0.8,
             land_max_pad_age_s: 0.4,
             relative_gain: 1.0,
-            relative_velocity_gain: 0.0,
+            relative_velocity_gain: 2.0,
             go_around_m: 0.4,
             max_go_arounds: 3,
             lost_after_s: 1.0,

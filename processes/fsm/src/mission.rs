@@ -110,6 +110,10 @@ pub struct Fsm {
     z_cmd: f64,
     go_arounds: u32,
     dropping: bool,
+    /// Since when the dropping vehicle has stood still at the pad's height.
+    touch_since: Option<u64>,
+    /// The gear is on the pad: the motors are being switched off.
+    touched: bool,
     lost_z0: f64,
     lost_since_update: u64,
     mode_lost_since: Option<u64>,
@@ -148,6 +152,8 @@ impl Fsm {
             z_cmd: 0.0,
             go_arounds: 0,
             dropping: false,
+            touch_since: None,
+            touched: false,
             lost_z0: 0.0,
             lost_since_update: 0,
             mode_lost_since: None,
@@ -778,6 +784,8 @@ impl Fsm {
         if held {
             self.z_cmd = p.z;
             self.dropping = false;
+            self.touch_since = None;
+            self.touched = false;
             self.go(
                 now_ns,
                 MissionState::Land,
@@ -833,6 +841,34 @@ impl Fsm {
                 );
                 return;
             }
+        }
+        // The drop stopped at the pad's height: the gear is on it. Motors off now (a forced
+        // disarm): PX4's land detector needs a second of low thrust to agree, and until then
+        // its controller tilts the vehicle about feet that grip a moving pad.
+        let still = Vector3::from(v.velocity).z - est.velocity.z > -TOUCH_STILL_M_S;
+        if self.dropping && !on_ground && height < TOUCH_HEIGHT_M && still {
+            let since = *self.touch_since.get_or_insert(now_ns);
+            self.touched |= now_ns.saturating_sub(since) as f64 * 1e-9 >= TOUCH_HOLD_S;
+        } else {
+            self.touch_since = None;
+        }
+        if self.touched && v.armed != 0 {
+            out.setpoint = Some(self.pad_setpoint(
+                now_ns,
+                &est,
+                est.position.z - 0.3,
+                -self.cfg.drop_rate_m_s,
+            ));
+            match self.drive(now_ns, LinkRequestKind::Touchdown, 0.0, out) {
+                Drive::Accepted => self.go(
+                    now_ns,
+                    MissionState::Landed,
+                    format!("touched down {height:.2} m over the pad estimate, motors off"),
+                ),
+                Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),
+                Drive::Waiting => {}
+            }
+            return;
         }
         if on_ground {
             // Stay pressed onto the pad, moving with it, until the motors are off.
@@ -1041,6 +1077,14 @@ impl Fsm {
         self.setpoint(now_ns, p, v, a)
     }
 }
+
+/// Touchdown: the drop has stopped (vertical speed relative to the pad above minus
+/// this, m/s) ...
+const TOUCH_STILL_M_S: f64 = 0.2;
+/// ... this close to the pad estimate's height (the pad's height is known to a few cm), m ...
+const TOUCH_HEIGHT_M: f64 = 0.12;
+/// ... for this long (three fsm cycles at 50 Hz), s.
+const TOUCH_HOLD_S: f64 = 0.05;
 
 /// Cap of the pad-relative acceleration feed-forward, m/s^2.
 const MAX_RELATIVE_ACCEL_M_S2: f64 = 2.0;

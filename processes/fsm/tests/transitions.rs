@@ -56,6 +56,8 @@ struct World {
     /// The mode the autopilot shows once it disarmed after landing (PX4: the mode
     /// asked for last that does not prevent arming).
     mode_after_disarm: Option<FlightMode>,
+    /// False: PX4's land detector has not agreed yet (it takes about a second of low thrust).
+    px4_sees_landing: bool,
 }
 
 impl World {
@@ -91,6 +93,7 @@ impl World {
             ground_drift: false,
             wander_m: 0.0,
             mode_after_disarm: None,
+            px4_sees_landing: true,
         }
     }
 
@@ -134,7 +137,7 @@ impl World {
     }
 
     fn vehicle_state(&self) -> VehicleState {
-        let landed = if !self.armed || self.on_ground() {
+        let landed = if !self.armed || (self.on_ground() && self.px4_sees_landing) {
             LandedState::OnGround
         } else {
             LandedState::InAir
@@ -192,6 +195,13 @@ impl World {
                 LinkRequestKind::Offboard => self.mode = FlightMode::Offboard,
                 LinkRequestKind::Land => self.mode = FlightMode::Land,
                 LinkRequestKind::Hold => self.mode = FlightMode::Hold,
+                // A forced disarm: motors off wherever the vehicle is.
+                LinkRequestKind::Touchdown => {
+                    self.armed = false;
+                    if let Some(m) = self.mode_after_disarm {
+                        self.mode = m;
+                    }
+                }
             }
         }
         let outcome = if accept {
@@ -415,6 +425,19 @@ fn a_whole_mission_passes_every_nominal_state_in_order() {
     let st = w.fsm.status(w.t);
     assert_eq!(st.state, MissionState::Landed as u32);
     assert_eq!(st.reason.as_str(), "touched down, disarmed");
+}
+
+#[test]
+fn a_drop_that_stops_on_the_pad_switches_the_motors_off_before_px4_sees_the_landing() {
+    let mut w = World::new(config());
+    w.pad = Some(Vector3::new(-1.0, -0.5, PAD_HEIGHT));
+    w.pad_vel = Vector3::new(1.0, 0.2, 0.0);
+    w.px4_sees_landing = false;
+    w.expect(MissionState::Landed, 60.0);
+    assert_eq!(w.count(LinkRequestKind::Touchdown), 1, "{:?}", w.requests);
+    assert_eq!(w.count(LinkRequestKind::Disarm), 0);
+    assert!(!w.armed);
+    assert!((w.pos - w.pad.unwrap()).xy().norm() < 0.12);
 }
 
 #[test]

@@ -16,6 +16,10 @@ use px4_protocol::frames::{
 };
 use px4_protocol::mode::{OFFBOARD, flight_mode};
 
+/// PX4's `param2` of ARM_DISARM that forces a disarm in the air (commander's
+/// `arm_disarm` handling).
+pub const FORCE_DISARM_MAGIC: f32 = 21196.0;
+
 /// What the stack asks of the autopilot.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Request {
@@ -23,6 +27,9 @@ pub enum Request {
     Arm,
     /// Disarm (refused by PX4 in flight).
     Disarm,
+    /// Disarm even in flight (PX4's ARM_DISARM with param2 21196): motors off at
+    /// touchdown, before PX4's land detector agrees.
+    ForceDisarm,
     /// AUTO.TAKEOFF to this world height (local frame, z up), m; sent as an altitude
     /// above mean sea level (PX4's reading of NAV_TAKEOFF param7).
     Takeoff {
@@ -657,6 +664,10 @@ impl Px4Link {
                 [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
             ),
             Request::Disarm => (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]),
+            Request::ForceDisarm => (
+                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                [0.0, FORCE_DISARM_MAGIC, 0.0, 0.0, 0.0, 0.0, 0.0],
+            ),
             // param7 is the target altitude above mean sea level (takeoff.cpp); the
             // request's altitude is a world (local) height.
             Request::Takeoff { altitude_m } => (

@@ -253,6 +253,7 @@ pub fn to_request(r: &LinkRequest) -> Option<Request> {
     Some(match LinkRequestKind::from_raw(r.kind)? {
         LinkRequestKind::Arm => Request::Arm,
         LinkRequestKind::Disarm => Request::Disarm,
+        LinkRequestKind::Touchdown => Request::ForceDisarm,
         LinkRequestKind::Takeoff => {
             if !(r.altitude_m.is_finite() && r.altitude_m > 0.0) {
                 return None;

@@ -33,6 +33,31 @@ struct CameraClock {
     rng: crate::rng::Pcg32,
 }
 
+/// The autopilot's MAVLink on its way to the companion: each message is held for the
+/// link's delay (per run) plus jitter (per message), in order.
+#[derive(Debug, Clone)]
+struct TelemetryDelay {
+    offset_ns: f64,
+    jitter_ns: f64,
+    rng: crate::rng::Pcg32,
+    held: std::collections::VecDeque<(u64, MavMessage)>,
+}
+
+impl TelemetryDelay {
+    fn hold(&mut self, now_ns: u64, msgs: Vec<MavMessage>) {
+        for m in msgs {
+            let delay = (self.offset_ns + self.jitter_ns * self.rng.normal()).max(0.0);
+            let due = (now_ns + delay as u64).max(self.held.back().map_or(0, |(t, _)| *t));
+            self.held.push_back((due, m));
+        }
+    }
+
+    fn release(&mut self, now_ns: u64) -> Vec<MavMessage> {
+        let n = self.held.iter().take_while(|(t, _)| *t <= now_ns).count();
+        self.held.drain(..n).map(|(_, m)| m).collect()
+    }
+}
+
 /// Physics step: 2 ms (500 Hz).
 pub const PHYSICS_STEP_NS: u64 = 2_000_000;
 
@@ -135,6 +160,8 @@ pub struct Simulator {
     seed: u64,
     /// The camera clock's error.
     camera_clock: CameraClock,
+    /// The telemetry link's delay.
+    telemetry: TelemetryDelay,
 }
 
 impl Simulator {
@@ -170,6 +197,11 @@ impl Simulator {
         sim.camera_clock.offset_ns = errors.draw_clock_offset_ns(seed.wrapping_add(4));
         sim.camera_clock.jitter_ns = errors.clock_jitter_ms * 1e6;
         sim.depth_camera = Some(Box::new(DepthCamera::new(depth)?));
+        let link = &scenario.scenario.telemetry_link;
+        let mut draw = crate::rng::Pcg32::with_stream(seed.wrapping_add(5), 41);
+        sim.telemetry.offset_ns =
+            (link.latency_ms + link.latency_spread_ms * draw.normal()).max(0.0) * 1e6;
+        sim.telemetry.jitter_ns = link.jitter_ms * 1e6;
         Ok(sim)
     }
 
@@ -196,6 +228,12 @@ impl Simulator {
                 jitter_ns: 0.0,
                 rng: crate::rng::Pcg32::with_stream(seed, 23),
             },
+            telemetry: TelemetryDelay {
+                offset_ns: 0.0,
+                jitter_ns: 0.0,
+                rng: crate::rng::Pcg32::with_stream(seed, 29),
+                held: std::collections::VecDeque::new(),
+            },
         }
     }
 
@@ -219,9 +257,13 @@ impl Simulator {
         self.commander.is_silent()
     }
 
-    /// MAVLink messages the autopilot has produced since the last call.
+    /// MAVLink messages of the autopilot that reach the companion by now: those produced
+    /// since the last call, held for the telemetry link's delay (none without one).
     pub fn take_mavlink(&mut self) -> Vec<MavMessage> {
-        self.commander.take_outgoing()
+        let now = self.world.time_ns();
+        let fresh = self.commander.take_outgoing();
+        self.telemetry.hold(now, fresh);
+        self.telemetry.release(now)
     }
 
     /// The downward camera, if this simulator has one.

@@ -158,3 +158,41 @@ fn the_rendering_camera_differs_from_its_calibration_file_by_a_seeded_realistic_
     assert!(moved > 0.0 && moved < 0.06, "{moved} m");
     assert!(turned > 0.0 && turned < 6.0, "{turned} deg");
 }
+
+#[test]
+fn the_autopilots_telemetry_reaches_the_companion_after_the_links_delay() {
+    let mut scn = crate::scenario::load("outdoor-1", &deploy()).expect("scenario");
+    scn.scenario.telemetry_link = crate::scenario::TelemetryLink {
+        latency_ms: 10.0,
+        latency_spread_ms: 0.0,
+        jitter_ms: 0.0,
+    };
+    let mut sim = Simulator::new(&scn, 1).expect("sim");
+    // Heartbeats and state go out from the first steps; none arrive in the first 10 ms.
+    let mut first = None;
+    for _ in 0..20 {
+        sim.step().expect("step");
+        if !sim.take_mavlink().is_empty() && first.is_none() {
+            first = Some(sim.world().time_ns());
+        }
+    }
+    let first = first.expect("telemetry within 40 ms");
+    assert!(
+        (10_000_000..=14_000_000).contains(&first),
+        "first telemetry at {first} ns"
+    );
+    // Per seed, the default link's delay differs; the same seed repeats it.
+    let default = crate::scenario::load("outdoor-1", &deploy()).expect("scenario");
+    let arrival = |seed| {
+        let mut sim = Simulator::new(&default, seed).expect("sim");
+        (0..50)
+            .find(|_| {
+                sim.step().expect("step");
+                !sim.take_mavlink().is_empty()
+            })
+            .map(|_| sim.world().time_ns())
+    };
+    assert_eq!(arrival(3), arrival(3));
+    let spread: std::collections::BTreeSet<_> = (1..9).map(arrival).collect();
+    assert!(spread.len() > 1, "the delay is drawn per seed: {spread:?}");
+}

@@ -145,6 +145,50 @@ pub struct Scenario {
     /// How far the flown vehicle is from its airframe file, drawn per seed.
     #[serde(default)]
     pub airframe_errors: AirframeErrors,
+    /// The autopilot's telemetry link: its delay, drawn per seed, and jitter.
+    #[serde(default)]
+    pub telemetry_link: TelemetryLink,
+}
+
+/// The companion's view of the autopilot's clock: every MAVLink message the autopilot
+/// sends reaches px4-link late by a per-run delay (serial framing, PX4's mavlink module
+/// scheduling) plus per-message jitter, and px4-link stamps telemetry when it arrives, so
+/// the pipeline's vehicle states are older than their stamps by that much.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TelemetryLink {
+    /// Mean delay, ms.
+    pub latency_ms: f64,
+    /// Standard deviation of the per-run delay around the mean, ms.
+    pub latency_spread_ms: f64,
+    /// Standard deviation of each message's delay around the run's, ms.
+    pub jitter_ms: f64,
+}
+
+impl Default for TelemetryLink {
+    /// A 921600-baud serial link: 4 ms +- 2 ms per run, 1 ms jitter.
+    fn default() -> Self {
+        Self {
+            latency_ms: 4.0,
+            latency_spread_ms: 2.0,
+            jitter_ms: 1.0,
+        }
+    }
+}
+
+impl TelemetryLink {
+    /// Checks every field; the error names it.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        crate::params::in_range("telemetry_link.latency_ms", self.latency_ms, 0.0, 500.0)?;
+        crate::params::in_range(
+            "telemetry_link.latency_spread_ms",
+            self.latency_spread_ms,
+            0.0,
+            100.0,
+        )?;
+        crate::params::in_range("telemetry_link.jitter_ms", self.jitter_ms, 0.0, 100.0)?;
+        Ok(())
+    }
 }
 
 /// Offset of the mass draw's seed from the run's seed (noise uses the seed itself, wind
@@ -247,6 +291,9 @@ impl Validate for Scenario {
             .validate()
             .map_err(|e| from_param("estimator_noise", e))?;
         self.crash.validate().map_err(|e| from_param("crash", e))?;
+        self.telemetry_link
+            .validate()
+            .map_err(|e| from_param("scenario", e))?;
         for (i, b) in self.obstacles.iter().enumerate() {
             for k in 0..3 {
                 let ok =
