@@ -112,6 +112,8 @@ pub struct Fsm {
     dropping: bool,
     /// Since when the dropping vehicle has stood still at the pad's height.
     touch_since: Option<u64>,
+    /// The drop got under way (a vehicle committed at the pad's height has not dropped).
+    drop_moving: bool,
     /// The gear is on the pad: the motors are being switched off.
     touched: bool,
     lost_z0: f64,
@@ -153,6 +155,7 @@ impl Fsm {
             go_arounds: 0,
             dropping: false,
             touch_since: None,
+            drop_moving: false,
             touched: false,
             lost_z0: 0.0,
             lost_since_update: 0,
@@ -785,6 +788,7 @@ impl Fsm {
             self.z_cmd = p.z;
             self.dropping = false;
             self.touch_since = None;
+            self.drop_moving = false;
             self.touched = false;
             self.go(
                 now_ns,
@@ -845,8 +849,10 @@ impl Fsm {
         // The drop stopped at the pad's height: the gear is on it. Motors off now (a forced
         // disarm): PX4's land detector needs a second of low thrust to agree, and until then
         // its controller tilts the vehicle about feet that grip a moving pad.
-        let still = Vector3::from(v.velocity).z - est.velocity.z > -TOUCH_STILL_M_S;
-        if self.dropping && !on_ground && height < TOUCH_HEIGHT_M && still {
+        let vz_rel = Vector3::from(v.velocity).z - est.velocity.z;
+        self.drop_moving |= self.dropping && vz_rel < -0.5 * self.cfg.drop_rate_m_s;
+        let still = vz_rel > -TOUCH_STILL_M_S;
+        if self.drop_moving && !on_ground && height < TOUCH_HEIGHT_M && still {
             let since = *self.touch_since.get_or_insert(now_ns);
             self.touched |= now_ns.saturating_sub(since) as f64 * 1e-9 >= TOUCH_HOLD_S;
         } else {
@@ -1070,6 +1076,10 @@ impl Fsm {
         {
             v.x += self.cfg.relative_gain * (est.position.x - u.x);
             v.y += self.cfg.relative_gain * (est.position.y - u.y);
+        }
+        // The touchdown only: higher up, the pad estimate's noise through this feedback
+        // set the descent oscillating (paper-sim seed 3 at 3 m, +-0.8 m/s).
+        if self.state == MissionState::Land {
             let dv = (v - self.velocity()).xy() * self.cfg.relative_velocity_gain;
             let dv = dv * (MAX_RELATIVE_ACCEL_M_S2 / dv.norm().max(MAX_RELATIVE_ACCEL_M_S2));
             a = Vector3::new(dv.x, dv.y, 0.0);
