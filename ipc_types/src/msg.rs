@@ -1035,7 +1035,7 @@ impl TruthKind {
 /// --processes`). No pipeline process may read it.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("landing::TruthState/v2")]
+#[type_name("landing::TruthState/v3")]
 pub struct TruthState {
     /// Sequence, publish time (monotonic ns), stage stamps.
     pub msg: Header,
@@ -1053,6 +1053,9 @@ pub struct TruthState {
     pub pad_position: [f64; 3],
     /// Pad velocity, m/s.
     pub pad_velocity: [f64; 3],
+    /// The vehicle's velocity relative to the pad's surface point under it (the pad
+    /// turns as its vehicle steers), world ENU, m/s (meaningful with `pad_valid`).
+    pub vehicle_velocity_rel_pad: [f64; 3],
     /// Each foot of the landing gear in the pad frame (x, y), m (meaningful with
     /// `pad_valid`).
     pub gear_pad: [Point2; 4],

@@ -59,7 +59,7 @@ impl Payload {
             Self::SafetyCommand => "landing::SafetyCommand/v1",
             Self::FsmStatus => "landing::FsmStatus/v1",
             Self::TruthEvent => "landing::TruthEvent/v2",
-            Self::TruthState => "landing::TruthState/v2",
+            Self::TruthState => "landing::TruthState/v3",
             Self::Mavlink => "MAVLink 2",
         }
     }

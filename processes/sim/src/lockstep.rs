@@ -445,6 +445,10 @@ pub fn world_truth_state(world: &World, now_ns: u64) -> TruthState {
             .as_ref()
             .map_or([0.0; 3], |p| p.world_from_pad.translation.vector.into()),
         pad_velocity: pad.as_ref().map_or([0.0; 3], |p| p.linear_velocity.into()),
+        vehicle_velocity_rel_pad: pad.as_ref().map_or([0.0; 3], |p| {
+            let arm = truth.position - p.world_from_pad.translation.vector;
+            (truth.velocity - p.linear_velocity - p.angular_velocity.cross(&arm)).into()
+        }),
         gear_pad: world.gear_in_pad().unwrap_or_default().map(Point2::from),
         contact: match world.resting_on_pad() {
             None => Contact::Airborne,

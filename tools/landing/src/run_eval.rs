@@ -392,9 +392,9 @@ pub fn verdict(
             "at the end the vehicle is still armed".into(),
         );
     }
-    let v = s.vehicle_velocity;
-    let p = s.pad_velocity;
-    let rel = ((v[0] - p[0]).powi(2) + (v[1] - p[1]).powi(2) + (v[2] - p[2]).powi(2)).sqrt();
+    // At rest on a pad that turns moves with the pad's point under it, not its centre.
+    let [x, y, z] = s.vehicle_velocity_rel_pad;
+    let rel = (x * x + y * y + z * z).sqrt();
     if !within(rel, AT_REST_MPS) {
         return (
             Outcome::OffPad,

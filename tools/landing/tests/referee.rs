@@ -13,7 +13,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use optics::Board;
 use sim::autopilot::Setpoint;
 use sim::estimator_noise::EstimatorNoiseParams;
-use sim::ground_vehicle::{GroundVehicleParams, SpeedProfile};
+use sim::ground_vehicle::{GroundVehicleParams, PathParams, SpeedProfile};
 use sim::lockstep::{truth_event, world_truth_state};
 use sim::quadrotor::{MotorCommands, VehicleState};
 use sim::world::{Aabb, World, WorldParams};
@@ -284,6 +284,43 @@ fn a_landing_on_the_pad_that_then_slides_off_its_braking_vehicle_is_not_landed()
     let (outcome, why) = s.fsm_says_landed();
     assert_ne!(outcome, Outcome::Landed, "{why}");
     eprintln!("slid off: {outcome:?}, {why}");
+}
+
+#[test]
+fn a_vehicle_at_rest_off_centre_on_a_pad_driving_a_circle_is_landed() {
+    // The pad turns at 0.75 rad/s (1.5 m/s on a 2 m circle): a point 0.25 m from its
+    // centre moves 0.19 m/s relative to the centre, and a vehicle resting there is at
+    // rest on the pad all the same.
+    let mut s = Scripted::new(
+        World::new(WorldParams {
+            estimator_noise: EstimatorNoiseParams::zero(),
+            ground_vehicle: Some(GroundVehicleParams {
+                path: PathParams::Circle {
+                    centre_m: [0.0, 0.0],
+                    radius_m: 2.0,
+                    start_angle_rad: 0.0,
+                    clockwise: false,
+                },
+                speed: SpeedProfile::Constant { speed_m_s: 1.5 },
+                ..GroundVehicleParams::default()
+            }),
+            ..WorldParams::default()
+        })
+        .unwrap(),
+    );
+    // The pad vehicle drives off from a standstill; a second later it is at speed.
+    s.run(1.0);
+    let pad = s.world.pad().unwrap();
+    let at = pad.world_from_pad * nalgebra::Point3::new(0.25, 0.0, 0.0);
+    let v = pad.linear_velocity
+        + pad
+            .angular_velocity
+            .cross(&(at.coords - pad.world_from_pad.translation.vector));
+    assert!(pad.angular_velocity.z > 0.7, "{:?}", pad.angular_velocity);
+    s.place_over_pad(0.25, 0.0, 0.005, [v.x, v.y, -0.2], 0.0);
+    s.run(1.0);
+    let (outcome, why) = s.fsm_says_landed();
+    assert_eq!(outcome, Outcome::Landed, "{why}");
 }
 
 #[test]
