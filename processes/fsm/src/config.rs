@@ -61,11 +61,14 @@ pub struct FsmConfig {
     /// Descend and Land: velocity added per metre of horizontal error over the pad, 1/s,
     /// on top of the autopilot's own position gain (0 = the autopilot's alone).
     pub relative_gain: f64,
-    /// Descend and Land: acceleration feed-forward per m/s of horizontal velocity error
-    /// (the pad-relative velocity wanted minus the vehicle's), 1/s, capped at 2 m/s^2.
-    /// PX4's velocity loop alone (MPC_XY_VEL_P_ACC 1.8) lets a 0.2 m/s error stand for
-    /// half a second, long enough to drift 10 cm during the touchdown (0 = PX4's alone).
+    /// Land: acceleration feed-forward per m/s of horizontal velocity error (the
+    /// pad-relative velocity wanted minus the vehicle's), 1/s. PX4's velocity loop alone
+    /// (MPC_XY_VEL_P_ACC 1.8) lets a 0.2 m/s error stand for half a second, long enough to
+    /// drift 10 cm during the touchdown (0 = PX4's alone).
     pub relative_velocity_gain: f64,
+    /// Land: cap of that feed-forward, m/s^2. Each m/s^2 tilts the vehicle about 6 deg,
+    /// and the touchdown is judged at 15 deg.
+    pub relative_accel_max_m_s2: f64,
     /// Horizontal error that aborts a descent or a touchdown into a climb back, m.
     pub go_around_m: f64,
     /// Go-arounds before the mission lands in place instead.
@@ -133,7 +136,8 @@ impl Default for FsmConfig {
             drop_rate_m_s: 0.8,
             land_max_pad_age_s: 0.4,
             relative_gain: 1.0,
-            relative_velocity_gain: 2.0,
+            relative_velocity_gain: 1.0,
+            relative_accel_max_m_s2: 1.0,
             go_around_m: 0.4,
             max_go_arounds: 3,
             lost_after_s: 1.0,
@@ -266,6 +270,12 @@ impl Validate for FsmConfig {
                 self.relative_velocity_gain,
                 0.0,
                 10.0,
+            ),
+            (
+                "relative_accel_max_m_s2",
+                self.relative_accel_max_m_s2,
+                0.0,
+                5.0,
             ),
             ("lost_after_s", self.lost_after_s, 0.05, 30.0),
             ("lost_hold_s", self.lost_hold_s, 0.0, 30.0),

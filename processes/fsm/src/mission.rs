@@ -1071,7 +1071,11 @@ impl Fsm {
         let p = Vector3::new(est.position.x, est.position.y, z);
         let mut v = Vector3::new(est.velocity.x, est.velocity.y, est.velocity.z + vz);
         let mut a = Vector3::zeros();
+        // Dropping, the vehicle only matches the pad's velocity: it was over the pad when
+        // the drop began, and chasing the last centimetres now only adds sideways speed
+        // at contact.
         if matches!(self.state, MissionState::Descend | MissionState::Land)
+            && !self.dropping
             && let Some(u) = self.position()
         {
             v.x += self.cfg.relative_gain * (est.position.x - u.x);
@@ -1081,7 +1085,12 @@ impl Fsm {
         // set the descent oscillating (paper-sim seed 3 at 3 m, +-0.8 m/s).
         if self.state == MissionState::Land {
             let dv = (v - self.velocity()).xy() * self.cfg.relative_velocity_gain;
-            let dv = dv * (MAX_RELATIVE_ACCEL_M_S2 / dv.norm().max(MAX_RELATIVE_ACCEL_M_S2));
+            let cap = self.cfg.relative_accel_max_m_s2;
+            let dv = if dv.norm() > cap {
+                dv * (cap / dv.norm())
+            } else {
+                dv
+            };
             a = Vector3::new(dv.x, dv.y, 0.0);
         }
         self.setpoint(now_ns, p, v, a)
@@ -1095,9 +1104,6 @@ const TOUCH_STILL_M_S: f64 = 0.2;
 const TOUCH_HEIGHT_M: f64 = 0.12;
 /// ... for this long (three fsm cycles at 50 Hz), s.
 const TOUCH_HOLD_S: f64 = 0.05;
-
-/// Cap of the pad-relative acceleration feed-forward, m/s^2.
-const MAX_RELATIVE_ACCEL_M_S2: f64 = 2.0;
 
 /// Heading of the body x axis from a quaternion (x, y, z, w), rad; 0 when degenerate.
 fn yaw_of(q: &[f64; 4]) -> f64 {
