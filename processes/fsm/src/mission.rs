@@ -859,40 +859,15 @@ impl Fsm {
             self.touch_since = None;
         }
         if self.touched && v.armed != 0 {
-            out.setpoint = Some(self.pad_setpoint(
-                now_ns,
-                &est,
-                est.position.z - 0.3,
-                -self.cfg.drop_rate_m_s,
-            ));
-            match self.drive(now_ns, LinkRequestKind::Touchdown, 0.0, out) {
-                Drive::Accepted => self.go(
-                    now_ns,
-                    MissionState::Landed,
-                    format!("touched down {height:.2} m over the pad estimate, motors off"),
-                ),
-                Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),
-                Drive::Waiting => {}
-            }
+            let why = format!("touched down {height:.2} m over the pad estimate, motors off");
+            let rate = self.cfg.drop_rate_m_s;
+            self.motors_off(now_ns, &est, rate, LinkRequestKind::Touchdown, why, out);
             return;
         }
         if on_ground {
-            // Stay pressed onto the pad, moving with it, until the motors are off.
-            out.setpoint = Some(self.pad_setpoint(
-                now_ns,
-                &est,
-                est.position.z - 0.3,
-                -self.cfg.land_rate_m_s,
-            ));
-            match self.drive(now_ns, LinkRequestKind::Disarm, 0.0, out) {
-                Drive::Accepted => self.go(
-                    now_ns,
-                    MissionState::Landed,
-                    "touched down, disarmed".into(),
-                ),
-                Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),
-                Drive::Waiting => {}
-            }
+            let rate = self.cfg.land_rate_m_s;
+            let why = "touched down, disarmed".to_string();
+            self.motors_off(now_ns, &est, rate, LinkRequestKind::Disarm, why, out);
             return;
         }
         // Down to the flare height at the touchdown rate (slowing to a hover when off the
@@ -929,6 +904,25 @@ impl Fsm {
         };
         self.z_cmd = (self.z_cmd - rate * dt).max(floor);
         out.setpoint = Some(self.pad_setpoint(now_ns, &est, self.z_cmd, -rate));
+    }
+
+    /// On the pad: stay pressed onto it at `rate`, moving with it, while `kind` (a disarm,
+    /// forced or not) switches the motors off; Landed with `why` once it is accepted.
+    fn motors_off(
+        &mut self,
+        now_ns: u64,
+        est: &PadEstimate,
+        rate: f64,
+        kind: LinkRequestKind,
+        why: String,
+        out: &mut Outputs,
+    ) {
+        out.setpoint = Some(self.pad_setpoint(now_ns, est, est.position.z - 0.3, -rate));
+        match self.drive(now_ns, kind, 0.0, out) {
+            Drive::Accepted => self.go(now_ns, MissionState::Landed, why),
+            Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),
+            Drive::Waiting => {}
+        }
     }
 
     fn enter_lost(&mut self, now_ns: u64) {

@@ -16,10 +16,6 @@ use px4_protocol::frames::{
 };
 use px4_protocol::mode::{OFFBOARD, flight_mode};
 
-/// PX4's `param2` of ARM_DISARM that forces a disarm in the air (commander's
-/// `arm_disarm` handling).
-pub const FORCE_DISARM_MAGIC: f32 = 21196.0;
-
 /// What the stack asks of the autopilot.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Request {
@@ -666,7 +662,15 @@ impl Px4Link {
             Request::Disarm => (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]),
             Request::ForceDisarm => (
                 MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-                [0.0, FORCE_DISARM_MAGIC, 0.0, 0.0, 0.0, 0.0, 0.0],
+                [
+                    0.0,
+                    px4_protocol::command::FORCE_DISARM_MAGIC,
+                    0.0,
+                    0.0,
+                    0.0,
+                    0.0,
+                    0.0,
+                ],
             ),
             // param7 is the target altitude above mean sea level (takeoff.cpp); the
             // request's altitude is a world (local) height.

@@ -3,6 +3,11 @@
 
 use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd, MavMessage};
 
+/// PX4's `param2` of ARM_DISARM that forces a disarm in the air (commander's
+/// `handle_command_arm_disarm`): the companion cuts the motors at touchdown with it, and
+/// the simulated commander honours it.
+pub const FORCE_DISARM_MAGIC: f32 = 21196.0;
+
 /// COMMAND_LONG `command` with `params` (param1 to param7) to `target` (system id,
 /// component id), first transmission (confirmation 0).
 pub fn command_long(command: MavCmd, params: [f32; 7], target: (u8, u8)) -> MavMessage {

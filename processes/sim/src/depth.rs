@@ -8,7 +8,7 @@
 //! only tested for the pixels inside its projected screen rectangle, so a box
 //! costs in proportion to its size on screen.
 
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use parry3d::math::Vector as PVec;
 use parry3d::query::{Ray, RayCast};
 use parry3d::shape::Cuboid;
@@ -313,25 +313,7 @@ impl DepthCamera {
         let mut behind = 0;
         let (mut umin, mut umax, mut vmin, mut vmax) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
         let mut straddles = false;
-        for k in 0..8 {
-            let corner = Point3::new(
-                if k & 1 == 0 {
-                    -b.half_m[0]
-                } else {
-                    b.half_m[0]
-                },
-                if k & 2 == 0 {
-                    -b.half_m[1]
-                } else {
-                    b.half_m[1]
-                },
-                if k & 4 == 0 {
-                    -b.half_m[2]
-                } else {
-                    b.half_m[2]
-                },
-            );
-            let p = b.world_from_box * corner;
+        for p in b.corners() {
             let c = world_from_camera.inverse_transform_point(&p);
             if c.z <= near {
                 behind += 1;

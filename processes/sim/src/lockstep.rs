@@ -162,6 +162,8 @@ pub struct Simulator {
     camera_clock: CameraClock,
     /// The telemetry link's delay.
     telemetry: TelemetryDelay,
+    /// The boxes the depth camera renders, refilled per frame.
+    boxes: Vec<crate::world::Obb>,
 }
 
 impl Simulator {
@@ -234,6 +236,7 @@ impl Simulator {
                 rng: crate::rng::Pcg32::with_stream(seed, 29),
                 held: std::collections::VecDeque::new(),
             },
+            boxes: Vec::new(),
         }
     }
 
@@ -318,8 +321,8 @@ impl Simulator {
         let truth = self.world.truth();
         let world_from_body =
             Isometry3::from_parts(Translation3::from(truth.position), truth.world_from_body);
-        let boxes = self.world.boxes_in_view();
-        cam.render_into(&world_from_body, &boxes, out);
+        self.world.boxes_in_view_into(&mut self.boxes);
+        cam.render_into(&world_from_body, &self.boxes, out);
         let now = self.world.time_ns();
         Some(Shot {
             capture_ns: now,

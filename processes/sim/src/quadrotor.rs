@@ -444,6 +444,12 @@ impl Surface {
         self.linear_velocity + self.angular_velocity.cross(&(p - o))
     }
 
+    /// Angle between body up of `world_from_body` and the surface's normal, rad.
+    pub fn tilt_rad(&self, world_from_body: &UnitQuaternion<f64>) -> f64 {
+        let body_up = world_from_body * Vector3::z();
+        body_up.dot(&self.normal()).clamp(-1.0, 1.0).acos()
+    }
+
     /// True if world point `p` is over (or under) the surface's extent.
     pub fn covers(&self, p: &Vector3<f64>) -> bool {
         let Some([hx, hy]) = self.half_extent_m else {
@@ -520,6 +526,14 @@ impl Default for Environment {
 }
 
 impl Environment {
+    /// The surface with this id: the platform if it is the platform's, else the ground.
+    pub fn surface_with_id(&self, id: u32) -> Surface {
+        match self.platform {
+            Some(p) if p.id == id => p,
+            _ => self.surface,
+        }
+    }
+
     /// The surface a world point `p` touches, with its depth under it: the
     /// platform where it is there to touch, else the ground.
     fn touching(&self, p: &Vector3<f64>) -> Option<(&Surface, f64)> {
@@ -761,16 +775,12 @@ impl Quadrotor {
         if let (ContactState::Airborne, ContactState::Resting { surface_id }) =
             (before, self.contact)
         {
-            let surface = match env.platform {
-                Some(p) if p.id == surface_id => p,
-                _ => env.surface,
-            };
+            let surface = env.surface_with_id(surface_id);
             let start = surface.earlier(dt_s);
-            let body_up = self.state.world_from_body * Vector3::z();
             impact = Some(Impact {
                 surface_id,
                 relative_velocity: approach - start.velocity_at(&self.state.position),
-                tilt_rad: body_up.dot(&surface.normal()).clamp(-1.0, 1.0).acos(),
+                tilt_rad: surface.tilt_rad(&self.state.world_from_body),
                 position: self.state.position,
             });
         }

@@ -84,6 +84,15 @@ pub struct Obb {
 }
 
 impl Obb {
+    /// The eight corners in world (bit 0 of the index picks +x, bit 1 +y, bit 2 +z).
+    pub fn corners(&self) -> [nalgebra::Point3<f64>; 8] {
+        let h = self.half_m;
+        std::array::from_fn(|k| {
+            let sign = |bit: usize, half: f64| if k & bit == 0 { -half } else { half };
+            self.world_from_box * nalgebra::Point3::new(sign(1, h[0]), sign(2, h[1]), sign(4, h[2]))
+        })
+    }
+
     /// True if a sphere of `radius` around `centre` touches or enters the box.
     pub fn intersects_sphere(&self, centre: &Vector3<f64>, radius: f64) -> bool {
         let local = self
@@ -497,11 +506,19 @@ impl World {
 
     /// Every box a camera sees now: the obstacles and the ground vehicle's body.
     pub fn boxes_in_view(&self) -> Vec<Obb> {
-        let mut boxes: Vec<Obb> = self.obstacles.iter().map(Obb::from).collect();
+        let mut boxes = Vec::new();
+        self.boxes_in_view_into(&mut boxes);
+        boxes
+    }
+
+    /// [`World::boxes_in_view`] into the caller's buffer (cleared first), so a renderer
+    /// allocates once, not per frame.
+    pub fn boxes_in_view_into(&self, boxes: &mut Vec<Obb>) {
+        boxes.clear();
+        boxes.extend(self.obstacles.iter().map(Obb::from));
         if let Some(g) = &self.ground_vehicle {
             boxes.push(g.body(&g.state_at(self.time_s())));
         }
-        boxes
     }
 
     /// Every event so far, oldest first.
@@ -610,10 +627,7 @@ impl World {
         if let Some(impact) = report.impact {
             self.left_contact_ns = None;
             let on_pad = impact.surface_id == PAD_SURFACE_ID;
-            let surface = match env.platform {
-                Some(p) if on_pad => p,
-                _ => env.surface,
-            };
+            let surface = env.surface_with_id(impact.surface_id);
             let normal_speed = -impact.relative_velocity.dot(&surface.normal());
             let crash = if normal_speed > self.crash.max_impact_speed_m_s {
                 Some(CrashReason::HardImpact {
@@ -650,15 +664,9 @@ impl World {
         if let ContactState::Resting { surface_id } = report.contact {
             self.last_surface_id = surface_id;
             // Tipped over onto its arms: on the ground, the tilt is the contact's.
-            let surface = match env.platform {
-                Some(p) if p.id == surface_id => p,
-                _ => env.surface,
-            };
-            let body_up = self.quad.state().world_from_body * Vector3::z();
-            let tilt_deg = body_up
-                .dot(&surface.normal())
-                .clamp(-1.0, 1.0)
-                .acos()
+            let tilt_deg = env
+                .surface_with_id(surface_id)
+                .tilt_rad(&self.quad.state().world_from_body)
                 .to_degrees();
             if tilt_deg > self.crash.max_contact_tilt_deg {
                 self.declare_crash(CrashReason::TiltedContact {

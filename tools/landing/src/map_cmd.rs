@@ -284,15 +284,7 @@ fn vehicle_body_sweep(
     let end_s = end_ns as f64 * 1e-9;
     let mut t = 0.0;
     while t <= end_s {
-        let body = vehicle.body(&vehicle.state_at(t));
-        for k in 0..8 {
-            let h = body.half_m;
-            let corner = nalgebra::Point3::new(
-                if k & 1 == 0 { -h[0] } else { h[0] },
-                if k & 2 == 0 { -h[1] } else { h[1] },
-                if k & 4 == 0 { -h[2] } else { h[2] },
-            );
-            let p = body.world_from_box * corner;
+        for p in vehicle.body(&vehicle.state_at(t)).corners() {
             for i in 0..3 {
                 lo[i] = lo[i].min(p[i]);
                 hi[i] = hi[i].max(p[i]);

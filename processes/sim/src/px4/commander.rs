@@ -29,8 +29,7 @@ use super::frames::{
 use crate::autopilot::{EstimatedState, Setpoint};
 use crate::params::{self, ParamError};
 
-/// PX4's magic `param2` of ARM_DISARM that forces a disarm in the air.
-pub const FORCE_DISARM_MAGIC: f32 = 21196.0;
+pub use px4_protocol::command::FORCE_DISARM_MAGIC;
 
 /// Mean Earth radius PX4's map projection uses, m.
 const EARTH_RADIUS_M: f64 = 6_371_000.0;
