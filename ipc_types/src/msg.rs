@@ -1034,6 +1034,7 @@ impl TruthKind {
 /// topic [`crate::services::SIM_TRUTH_STATE`] (plots and speeds of `landing run
 /// --processes`). No pipeline process may read it.
 #[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::TruthState/v3")]
 pub struct TruthState {

@@ -7,6 +7,7 @@
 
 pub mod config;
 pub mod mission;
+pub mod odometry;
 pub mod pad_filter;
 pub mod stage;
 

@@ -12,6 +12,7 @@ use ipc_types::msg::{
 use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::config::FsmConfig;
+use crate::odometry::Odometry;
 use crate::pad_filter::{PadEstimate, PadFilter, Update};
 
 /// One transition, kept for the log and the tests.
@@ -92,6 +93,8 @@ pub struct Fsm {
     state: MissionState,
     started: bool,
     filter: PadFilter,
+    /// The frame the filter runs in (the integrated velocity).
+    odometry: Odometry,
     vehicle: Option<(u64, VehicleState)>,
     trajectory: Option<(u64, BSpline, u64)>,
     takeoff: TakeoffStep,
@@ -136,6 +139,7 @@ impl Fsm {
             state: MissionState::Idle,
             started,
             filter,
+            odometry: Odometry::default(),
             vehicle: None,
             trajectory: None,
             takeoff: TakeoffStep::EnteringOffboard,
@@ -216,12 +220,22 @@ impl Fsm {
                 t => t.min(now_ns),
             };
             self.vehicle = Some((t, *v));
+            let p = Vector3::from(v.world_from_body.translation);
+            self.odometry.on_state(t, p, Vector3::from(v.velocity));
         }
     }
 
     /// A pad observation, received at `now_ns`.
     pub fn on_observation(&mut self, now_ns: u64, obs: &PadObservation) -> Update {
-        let u = self.filter.update(now_ns, obs);
+        // Into the odometry frame (see `odometry`): the estimate's noise at the capture
+        // time out, only the camera's error left.
+        let mut in_odometry = *obs;
+        let d = self.odometry.offset_at(obs.msg.capture_ns);
+        let t = &mut in_odometry.world_from_pad.translation;
+        for k in 0..3 {
+            t[k] -= d[k];
+        }
+        let u = self.filter.update(now_ns, &in_odometry);
         match u {
             Update::Restarted => tracing::warn!("pad observations jumped: pad filter restarted"),
             Update::Rejected => tracing::debug!("pad observation outside the gate"),
@@ -328,7 +342,7 @@ impl Fsm {
         // Bumped by each transition (periodic repeats carry the same number).
         msg.seq = self.transitions.len() as u64;
         msg.push_stage(Stage::Fsm, now_ns, now_ns);
-        let est = self.filter.estimate(now_ns);
+        let est = self.pad_estimate(now_ns);
         FsmStatus {
             msg,
             state: self.state as u32,
@@ -609,8 +623,16 @@ impl Fsm {
         }
     }
 
+    /// The pad filter's estimate, from the odometry frame into the vehicle's current
+    /// estimate: `pad - vehicle` is what the camera measured, whatever the estimate's noise.
+    fn pad_estimate(&self, now_ns: u64) -> Option<PadEstimate> {
+        let mut est = self.filter.estimate(now_ns)?;
+        est.position += self.odometry.offset_now();
+        Some(est)
+    }
+
     fn pad(&self, now_ns: u64) -> Option<PadEstimate> {
-        let est = self.filter.estimate(now_ns)?;
+        let est = self.pad_estimate(now_ns)?;
         (est.age_s <= self.cfg.lost_after_s).then_some(est)
     }
 
@@ -669,7 +691,7 @@ impl Fsm {
         self.go(now_ns, MissionState::Track, reason);
         self.new_goal_epoch(now_ns);
         self.guidance = Guidance::Planner;
-        if let (Some(p), Some(est)) = (self.position(), self.filter.estimate(now_ns)) {
+        if let (Some(p), Some(est)) = (self.position(), self.pad_estimate(now_ns)) {
             let h = p.z - est.position.z;
             let lo = self.cfg.commit_height_m + 0.3;
             let hi = self.cfg.track_height_max_m.max(lo);
@@ -816,7 +838,7 @@ impl Fsm {
             return;
         }
         // Close to the pad the camera may see too little: the filter carries the pad.
-        let Some(est) = self.filter.estimate(now_ns) else {
+        let Some(est) = self.pad_estimate(now_ns) else {
             self.go(
                 now_ns,
                 MissionState::SafeLand,
@@ -927,7 +949,7 @@ impl Fsm {
 
     fn enter_lost(&mut self, now_ns: u64) {
         let z0 = self.position().map(|p| p.z).unwrap_or(self.hold.z);
-        let why = match self.filter.estimate(now_ns) {
+        let why = match self.pad_estimate(now_ns) {
             Some(e) => format!("no pad for {:.1} s", e.age_s),
             None => "pad estimate restarted (observations jumped)".to_string(),
         };

@@ -16,6 +16,8 @@ use planner::{GridMap, PlannerConfig, PlannerNode, State};
 
 const DT: u64 = 20_000_000;
 const PAD_HEIGHT: f64 = 0.4;
+/// How old a pad observation is when the fsm gets it, ns.
+const CAPTURE_AGE_NS: u64 = 2 * DT;
 
 /// How the autopilot answers one kind of request.
 #[derive(Clone, Copy, PartialEq)]
@@ -53,6 +55,13 @@ struct World {
     ground_drift: bool,
     /// The estimate wanders this much (m) horizontally, as PX4 SITL's did hovering.
     wander_m: f64,
+    /// Fast noise on the estimated position (not its velocity), m: a fresh +-value each
+    /// step, as a VIO-fed EKF's position jitters by centimetres.
+    jitter_m: f64,
+    /// Largest error, over the touchdown's setpoints, of where they put the pad relative to
+    /// the vehicle (the setpoint minus the estimate the autopilot steers by) against where
+    /// it truly is, m.
+    touchdown_offset_error_m: f64,
     /// The mode the autopilot shows once it disarmed after landing (PX4: the mode
     /// asked for last that does not prevent arming).
     mode_after_disarm: Option<FlightMode>,
@@ -92,6 +101,8 @@ impl World {
             next_obs: 0,
             ground_drift: false,
             wander_m: 0.0,
+            jitter_m: 0.0,
+            touchdown_offset_error_m: 0.0,
             mode_after_disarm: None,
             px4_sees_landing: true,
         }
@@ -107,13 +118,27 @@ impl World {
             0.0
         };
         let w = std::f64::consts::TAU * s / 20.0;
-        Vector3::new(self.wander_m * w.sin(), self.wander_m * w.cos(), z)
+        let wander = Vector3::new(self.wander_m * w.sin(), self.wander_m * w.cos(), z);
+        wander + self.jitter_at(t)
+    }
+
+    /// [`Self::jitter_m`] at `t`: constant over a step, so no part of the velocity.
+    fn jitter_at(&self, t: u64) -> Vector3<f64> {
+        let mut h = (t / DT).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        let mut sign = || {
+            h ^= h >> 29;
+            h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            if h >> 63 == 1 { 1.0 } else { -1.0 }
+        };
+        Vector3::new(sign(), sign(), 0.0) * self.jitter_m
     }
 
     /// How fast the estimate error changes: the estimated velocity is the true one plus
     /// this.
     fn error_rate_at(&self, t: u64) -> Vector3<f64> {
-        (self.error_at(t + 1_000_000) - self.error_at(t)) / 1e-3
+        (self.error_at(t + 1_000_000) - self.jitter_at(t + 1_000_000) - self.error_at(t)
+            + self.jitter_at(t))
+            / 1e-3
     }
 
     fn answer(&mut self, kind: LinkRequestKind, a: Answer) -> &mut Self {
@@ -249,6 +274,10 @@ impl World {
                 // The autopilot tracks the setpoint on its estimate: position and
                 // velocity both carry the estimate's error.
                 let estimate = self.pos + self.error_at(self.t);
+                if let (MissionState::Land, Some(pad)) = (self.fsm.state(), self.pad) {
+                    let wrong = ((p - estimate) - (pad - self.pos)).xy().norm();
+                    self.touchdown_offset_error_m = self.touchdown_offset_error_m.max(wrong);
+                }
                 target_v =
                     Vector3::from(sp.velocity) - self.error_rate_at(self.t) + (p - estimate) * 2.0;
             }
@@ -318,7 +347,8 @@ impl World {
     }
 
     /// What the camera reports: the pad inside a 45-degree cone under the vehicle,
-    /// captured 30 ms ago.
+    /// captured two telemetry steps (40 ms) ago and placed in the world through the
+    /// estimate of that time, as aruco-pnp does.
     fn observation(&self) -> Option<PadObservation> {
         let pad = self.pad?;
         let rel = pad - self.pos;
@@ -326,13 +356,14 @@ impl World {
         if !self.pad_visible || h < 0.1 || rel.xy().norm() > h + 0.3 {
             return None;
         }
-        let captured = self.t.saturating_sub(30_000_000);
-        Some(self.observation_at(pad - self.pad_vel * 0.03 + self.error_at(captured), h))
+        let captured = self.t.saturating_sub(CAPTURE_AGE_NS);
+        let pad_then = pad - self.pad_vel * (CAPTURE_AGE_NS as f64 * 1e-9);
+        Some(self.observation_at(pad_then + self.error_at(captured), h))
     }
 
     fn observation_at(&self, pad: Vector3<f64>, range: f64) -> PadObservation {
         PadObservation {
-            msg: Header::captured_at(self.t.saturating_sub(30_000_000)),
+            msg: Header::captured_at(self.t.saturating_sub(CAPTURE_AGE_NS)),
             camera_from_pad: Pose {
                 translation: [0.0, 0.0, range],
                 rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
@@ -764,6 +795,25 @@ fn a_drifting_ground_estimate_and_a_wandering_one_in_the_air_still_take_off_and_
         w.pos,
         w.pad
     );
+}
+
+#[test]
+fn a_position_estimate_jittering_by_centimetres_does_not_move_the_touchdown_off_centre() {
+    // Observations are placed in the world through the estimate at their capture time and
+    // the pad is compared with the estimate at another: unless the fsm cancels the two,
+    // 3 cm of jitter on each axis reaches the touchdown's setpoints (and opens its 4 cm
+    // gate on lucky samples).
+    let mut w = World::new(config());
+    w.pad_vel = Vector3::new(0.5, 0.0, 0.0);
+    w.jitter_m = 0.03;
+    w.expect(MissionState::Landed, 90.0);
+    let wrong = w.touchdown_offset_error_m;
+    assert!(
+        wrong < 0.015,
+        "the touchdown put the pad {wrong:.3} m off where it was"
+    );
+    let off = (w.pos - w.pad.unwrap()).xy().norm();
+    assert!(off < 0.03, "touched down {off:.3} m off the pad's centre");
 }
 
 #[test]

@@ -29,7 +29,7 @@ use std::path::{Path, PathBuf};
 use ipc_types::msg::{
     CameraFrameHeader, DepthFrameHeader, FsmStatus, LinkOutcome, LinkRequest, OccupancyMapHeader,
     PadObservation, PlannerGoal, PlannerStats, SafetyCommand, Setpoint, Trajectory, TruthEvent,
-    VehicleState, WatchdogView,
+    TruthState, VehicleState, WatchdogView,
 };
 use mcap::records::MessageHeader;
 use mcap::{Compression, WriteOptions, Writer};
@@ -114,6 +114,7 @@ recordable!(
     Setpoint => "landing::Setpoint/v1",
     FsmStatus => "landing::FsmStatus/v1",
     TruthEvent => "landing::TruthEvent/v2",
+    TruthState => "landing::TruthState/v3",
     LinkRequest => "landing::LinkRequest/v1",
     LinkOutcome => "landing::LinkOutcome/v1",
     SafetyCommand => "landing::SafetyCommand/v1",

@@ -177,7 +177,10 @@ fn observe(p: &Published<'_>, referee: &mut Referee, rec: &mut Recording) -> Res
             referee.on_truth(t);
             rec.write(name, p.now_ns, t)?;
         }
-        Message::TruthState(s) => referee.on_truth_state(s),
+        Message::TruthState(s) => {
+            referee.on_truth_state(s);
+            rec.write(name, p.now_ns, s)?;
+        }
         Message::VehicleState(m) => rec.write(name, p.now_ns, m)?,
         Message::PadObservation(m) => rec.write(name, p.now_ns, m)?,
         Message::PlannerGoal(m) => rec.write(name, p.now_ns, m)?,

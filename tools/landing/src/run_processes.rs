@@ -197,6 +197,10 @@ pub fn run(
                     referee.on_truth(&t);
                 }
                 while let Some(s) = truth_state.receive()? {
+                    if let Some(r) = recorder.as_mut() {
+                        let at = monotonic_ns();
+                        r.write_message(&name(topics::SIM_TRUTH_STATE), at, s.payload())?;
+                    }
                     referee.on_truth_state(s.payload());
                 }
                 Ok(())
