@@ -271,11 +271,54 @@ impl CameraErrors {
         }
         let truth =
             CameraCalibration::new(nominal.width, nominal.height, fx, fy, cx, cy, distortion)?;
-        let r = self.mount_rotation_deg.to_radians();
+        let mount = MountErrors {
+            rotation_deg: self.mount_rotation_deg,
+            translation_m: self.mount_translation_m,
+        };
+        Ok((truth, mount.draw_with(n)))
+    }
+}
+
+/// How far a sensor's true mount is from the drawing the pipeline reads (standard
+/// deviations, drawn per seed).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MountErrors {
+    /// Rotation about each optical axis, deg.
+    pub rotation_deg: f64,
+    /// Translation along each axis, m.
+    pub translation_m: f64,
+}
+
+impl Default for MountErrors {
+    /// A sensor bolted to a real airframe: 1 deg and 1 cm.
+    fn default() -> Self {
+        Self {
+            rotation_deg: 1.0,
+            translation_m: 0.01,
+        }
+    }
+}
+
+impl MountErrors {
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        params::in_range("mount_errors.rotation_deg", self.rotation_deg, 0.0, 10.0)?;
+        params::in_range("mount_errors.translation_m", self.translation_m, 0.0, 0.1)
+    }
+
+    /// The mount error drawn for `seed`: maps the true optical frame into the nominal one.
+    pub fn draw(&self, seed: u64) -> Isometry3<f64> {
+        let mut rng = Pcg32::with_stream(seed, 24);
+        self.draw_with(|std| std * rng.normal())
+    }
+
+    fn draw_with(&self, mut n: impl FnMut(f64) -> f64) -> Isometry3<f64> {
+        let r = self.rotation_deg.to_radians();
         let rotation = UnitQuaternion::from_euler_angles(n(r), n(r), n(r));
-        let t = self.mount_translation_m;
+        let t = self.translation_m;
         let translation = Translation3::new(n(t), n(t), n(t));
-        Ok((truth, Isometry3::from_parts(translation, rotation)))
+        Isometry3::from_parts(translation, rotation)
     }
 }
 

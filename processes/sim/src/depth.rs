@@ -204,6 +204,13 @@ impl DepthCamera {
         self.camera_from_body
     }
 
+    /// Renders from a mount off the drawing by `error` (the true optical frame into the
+    /// nominal one, as [`crate::camera::MountErrors::draw`] gives it): the pipeline reads
+    /// the drawing.
+    pub fn set_mount_error(&mut self, error: Isometry3<f64>) {
+        self.camera_from_body = error.inverse() * self.params.camera_from_body();
+    }
+
     /// Renders the depth image seen from `world_from_body` with these boxes.
     pub fn render(&mut self, world_from_body: &Isometry3<f64>, obstacles: &[Obb]) -> DepthFrame {
         let mut out = vec![0u16; self.frame_len()];

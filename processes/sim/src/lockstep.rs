@@ -198,7 +198,11 @@ impl Simulator {
         let errors = &scenario.scenario.camera.errors;
         sim.camera_clock.offset_ns = errors.draw_clock_offset_ns(seed.wrapping_add(4));
         sim.camera_clock.jitter_ns = errors.clock_jitter_ms * 1e6;
-        sim.depth_camera = Some(Box::new(DepthCamera::new(depth)?));
+        // So is the depth camera's mount.
+        let mut depth = DepthCamera::new(depth)?;
+        let mount_errors = &scenario.scenario.depth.mount_errors;
+        depth.set_mount_error(mount_errors.draw(seed.wrapping_add(6)));
+        sim.depth_camera = Some(Box::new(depth));
         let link = &scenario.scenario.telemetry_link;
         let mut draw = crate::rng::Pcg32::with_stream(seed.wrapping_add(5), 41);
         sim.telemetry.offset_ns =

@@ -12,7 +12,7 @@ use serde::Deserialize;
 use stack_config::{self as config, ConfigError, Invalid, Validate, check_range};
 
 use crate::autopilot::AutopilotParams;
-use crate::camera::{CameraErrors, DownCameraParams};
+use crate::camera::{CameraErrors, DownCameraParams, MountErrors};
 use crate::depth::DepthCameraParams;
 use crate::estimator_noise::EstimatorNoiseParams;
 use crate::ground_vehicle::GroundVehicleParams;
@@ -91,6 +91,8 @@ pub struct DepthParams {
     pub rate_hz: f64,
     /// Resolution, field of view, range, noise, mount.
     pub sensor: DepthCameraParams,
+    /// How far the true mount is from `sensor`'s (which the pipeline reads), per seed.
+    pub mount_errors: MountErrors,
 }
 
 impl Default for DepthParams {
@@ -98,6 +100,7 @@ impl Default for DepthParams {
         Self {
             rate_hz: 30.0,
             sensor: DepthCameraParams::default(),
+            mount_errors: MountErrors::default(),
         }
     }
 }
@@ -320,6 +323,10 @@ impl Validate for Scenario {
             .sensor
             .validate()
             .map_err(|e| from_param("depth.sensor", e))?;
+        self.depth
+            .mount_errors
+            .validate()
+            .map_err(|e| from_param("depth", e))?;
         self.faults
             .validate()
             .map_err(|e| from_param("faults", e))?;

@@ -437,6 +437,45 @@ fn the_ground_appears_where_it_should_and_out_of_range_reads_zero() {
 }
 
 #[test]
+fn a_depth_camera_mounted_a_degree_off_its_drawing_sees_the_ground_where_its_true_mount_does() {
+    let params = DepthCameraParams {
+        noise_k_per_m: 0.0,
+        ..DepthCameraParams::default()
+    };
+    let (fy, cy) = (params.focal_px().1, params.principal_point_px().1);
+    let mount_z = params.position_in_body_m[2];
+    let mut cam = DepthCamera::new(params).unwrap();
+    // Pitched 1 deg about the optical x axis (the true optical frame into the drawn one).
+    let error = Isometry3::from_parts(
+        Translation3::identity(),
+        UnitQuaternion::from_euler_angles(1f64.to_radians(), 0.0, 0.0),
+    );
+    cam.set_mount_error(error);
+    let height = 1.0;
+    let frame = cam.render(&level_body(5.0, 5.0, height - mount_z, 0.0), &[]);
+    for v in [300u32, 400, 479] {
+        // The pixel's ray, turned into the drawn (level) frame, meets the ground at
+        // `height` below; the depth is along the true optical axis.
+        let ray = nalgebra::Vector3::new(0.0, (f64::from(v) - cy) / fy, 1.0);
+        let down = (error.rotation * ray).y;
+        let expect = height / down;
+        let nominal = height * fy / (f64::from(v) - cy);
+        let got = frame.depth_m(320, v).unwrap();
+        assert!((got - expect).abs() < 0.002, "row {v}: {got} vs {expect}");
+        assert!(
+            (got - nominal).abs() > 0.01,
+            "row {v}: as if mounted as drawn"
+        );
+    }
+    // Drawn per seed, within its standard deviations, and the same for the same seed.
+    let mount = sim::camera::MountErrors::default();
+    let (a, b) = (mount.draw(7), mount.draw(7));
+    assert_eq!(a, b);
+    assert!(a.rotation.angle() < 5f64.to_radians() && a.translation.vector.norm() < 0.05);
+    assert_ne!(a, mount.draw(8));
+}
+
+#[test]
 fn depth_noise_grows_with_range() {
     let mut cam = DepthCamera::new(DepthCameraParams::default()).unwrap();
     let body = level_body(0.0, 0.0, 1.5, 0.0);
