@@ -7,6 +7,7 @@
 
 use std::cell::Cell;
 use std::fmt::Debug;
+use std::mem::ManuallyDrop;
 use std::time::Duration;
 
 use iceoryx2::port::listener::Listener;
@@ -296,10 +297,39 @@ impl_message_header!(CameraFrameHeader, DepthFrameHeader, OccupancyMapHeader);
 
 type PubSubBuilder<P, H> = iceoryx2::service::builder::publish_subscribe::Builder<P, H, Svc>;
 
-/// A process's connection to iceoryx2: one node, named after the process.
+/// A process's connection to iceoryx2: one node, named after the process. Dropped, it
+/// cleans up after dead nodes of its stack and, the last node of its prefix gone, removes
+/// the prefix's node-counter segment, which iceoryx2 otherwise leaves in /dev/shm for
+/// every prefix ever used.
 pub struct Ipc {
-    node: Node<Svc>,
+    /// Dropped by hand in `Drop`, before the domain is looked at.
+    node: ManuallyDrop<Node<Svc>>,
+    config: Config,
     process: String,
+}
+
+impl Drop for Ipc {
+    fn drop(&mut self) {
+        // A process that died (SIGKILL) left its node's resources: the survivors clean up.
+        let _ = self.node.try_cleanup_dead_nodes();
+        // SAFETY: the node is dropped exactly once, here, and never used afterwards.
+        unsafe { ManuallyDrop::drop(&mut self.node) };
+        // Our node is gone first, so of two processes stopping together at least one sees
+        // the other gone too.
+        let mut alive = 0usize;
+        let listed = Node::<Svc>::list(&self.config, |state| {
+            if !matches!(state, NodeState::Dead(_)) {
+                alive += 1;
+            }
+            CallbackProgression::Continue
+        });
+        if listed.is_ok() && alive == 0 {
+            // SAFETY: no node of this prefix is alive; one that starts now recreates the
+            // segment (a counter for node ids, whose reuse after every node has gone
+            // collides with nothing).
+            let _ = unsafe { iceoryx2::testing::remove_global_mgmt_segment::<Svc>(&self.config) };
+        }
+    }
 }
 
 impl Debug for Ipc {
@@ -342,7 +372,8 @@ impl Ipc {
             );
         }
         Ok(Self {
-            node,
+            node: ManuallyDrop::new(node),
+            config,
             process: process.to_string(),
         })
     }

@@ -100,6 +100,10 @@ pub enum Outcome {
     Crashed,
     /// Neither landed nor crashed within the time limit.
     Timeout,
+    /// Stopped by SIGINT (Ctrl-C) or SIGTERM before it ended.
+    Interrupted,
+    /// A stage process exited during the mission (`--processes`).
+    ProcessDied,
 }
 
 impl Outcome {
@@ -112,6 +116,8 @@ impl Outcome {
             Self::SafeLanded => "safe_landed",
             Self::Crashed => "crashed",
             Self::Timeout => "timeout",
+            Self::Interrupted => "interrupted",
+            Self::ProcessDied => "process_died",
         }
     }
 }
@@ -317,6 +323,8 @@ impl fmt::Display for RunSummary {
             Outcome::SafeLanded => "SAFE LANDING (not on the pad)",
             Outcome::Crashed => "CRASHED",
             Outcome::Timeout => "TIMEOUT (no landing)",
+            Outcome::Interrupted => "INTERRUPTED",
+            Outcome::ProcessDied => "A PROCESS DIED",
         };
         writeln!(f, "scenario    {} (seed {})", self.scenario, self.seed)?;
         writeln!(f, "outcome     {verdict}: {}", self.referee)?;

@@ -156,6 +156,8 @@ fn outcomes_are_named_in_snake_case() {
         (Outcome::SafeLanded, "safe_landed"),
         (Outcome::Crashed, "crashed"),
         (Outcome::Timeout, "timeout"),
+        (Outcome::Interrupted, "interrupted"),
+        (Outcome::ProcessDied, "process_died"),
     ] {
         assert_eq!(
             serde_json::to_value(o).unwrap_or_default(),

@@ -161,6 +161,9 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             eprintln!("{line}");
         }
     };
+    // Ctrl-C and SIGTERM end the run as `interrupted`, with its summary, in both modes.
+    runtime::shutdown::install();
+    let mut died = None;
     let (end, referee) = if args.processes {
         let log_dir = args.log_dir.clone().unwrap_or_else(|| {
             std::env::temp_dir().join(format!("landing-run-{}", std::process::id()))
@@ -175,12 +178,13 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             graph: &graph,
             graph_path: &graph_path,
         };
-        let r = run_processes::run(&launch, &mut recorder, progress)?;
+        let (end, referee, exited) = run_processes::run(&launch, &mut recorder, progress)?;
         if tty {
             eprintln!();
         }
         eprintln!("  process logs: {}", log_dir.display());
-        r
+        died = exited;
+        (end, referee)
     } else {
         let setup = run_lockstep::Setup {
             scenario: &scn,
@@ -243,6 +247,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         .collect();
     let log = flight_log(&scn.scenario.name, seed, &eval, obstacles);
     let (outcome, why) = run_eval::verdict(end, &eval, last_state.as_ref(), &rules);
+    let why = died.take().unwrap_or(why);
     eprintln!("  referee: {outcome}: {why}");
     let replans = u32::try_from(stats.plans.saturating_sub(1)).unwrap_or(u32::MAX);
     let mut summary = RunSummary::from_log(

@@ -188,6 +188,10 @@ pub enum End {
     Crashed,
     /// The scenario's time ran out.
     Timeout,
+    /// SIGINT (Ctrl-C) or SIGTERM stopped the run.
+    Interrupted,
+    /// A stage process exited during the mission (`--processes`).
+    ProcessDied,
 }
 
 impl End {
@@ -335,6 +339,18 @@ pub fn verdict(
             return (Outcome::Crashed, why);
         }
         End::Timeout => return (Outcome::Timeout, "the scenario's time ran out".into()),
+        End::Interrupted => {
+            return (
+                Outcome::Interrupted,
+                "stopped by a signal (Ctrl-C or SIGTERM)".into(),
+            );
+        }
+        End::ProcessDied => {
+            return (
+                Outcome::ProcessDied,
+                "a stage process exited during the mission".into(),
+            );
+        }
         End::Landed | End::SafeLanded => {}
     }
     let l = &rules.limits;

@@ -152,6 +152,9 @@ pub fn run(
         if now >= end_ns {
             return Ok(End::Timeout);
         }
+        if runtime::shutdown::requested() {
+            return Ok(End::Interrupted);
+        }
         if now >= next_progress {
             next_progress = now + 1_000_000_000;
             progress(now as f64 * 1e-9, referee.phase, referee.distance_to_pad());

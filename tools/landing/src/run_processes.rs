@@ -19,7 +19,7 @@ use ipc_types::msg::{
 };
 use ipc_types::{services, topics};
 use runtime::ipc::Subscriber;
-use runtime::ipc::{Wake, run_wait_loop};
+use runtime::ipc::{LoopExit, Wake, run_wait_loop};
 use runtime::{Ipc, IpcPrefix, monotonic_ns};
 use sim::scenario::LoadedScenario;
 
@@ -90,16 +90,42 @@ pub fn command(
         .args(["--ipc-prefix", prefix.as_str()])
         .arg("--graph")
         .arg(graph_path);
+    stop_with_parent(&mut cmd);
     Ok(cmd)
 }
 
-/// Runs the mission with every stage as a process; returns how it ended and the
-/// referee's record (the same referee as the lockstep run).
+/// The child gets SIGTERM when this process dies, however it dies (SIGKILL included):
+/// it then stops as systemd would stop it, releasing its shared memory, instead of
+/// flying on as an orphan. Must be spawned from the thread that lives as long as the
+/// child should (Linux ties the signal to the spawning thread): the main thread here.
+fn stop_with_parent(cmd: &mut Command) {
+    use std::os::unix::process::CommandExt;
+    // SAFETY: getpid and getppid are async-signal-safe.
+    let parent = unsafe { libc::getpid() };
+    // SAFETY: the closure runs between fork and exec and calls only async-signal-safe
+    // functions (prctl, getppid, raise); it allocates nothing.
+    unsafe {
+        cmd.pre_exec(move || {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            // The parent died before the line above: nobody would send the signal.
+            if libc::getppid() != parent {
+                libc::raise(libc::SIGTERM);
+            }
+            Ok(())
+        });
+    }
+}
+
+/// Runs the mission with every stage as a process; returns how it ended, the
+/// referee's record (the same referee as the lockstep run) and, when a stage process
+/// exited during the mission, which one and where its log is.
 pub fn run(
     launch: &Launch<'_>,
     recorder: &mut Option<Recorder>,
     mut progress: impl FnMut(f64, MissionState, Option<f64>),
-) -> Result<(End, Referee)> {
+) -> Result<(End, Referee, Option<String>)> {
     let prefix = match launch.ipc_prefix {
         Some(p) => IpcPrefix::new(p)?,
         None => IpcPrefix::unique("run"),
@@ -148,6 +174,7 @@ pub fn run(
     let mut referee = Referee::new(monotonic_ns());
     let mut result: Option<End> = None;
     let mut failure: Option<anyhow::Error> = None;
+    let mut died: Option<String> = None;
     let mut next_progress = 0.0f64;
     let wall_limit = Instant::now() + Duration::from_secs_f64(scn.scenario.duration_s + 15.0);
     // A recording wakes on every recorded topic: subscriber queues are short.
@@ -165,7 +192,7 @@ pub fn run(
     }
     let name =
         |topic: &str| topics::find(topic).map_or_else(|| topic.to_string(), |t| t.recording_name());
-    run_wait_loop(
+    let exit = run_wait_loop(
         &listeners,
         &[],
         Some(Duration::from_millis(100)),
@@ -223,20 +250,24 @@ pub fn run(
                 return false;
             }
             if let Some((name, status)) = children.exited() {
-                failure = Some(anyhow::anyhow!(
+                died = Some(format!(
                     "{name} exited ({status}) during the mission; its log: {}",
                     launch.log_dir.join(format!("{name}.log")).display()
                 ));
+                result = Some(End::ProcessDied);
                 return false;
             }
             true
         },
     )?;
+    if exit == LoopExit::Signal {
+        result = Some(End::Interrupted);
+    }
     drop(children);
     if let Some(e) = failure {
         return Err(e);
     }
-    Ok((result.unwrap_or(End::Timeout), referee))
+    Ok((result.unwrap_or(End::Timeout), referee, died))
 }
 
 /// Subscribers to the pipeline topics a recording keeps (besides those the run watches).

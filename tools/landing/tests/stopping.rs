@@ -1,0 +1,174 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! `landing run` however it is stopped: killed outright, interrupted, or losing a stage.
+//! No stage process outlives it, nothing of its iceoryx2 prefix stays in /dev/shm or
+//! /tmp/iceoryx2, and every end that lets it speak prints its summary.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// The stage processes of deploy/graph.toml.
+const STAGES: usize = 7;
+
+fn prefix(tag: &str) -> String {
+    format!("lt_{tag}{}_", std::process::id())
+}
+
+/// Process ids whose command line mentions `prefix` (the stages get `--ipc-prefix`).
+fn processes_with(prefix: &str) -> Vec<u32> {
+    let mut pids = Vec::new();
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(pid) = e.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        if let Ok(cmd) = std::fs::read(e.path().join("cmdline"))
+            && String::from_utf8_lossy(&cmd).contains(prefix)
+        {
+            pids.push(pid);
+        }
+    }
+    pids
+}
+
+/// Files of `prefix` in /dev/shm and under /tmp/iceoryx2.
+fn files_of(prefix: &str) -> Vec<String> {
+    let mut found = Vec::new();
+    let mut walk = vec![std::path::PathBuf::from("/dev/shm")];
+    walk.push(std::path::PathBuf::from("/tmp/iceoryx2"));
+    while let Some(dir) = walk.pop() {
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                walk.push(p);
+            } else if e.file_name().to_string_lossy().starts_with(prefix) {
+                found.push(p.display().to_string());
+            }
+        }
+    }
+    found
+}
+
+fn start(args: &[&str], prefix: &str) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_landing"))
+        .args(["--ipc-prefix", prefix, "run"])
+        .args(args)
+        .env("LANDING_LOG", "warn")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+/// Waits until every stage of `prefix` runs (besides `landing` itself).
+fn wait_for_stages(prefix: &str, landing: u32) {
+    let end = Instant::now() + Duration::from_secs(30);
+    loop {
+        let stages = processes_with(prefix)
+            .into_iter()
+            .filter(|p| *p != landing)
+            .count();
+        if stages >= STAGES {
+            // Let them open their ports and the simulator's clock start.
+            std::thread::sleep(Duration::from_secs(2));
+            return;
+        }
+        assert!(Instant::now() < end, "{stages} of {STAGES} stages started");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// Waits up to 10 s for `prefix` to leave no process and no file behind.
+fn assert_nothing_left(prefix: &str) {
+    let end = Instant::now() + Duration::from_secs(10);
+    loop {
+        let (procs, files) = (processes_with(prefix), files_of(prefix));
+        if procs.is_empty() && files.is_empty() {
+            return;
+        }
+        assert!(
+            Instant::now() < end,
+            "left behind: processes {procs:?}, files {files:?}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+fn signal(pid: u32, sig: libc::c_int) {
+    // SAFETY: signalling a process this test started.
+    assert_eq!(unsafe { libc::kill(pid as i32, sig) }, 0);
+}
+
+fn summary(child: Child) -> (Option<i32>, Value, String) {
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    let json = serde_json::from_str(stdout.trim())
+        .unwrap_or_else(|e| panic!("no summary ({e}): {stdout}\n{stderr}"));
+    (out.status.code(), json, stderr)
+}
+
+#[test]
+fn killing_landing_outright_leaves_no_stage_and_no_shared_memory_behind() {
+    let p = prefix("kill");
+    let mut landing = start(&["--processes", "--json"], &p);
+    wait_for_stages(&p, landing.id());
+    signal(landing.id(), libc::SIGKILL);
+    let _ = landing.wait();
+    assert_nothing_left(&p);
+}
+
+#[test]
+fn ctrl_c_ends_a_processes_run_as_interrupted_with_its_summary() {
+    let p = prefix("int");
+    let landing = start(&["--processes", "--json"], &p);
+    wait_for_stages(&p, landing.id());
+    signal(landing.id(), libc::SIGINT);
+    let (code, s, log) = summary(landing);
+    assert_eq!(s["outcome"], "interrupted", "{s}\n{log}");
+    assert_eq!(code, Some(1), "{log}");
+    assert_nothing_left(&p);
+}
+
+#[test]
+fn a_stage_that_dies_ends_the_run_with_a_summary_naming_it() {
+    let p = prefix("die");
+    let landing = start(&["--processes", "--json"], &p);
+    wait_for_stages(&p, landing.id());
+    let planner = processes_with(&p)
+        .into_iter()
+        .find(|pid| {
+            let exe = std::fs::read_link(format!("/proc/{pid}/exe")).unwrap_or_default();
+            exe.file_name().is_some_and(|n| n == "planner")
+        })
+        .expect("a planner process");
+    signal(planner, libc::SIGKILL);
+    let (code, s, log) = summary(landing);
+    assert_eq!(s["outcome"], "process_died", "{s}\n{log}");
+    let why = s["referee"].as_str().unwrap();
+    assert!(why.starts_with("planner exited"), "{why}");
+    assert_eq!(code, Some(1), "{log}");
+    // The survivors clean up after the killed planner.
+    assert_nothing_left(&p);
+}
+
+#[test]
+fn ctrl_c_ends_a_lockstep_run_as_interrupted_with_its_summary() {
+    // Stopped at its first progress line (the flight takes a few seconds here).
+    let mut landing = start(&["--scenario", "obstacle-demo", "--json"], &prefix("lock"));
+    let mut err = BufReader::new(landing.stderr.take().unwrap());
+    let mut line = String::new();
+    while !line.contains("[   0.0 s]") {
+        line.clear();
+        assert!(err.read_line(&mut line).unwrap() > 0, "no progress line");
+    }
+    signal(landing.id(), libc::SIGINT);
+    let out = landing.wait_with_output().unwrap();
+    let s: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(s["outcome"], "interrupted", "{s}");
+    assert_eq!(out.status.code(), Some(1));
+}
