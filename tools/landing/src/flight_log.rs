@@ -102,7 +102,7 @@ pub enum Outcome {
     Timeout,
     /// Stopped by SIGINT (Ctrl-C) or SIGTERM before it ended.
     Interrupted,
-    /// A stage process exited during the mission (`--processes`).
+    /// The simulator's process exited during the mission (`--processes`).
     ProcessDied,
 }
 
@@ -170,6 +170,9 @@ pub struct RunSummary {
     pub replans: u32,
     /// Obstacle contacts; `None` when not counted (no obstacles).
     pub collisions: Option<u32>,
+    /// Faults done to the stack's processes (`--inject`) or processes that exited on
+    /// their own during the run (`--processes`).
+    pub faults: Vec<crate::inject::FaultRecord>,
 }
 
 fn norm(v: [f64; 3]) -> f64 {
@@ -301,6 +304,7 @@ impl RunSummary {
             planning_time_ms_max: pmax,
             replans,
             collisions,
+            faults: Vec::new(),
         }
     }
 }

@@ -146,7 +146,27 @@ fn main() -> ExitCode {
     // panic in println!.
     // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
     unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
-    let cli = Cli::parse();
+    // A usage mistake is one line naming what is wrong (clap's own text, first line).
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            let _ = match e.kind() {
+                ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
+                    let _ = e.print();
+                    return ExitCode::SUCCESS;
+                }
+                ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => e.print(),
+                _ => {
+                    let text = e.to_string();
+                    let first = text.lines().next().unwrap_or("error: bad arguments");
+                    eprintln!("{first} (see --help)");
+                    Ok(())
+                }
+            };
+            return ExitCode::from(2);
+        }
+    };
     runtime::logging::init("warn");
     let result = match cli.command {
         Command::Bench(BenchCommand::Ipc(args)) => bench_ipc::run(&args, cli.ipc_prefix.as_deref()),

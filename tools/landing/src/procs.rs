@@ -21,19 +21,36 @@ impl Children {
 
     /// The first child that has exited, with its status.
     pub fn exited(&mut self) -> Option<(String, std::process::ExitStatus)> {
-        self.0.iter_mut().find_map(|(n, c)| match c.try_wait() {
-            Ok(Some(s)) => Some((n.clone(), s)),
-            _ => None,
-        })
+        self.newly_exited(&[])
+    }
+
+    /// The first child that has exited and is not among `seen`.
+    pub fn newly_exited(&mut self, seen: &[String]) -> Option<(String, std::process::ExitStatus)> {
+        self.0
+            .iter_mut()
+            .filter(|(n, _)| !seen.contains(n))
+            .find_map(|(n, c)| match c.try_wait() {
+                Ok(Some(s)) => Some((n.clone(), s)),
+                _ => None,
+            })
+    }
+
+    /// The process id of the child started as `name`.
+    pub fn pid_of(&self, name: &str) -> Option<u32> {
+        self.0.iter().find(|(n, _)| n == name).map(|(_, c)| c.id())
     }
 }
 
 impl Drop for Children {
     fn drop(&mut self) {
         for (_, c) in &mut self.0 {
-            // SIGTERM first: the processes shut down cleanly and release shared memory.
+            // SIGTERM first: the processes shut down cleanly and release shared memory;
+            // SIGCONT after it, so a stopped (hung, injected) process can act on it.
             // SAFETY: signalling our own child.
-            unsafe { libc::kill(c.id() as i32, libc::SIGTERM) };
+            unsafe {
+                libc::kill(c.id() as i32, libc::SIGTERM);
+                libc::kill(c.id() as i32, libc::SIGCONT);
+            }
         }
         let end = Instant::now() + Duration::from_secs(3);
         for (_, c) in &mut self.0 {

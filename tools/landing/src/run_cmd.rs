@@ -59,6 +59,12 @@ pub struct RunArgs {
     /// system's temporary directory).
     #[arg(long, value_name = "DIR")]
     log_dir: Option<PathBuf>,
+    /// --processes: a fault to do in flight, FAULT:PROCESS@WHEN (repeatable): FAULT kill
+    /// (SIGKILL) or stop (SIGSTOP, a hang); PROCESS a node of the graph; WHEN a mission
+    /// state (takeoff, track, descend, land) or seconds after the start. The summary
+    /// lists the faults.
+    #[arg(long, value_name = "FAULT:PROCESS@WHEN")]
+    inject: Vec<crate::inject::Injection>,
 }
 
 /// The evaluator's record as the flight log the summary and the plots read.
@@ -164,6 +170,10 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
     // Ctrl-C and SIGTERM end the run as `interrupted`, with its summary, in both modes.
     runtime::shutdown::install();
     let mut died = None;
+    let mut faults = Vec::new();
+    if !args.inject.is_empty() && !args.processes {
+        anyhow::bail!("--inject needs --processes (faults are done to the stage processes)");
+    }
     let (end, referee) = if args.processes {
         let log_dir = args.log_dir.clone().unwrap_or_else(|| {
             std::env::temp_dir().join(format!("landing-run-{}", std::process::id()))
@@ -177,14 +187,16 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             ipc_prefix,
             graph: &graph,
             graph_path: &graph_path,
+            injections: &args.inject,
         };
-        let (end, referee, exited) = run_processes::run(&launch, &mut recorder, progress)?;
+        let r = run_processes::run(&launch, &mut recorder, progress)?;
         if tty {
             eprintln!();
         }
         eprintln!("  process logs: {}", log_dir.display());
-        died = exited;
-        (end, referee)
+        died = r.died;
+        faults = r.faults;
+        (r.end, r.referee)
     } else {
         let setup = run_lockstep::Setup {
             scenario: &scn,
@@ -258,6 +270,11 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         Some(eval.collisions),
     );
     summary.referee = why;
+    for f in &mut faults {
+        f.outcome = outcome.name().to_string();
+        eprintln!("  fault: {} {} at {:.2} s", f.fault, f.process, f.at_s);
+    }
+    summary.faults = faults;
     if let Some(dir) = &args.plot {
         let mut written = plot::write_plots(dir, &log)?;
         if !stats.planning_ms.is_empty() {

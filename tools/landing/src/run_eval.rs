@@ -190,8 +190,10 @@ pub enum End {
     Timeout,
     /// SIGINT (Ctrl-C) or SIGTERM stopped the run.
     Interrupted,
-    /// A stage process exited during the mission (`--processes`).
+    /// The simulator's process exited during the mission (`--processes`): no world left.
     ProcessDied,
+    /// After a fault to a process the vehicle came down and disarmed, the fsm or not.
+    DownAfterFault,
 }
 
 impl End {
@@ -348,9 +350,10 @@ pub fn verdict(
         End::ProcessDied => {
             return (
                 Outcome::ProcessDied,
-                "a stage process exited during the mission".into(),
+                "the simulator's process exited during the mission".into(),
             );
         }
+        End::DownAfterFault => {}
         End::Landed | End::SafeLanded => {}
     }
     let l = &rules.limits;
@@ -387,6 +390,12 @@ pub fn verdict(
         return (
             Outcome::SafeLanded,
             "the fsm ended in safe-land or abort".into(),
+        );
+    }
+    if end == End::DownAfterFault {
+        return (
+            Outcome::SafeLanded,
+            "down and disarmed after a fault to a process".into(),
         );
     }
     let Some(s) = last else {

@@ -14,8 +14,8 @@ use anyhow::{Context, Result};
 use graph::{Graph, Node, RunValues};
 use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::msg::{
-    FsmStatus, LinkOutcome, LinkRequest, MissionState, PadObservation, PlannerGoal, PlannerStats,
-    Setpoint, Stage, Trajectory, TruthEvent, TruthState, VehicleState,
+    Contact, FsmStatus, LinkOutcome, LinkRequest, MissionState, PadObservation, PlannerGoal,
+    PlannerStats, Setpoint, Stage, Trajectory, TruthEvent, TruthState, VehicleState,
 };
 use ipc_types::{services, topics};
 use runtime::ipc::Subscriber;
@@ -23,6 +23,7 @@ use runtime::ipc::{LoopExit, Wake, run_wait_loop};
 use runtime::{Ipc, IpcPrefix, monotonic_ns};
 use sim::scenario::LoadedScenario;
 
+use crate::inject::{Fault, FaultRecord, Injection};
 use crate::procs::{Children, binary, free_udp_port};
 use crate::record::{Recordable, Recorder};
 use crate::run_eval::{End, Referee, stage_ms};
@@ -46,6 +47,20 @@ pub struct Launch<'a> {
     pub graph: &'a Graph,
     /// Its file, handed to every process (`--graph`): each finds its node there.
     pub graph_path: &'a Path,
+    /// Faults to do to the processes in flight (`--inject`).
+    pub injections: &'a [Injection],
+}
+
+/// How a `--processes` run ended.
+pub struct ProcessesRun {
+    /// The end.
+    pub end: End,
+    /// The referee's record.
+    pub referee: Referee,
+    /// The simulator exited during the mission: which way, and where its log is.
+    pub died: Option<String>,
+    /// Faults injected, and processes that exited on their own.
+    pub faults: Vec<FaultRecord>,
 }
 
 /// The values of the graph's argument placeholders for one run of `scn`: the files, the
@@ -118,14 +133,15 @@ fn stop_with_parent(cmd: &mut Command) {
     }
 }
 
-/// Runs the mission with every stage as a process; returns how it ended, the
-/// referee's record (the same referee as the lockstep run) and, when a stage process
-/// exited during the mission, which one and where its log is.
+/// Runs the mission with every stage as a process, doing `launch.injections` on the way.
+/// A stage that dies (injected or not) does not end the run: the world flies on, and the
+/// run ends when the vehicle is down and disarmed (or by the fsm, or the time limit).
+/// The simulator's death ends it at once.
 pub fn run(
     launch: &Launch<'_>,
     recorder: &mut Option<Recorder>,
     mut progress: impl FnMut(f64, MissionState, Option<f64>),
-) -> Result<(End, Referee, Option<String>)> {
+) -> Result<ProcessesRun> {
     let prefix = match launch.ipc_prefix {
         Some(p) => IpcPrefix::new(p)?,
         None => IpcPrefix::unique("run"),
@@ -175,6 +191,10 @@ pub fn run(
     let mut result: Option<End> = None;
     let mut failure: Option<anyhow::Error> = None;
     let mut died: Option<String> = None;
+    let mut faults: Vec<FaultRecord> = Vec::new();
+    let mut done = vec![false; launch.injections.len()];
+    let mut exits_seen: Vec<String> = Vec::new();
+    let mut down_since: Option<u64> = None;
     let mut next_progress = 0.0f64;
     let wall_limit = Instant::now() + Duration::from_secs_f64(scn.scenario.duration_s + 15.0);
     // A recording wakes on every recorded topic: subscriber queues are short.
@@ -249,12 +269,44 @@ pub fn run(
                 result = Some(End::Timeout);
                 return false;
             }
-            if let Some((name, status)) = children.exited() {
-                died = Some(format!(
-                    "{name} exited ({status}) during the mission; its log: {}",
-                    launch.log_dir.join(format!("{name}.log")).display()
-                ));
-                result = Some(End::ProcessDied);
+            for (inj, done) in launch.injections.iter().zip(done.iter_mut()) {
+                if *done || !inj.due(t_s, referee.phase) {
+                    continue;
+                }
+                *done = true;
+                if let Some(pid) = children.pid_of(&inj.process) {
+                    // SAFETY: signalling our own child.
+                    unsafe { libc::kill(pid as i32, inj.fault.signal()) };
+                    tracing::warn!(fault = %inj, at_s = t_s, "fault injected");
+                    faults.push(fault_record(format!("{:?}", inj.fault), &inj.process, t_s));
+                    if inj.fault == Fault::Kill {
+                        exits_seen.push(inj.process.clone());
+                    }
+                }
+            }
+            while let Some((name, status)) = children.newly_exited(&exits_seen) {
+                exits_seen.push(name.clone());
+                let log = launch.log_dir.join(format!("{name}.log"));
+                if name == "sim" {
+                    died = Some(format!(
+                        "{name} exited ({status}) during the mission; its log: {}",
+                        log.display()
+                    ));
+                    result = Some(End::ProcessDied);
+                    return false;
+                }
+                tracing::warn!(process = name.as_str(), %status, "process exited during the mission");
+                faults.push(fault_record("exited".into(), &name, t_s));
+            }
+            // After a fault, the run ends once the vehicle is down and disarmed for a
+            // second, whoever brought it down (the fsm, PX4's failsafe).
+            let down = referee.last_state().is_some_and(|s| {
+                s.armed == 0 && Contact::from_raw(s.contact) != Some(Contact::Airborne)
+            });
+            let now = referee.sim_time_ns();
+            down_since = if down { down_since.or(Some(now)) } else { None };
+            if !faults.is_empty() && down_since.is_some_and(|d| now >= d + 1_000_000_000) {
+                result = Some(End::DownAfterFault);
                 return false;
             }
             true
@@ -267,7 +319,23 @@ pub fn run(
     if let Some(e) = failure {
         return Err(e);
     }
-    Ok((result.unwrap_or(End::Timeout), referee, died))
+    Ok(ProcessesRun {
+        end: result.unwrap_or(End::Timeout),
+        referee,
+        died,
+        faults,
+    })
+}
+
+fn fault_record(fault: String, process: &str, at_s: f64) -> FaultRecord {
+    FaultRecord {
+        fault: fault.to_lowercase(),
+        process: process.to_string(),
+        at_s,
+        detected_after_ms: None,
+        action: None,
+        outcome: String::new(),
+    }
 }
 
 /// Subscribers to the pipeline topics a recording keeps (besides those the run watches).

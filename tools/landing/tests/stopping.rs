@@ -135,25 +135,59 @@ fn ctrl_c_ends_a_processes_run_as_interrupted_with_its_summary() {
 }
 
 #[test]
-fn a_stage_that_dies_ends_the_run_with_a_summary_naming_it() {
+fn the_simulator_dying_ends_the_run_with_a_summary_naming_it() {
     let p = prefix("die");
     let landing = start(&["--processes", "--json"], &p);
     wait_for_stages(&p, landing.id());
-    let planner = processes_with(&p)
+    let sim = processes_with(&p)
         .into_iter()
         .find(|pid| {
             let exe = std::fs::read_link(format!("/proc/{pid}/exe")).unwrap_or_default();
-            exe.file_name().is_some_and(|n| n == "planner")
+            exe.file_name().is_some_and(|n| n == "sim")
         })
-        .expect("a planner process");
-    signal(planner, libc::SIGKILL);
+        .expect("a sim process");
+    signal(sim, libc::SIGKILL);
     let (code, s, log) = summary(landing);
     assert_eq!(s["outcome"], "process_died", "{s}\n{log}");
     let why = s["referee"].as_str().unwrap();
-    assert!(why.starts_with("planner exited"), "{why}");
+    assert!(why.starts_with("sim exited"), "{why}");
     assert_eq!(code, Some(1), "{log}");
-    // The survivors clean up after the killed planner.
+    // The survivors clean up after the killed simulator.
     assert_nothing_left(&p);
+}
+
+#[test]
+fn an_fsm_killed_while_tracking_leaves_px4s_offboard_loss_failsafe_to_land_the_vehicle() {
+    // No watchdog yet: the setpoints stop, and PX4 (COM_OBL_RC_ACT = 4 in the airframe,
+    // deploy/README.md) lands where it is after COM_OF_LOSS_T. The vehicle must end on
+    // the ground, disarmed, without a crash or a hard landing.
+    let p = prefix("fsm");
+    let landing = start(&["--processes", "--json", "--inject", "kill:fsm@track"], &p);
+    let (code, s, log) = summary(landing);
+    assert_eq!(s["outcome"], "safe_landed", "{s}\n{log}");
+    assert_eq!(code, Some(1), "{log}");
+    let faults = s["faults"].as_array().unwrap();
+    assert_eq!(faults.len(), 1, "{s}");
+    assert_eq!(faults[0]["fault"], "kill");
+    assert_eq!(faults[0]["process"], "fsm");
+    assert_eq!(faults[0]["outcome"], "safe_landed");
+    assert!(faults[0]["at_s"].as_f64().unwrap() > 1.0, "{s}");
+    assert_nothing_left(&p);
+}
+
+#[test]
+fn a_malformed_injection_is_one_line_naming_what_is_allowed() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_landing"))
+        .args(["run", "--processes", "--inject", "explode:fsm@track"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("unknown fault") && err.contains("kill or stop"),
+        "{err}"
+    );
 }
 
 #[test]

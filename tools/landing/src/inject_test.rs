@@ -1,0 +1,31 @@
+use super::*;
+
+#[test]
+fn injections_parse_a_fault_a_process_and_a_phase_or_a_time() {
+    let i: Injection = "kill:fsm@track".parse().unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(i.fault, Fault::Kill);
+    assert_eq!(i.process, "fsm");
+    assert_eq!(i.when, When::Phase(MissionState::Track));
+    assert!(i.due(3.0, MissionState::Track) && !i.due(3.0, MissionState::Land));
+    let i: Injection = "stop:planner@12.5s".parse().unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((i.fault, i.when), (Fault::Stop, When::At(12.5)));
+    assert!(!i.due(12.0, MissionState::Track) && i.due(12.5, MissionState::Idle));
+    assert_eq!(i.to_string(), "stop:planner@12.5");
+}
+
+#[test]
+fn a_bad_injection_names_what_is_wrong_and_what_is_allowed() {
+    for (bad, why) in [
+        ("kill-fsm@track", "no ':'"),
+        ("kill:fsm", "no '@'"),
+        ("melt:fsm@track", "unknown fault"),
+        ("kill:@track", "no process"),
+        ("kill:fsm@later", "unknown time"),
+        ("kill:fsm@-1", "unknown time"),
+        ("kill:fsm@NaN", "unknown time"),
+    ] {
+        let e = bad.parse::<Injection>().err().map(|e| e.to_string());
+        let e = e.unwrap_or_default();
+        assert!(e.contains(why) && e.contains("kill or stop"), "{bad}: {e}");
+    }
+}
