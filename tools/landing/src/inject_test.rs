@@ -7,7 +7,9 @@ fn injections_parse_a_fault_a_process_and_a_phase_or_a_time() {
     assert_eq!(i.process, "fsm");
     assert_eq!(i.when, When::Phase(MissionState::Track));
     assert!(i.due(3.0, MissionState::Track) && !i.due(3.0, MissionState::Land));
-    let i: Injection = "stop:planner@12.5s".parse().unwrap_or_else(|e| panic!("{e}"));
+    let i: Injection = "stop:planner@12.5s"
+        .parse()
+        .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!((i.fault, i.when), (Fault::Stop, When::At(12.5)));
     assert!(!i.due(12.0, MissionState::Track) && i.due(12.5, MissionState::Idle));
     assert_eq!(i.to_string(), "stop:planner@12.5");
