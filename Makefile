@@ -3,7 +3,7 @@
 
 SHELL := /bin/bash
 # OpenCV with contrib (aruco) and libclang for the opencv and iceoryx2 bindings.
-APT_PACKAGES := libopencv-dev libopencv-contrib-dev clang libclang-dev pkg-config
+APT_PACKAGES := libopencv-dev libopencv-contrib-dev clang libclang-dev pkg-config systemd
 CARGO ?= cargo
 export CARGO_TERM_COLOR ?= never
 

@@ -308,6 +308,46 @@ pub struct Ipc {
     process: String,
 }
 
+/// What [`clean`] found under a prefix.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Cleaned {
+    /// Dead nodes whose resources were removed.
+    pub dead_nodes: usize,
+    /// Nodes still alive (their resources are kept).
+    pub alive_nodes: usize,
+}
+
+/// Removes what dead processes of the stack under `prefix` left behind (their nodes'
+/// files in /dev/shm and /tmp/iceoryx2, their ports in every service), and the prefix's
+/// node-counter segment when no process of it is alive: what systemd runs before it
+/// starts (or restarts) the stack, so the new processes reconnect.
+pub fn clean(prefix: &IpcPrefix) -> Result<Cleaned, NodeError> {
+    // Counted before a node of ours exists (opening one already cleans up).
+    let (mut alive, mut dead) = (0usize, 0usize);
+    let _ = Node::<Svc>::list(&config_for(prefix)?, |state| {
+        match &state {
+            NodeState::Alive(_) => alive += 1,
+            NodeState::Dead(_) => dead += 1,
+            _ => {}
+        }
+        CallbackProgression::Continue
+    });
+    // Opening cleans up after the dead, dropping removes the node counter if none lives.
+    drop(Ipc::open("landing-clean", prefix)?);
+    Ok(Cleaned {
+        dead_nodes: dead,
+        alive_nodes: alive,
+    })
+}
+
+/// The iceoryx2 configuration of a stack under `prefix`.
+fn config_for(prefix: &IpcPrefix) -> Result<Config, NodeError> {
+    let mut config = Config::default();
+    config.global.prefix = FileName::new(prefix.as_str().as_bytes())
+        .map_err(|_| PrefixError(prefix.as_str().to_string()))?;
+    Ok(config)
+}
+
 impl Drop for Ipc {
     fn drop(&mut self) {
         // A process that died (SIGKILL) left its node's resources: the survivors clean up.
@@ -344,9 +384,7 @@ impl Ipc {
     /// Creates the node of `process` under `prefix`, cleaning up what dead nodes of earlier
     /// runs left behind (systemd restarts processes; stale resources must not block them).
     pub fn open(process: &str, prefix: &IpcPrefix) -> Result<Self, NodeError> {
-        let mut config = Config::default();
-        config.global.prefix = FileName::new(prefix.as_str().as_bytes())
-            .map_err(|_| PrefixError(prefix.as_str().to_string()))?;
+        let config = config_for(prefix)?;
         let name = NodeName::new(process).map_err(|e| NodeError::Name {
             name: process.to_string(),
             reason: reason(e),

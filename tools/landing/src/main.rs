@@ -52,6 +52,11 @@ enum Command {
     /// without a delayed input, a node without a binary, a rate of 0, ...) is one line
     /// and exit code 2.
     Graph(graph_cmd::GraphArgs),
+    /// Remove what dead processes of a stack left in shared memory (/dev/shm,
+    /// /tmp/iceoryx2) under its iceoryx2 prefix (--ipc-prefix, else $LANDING_IPC_PREFIX,
+    /// else `landing_`), so that restarted processes reconnect; the resources of live
+    /// processes are kept. systemd runs it before the stack (landing-clean.service).
+    Clean,
 }
 
 #[derive(Debug, Subcommand)]
@@ -130,6 +135,19 @@ enum ConfigCommand {
     },
 }
 
+/// `landing clean`.
+fn clean(prefix: Option<&str>) -> anyhow::Result<()> {
+    let prefix = runtime::IpcPrefix::from_flag_or_env(prefix)?;
+    let c = runtime::ipc::clean(&prefix)?;
+    println!(
+        "prefix {}: removed the resources of {} dead process(es); {} alive, kept",
+        prefix.as_str(),
+        c.dead_nodes,
+        c.alive_nodes
+    );
+    Ok(())
+}
+
 /// `landing mcap info`.
 fn mcap_info(file: &std::path::Path, json: bool) -> anyhow::Result<()> {
     let info = record::info(file)?;
@@ -197,6 +215,7 @@ fn main() -> ExitCode {
         },
         Command::Mcap(McapCommand::Info { file, json }) => mcap_info(&file, json),
         Command::Graph(args) => graph_cmd::run(&args),
+        Command::Clean => clean(cli.ipc_prefix.as_deref()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

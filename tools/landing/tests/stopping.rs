@@ -206,3 +206,35 @@ fn ctrl_c_ends_a_lockstep_run_as_interrupted_with_its_summary() {
     assert_eq!(s["outcome"], "interrupted", "{s}");
     assert_eq!(out.status.code(), Some(1));
 }
+
+#[test]
+fn landing_clean_removes_what_a_stack_killed_outright_left_behind() {
+    // Every process SIGKILLed at once (a power cut, `systemctl kill -s KILL`): nobody is
+    // left to clean up, so `landing clean` (landing-clean.service, before the stack
+    // starts again) must.
+    let p = prefix("clean");
+    let mut landing = start(&["--processes", "--json"], &p);
+    wait_for_stages(&p, landing.id());
+    for pid in processes_with(&p) {
+        signal(pid, libc::SIGKILL);
+    }
+    let _ = landing.wait();
+    let end = Instant::now() + Duration::from_secs(5);
+    while !processes_with(&p).is_empty() {
+        assert!(
+            Instant::now() < end,
+            "still running: {:?}",
+            processes_with(&p)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(!files_of(&p).is_empty(), "a SIGKILL leaves files behind");
+    let out = Command::new(env!("CARGO_BIN_EXE_landing"))
+        .args(["--ipc-prefix", &p, "clean"])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{said}");
+    assert!(said.contains(&format!("{} dead", STAGES + 1)), "{said}");
+    assert!(files_of(&p).is_empty(), "left: {:?}", files_of(&p));
+}
