@@ -401,15 +401,21 @@ fn the_ground_vehicles_body_turned_45_degrees_shows_its_corner_to_the_depth_came
     }
 }
 
-#[test]
-fn the_ground_appears_where_it_should_and_out_of_range_reads_zero() {
+/// The default depth camera without noise, its vertical focal length and principal
+/// point, px, and its mount's height over the body origin, m.
+fn noiseless_depth_camera() -> (DepthCamera, f64, f64, f64) {
     let params = DepthCameraParams {
         noise_k_per_m: 0.0,
         ..DepthCameraParams::default()
     };
     let (fy, cy) = (params.focal_px().1, params.principal_point_px().1);
     let mount_z = params.position_in_body_m[2];
-    let mut cam = DepthCamera::new(params).unwrap();
+    (DepthCamera::new(params).unwrap(), fy, cy, mount_z)
+}
+
+#[test]
+fn the_ground_appears_where_it_should_and_out_of_range_reads_zero() {
+    let (mut cam, fy, cy, mount_z) = noiseless_depth_camera();
     // The camera 1 m above the ground (its mount is above the body origin).
     let height = 1.0;
     let body = level_body(5.0, 5.0, height - mount_z, 0.0);
@@ -438,13 +444,7 @@ fn the_ground_appears_where_it_should_and_out_of_range_reads_zero() {
 
 #[test]
 fn a_depth_camera_mounted_a_degree_off_its_drawing_sees_the_ground_where_its_true_mount_does() {
-    let params = DepthCameraParams {
-        noise_k_per_m: 0.0,
-        ..DepthCameraParams::default()
-    };
-    let (fy, cy) = (params.focal_px().1, params.principal_point_px().1);
-    let mount_z = params.position_in_body_m[2];
-    let mut cam = DepthCamera::new(params).unwrap();
+    let (mut cam, fy, cy, mount_z) = noiseless_depth_camera();
     // Pitched 1 deg about the optical x axis (the true optical frame into the drawn one).
     let error = Isometry3::from_parts(
         Translation3::identity(),

@@ -145,7 +145,11 @@ fn json_has_exactly_the_agreed_fields_and_null_where_not_applicable() {
     assert_eq!(obj["outcome"], "timeout");
     assert!(obj["touchdown_error_m"].is_null());
     assert!(obj["collisions"].is_null());
-    assert_eq!(obj["faults"], serde_json::json!([]), "no fault: an empty list");
+    assert_eq!(
+        obj["faults"],
+        serde_json::json!([]),
+        "no fault: an empty list"
+    );
     assert!(obj["planning_time_ms_p50"].is_null());
     // Without a touchdown the flight runs to the end of the log.
     assert!(close(s.flight_time_s, 7.0), "{}", s.flight_time_s);

@@ -51,15 +51,9 @@ fn the_install_script_installs_twice_passes_systemds_checks_and_uninstalls() {
     std::fs::create_dir_all(&root).unwrap();
     install(&root, &[]);
     install(&root, &[]);
-    for b in [
-        "camera-ingest",
-        "aruco-pnp",
-        "depth-map",
-        "planner",
-        "fsm",
-        "px4-link",
-        "landing",
-    ] {
+    // Every process the vehicle runs, and `landing` for `landing clean`.
+    let vehicle = graph::STACK_BINARIES.iter().filter(|b| **b != "sim");
+    for b in vehicle.chain(&["landing"]) {
         let p = root.join("usr/local/bin").join(b);
         assert!(p.is_file(), "{} missing", p.display());
     }
