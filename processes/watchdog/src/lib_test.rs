@@ -1,0 +1,204 @@
+use super::*;
+
+const MS: u64 = 1_000_000;
+
+fn process(name: &str, critical: bool) -> WatchedProcess {
+    WatchedProcess {
+        name: name.into(),
+        deadline_ms: 500.0,
+        critical,
+    }
+}
+
+fn watchdog() -> Watchdog {
+    let cfg = WatchdogConfig {
+        processes: vec![
+            process("fsm", true),
+            process("px4-link", true),
+            process("planner", false),
+        ],
+        paths: vec![
+            PathRule {
+                topic: "pad/observation".into(),
+                phases: vec![MissionState::Descend, MissionState::Land],
+                max_silence_ms: 300.0,
+                critical: false,
+            },
+            PathRule {
+                topic: "fsm/setpoint".into(),
+                phases: Vec::new(),
+                max_silence_ms: 200.0,
+                critical: true,
+            },
+        ],
+    };
+    Watchdog::new(cfg).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Every process beats every 100 ms and setpoints flow at 50 Hz until `until_ms`.
+fn healthy(w: &mut Watchdog, from_ms: u64, until_ms: u64) -> Vec<Outputs> {
+    let mut out = Vec::new();
+    for t in (from_ms..until_ms).step_by(20) {
+        let now = t * MS;
+        if t % 100 == 0 {
+            for p in ["fsm", "px4-link", "planner"] {
+                w.beat(p, now);
+            }
+        }
+        w.message("fsm/setpoint", now, true);
+        out.push(w.tick(now));
+    }
+    out
+}
+
+#[test]
+fn a_healthy_stack_raises_nothing() {
+    let mut w = watchdog();
+    w.mission(MissionState::Track, true, 0);
+    let out = healthy(&mut w, 0, 5_000);
+    assert!(out.iter().all(|o| o.faults.is_empty() && o.order.is_none()));
+    let v = w.view();
+    assert_eq!(v.count, 3);
+    assert!(v.processes[..3].iter().all(|p| p.alive == 1));
+}
+
+#[test]
+fn a_dead_fsm_in_the_air_orders_one_safe_landing_at_once() {
+    let mut w = watchdog();
+    w.mission(MissionState::Track, true, 0);
+    healthy(&mut w, 0, 1_000);
+    w.died("fsm", 1_010 * MS);
+    let o = w.tick(1_010 * MS);
+    assert_eq!(o.faults, vec![(1_010 * MS, Fault::Dead("fsm".into()))]);
+    assert_eq!(o.order, Some((SafetyAction::SafeLand, "fsm died".into())));
+    assert!(w.tick(1_030 * MS).order.is_none(), "ordered once");
+    assert!(w.ordered() && w.view().safe_land_ordered == 1);
+}
+
+#[test]
+fn a_hung_px4_link_is_found_after_its_deadline_and_not_before() {
+    let mut w = watchdog();
+    w.mission(MissionState::Descend, true, 0);
+    w.beat("px4-link", 0);
+    w.beat("fsm", 0);
+    assert!(w.tick(500 * MS).order.is_none(), "at the deadline: not yet");
+    w.beat("fsm", 400 * MS);
+    let o = w.tick(501 * MS);
+    assert_eq!(o.faults, vec![(501 * MS, Fault::Hung("px4-link".into()))]);
+    assert_eq!(
+        o.order,
+        Some((
+            SafetyAction::SafeLand,
+            "px4-link hung (no heartbeat)".into()
+        ))
+    );
+    assert_eq!(w.view().processes[1].missed_deadlines, 1);
+}
+
+#[test]
+fn on_the_ground_a_fault_is_reported_but_nothing_is_ordered() {
+    let mut w = watchdog();
+    w.mission(MissionState::Idle, false, 0);
+    healthy(&mut w, 0, 1_000);
+    w.died("fsm", 1_000 * MS);
+    let o = w.tick(1_000 * MS);
+    assert_eq!(o.faults.len(), 1);
+    assert!(o.order.is_none(), "systemd restarts it; nothing to land");
+    // Restarted: it beats again and is alive.
+    w.beat("fsm", 1_300 * MS);
+    assert_eq!(w.view().processes[0].alive, 1);
+}
+
+#[test]
+fn a_non_critical_process_lost_in_the_air_is_reported_without_a_landing() {
+    let mut w = watchdog();
+    w.mission(MissionState::Track, true, 0);
+    healthy(&mut w, 0, 1_000);
+    w.died("planner", 1_000 * MS);
+    let o = w.tick(1_000 * MS);
+    assert_eq!(o.faults, vec![(1_000 * MS, Fault::Dead("planner".into()))]);
+    assert!(o.order.is_none());
+}
+
+#[test]
+fn pad_observations_must_flow_only_while_descending() {
+    let mut w = watchdog();
+    w.mission(MissionState::Track, true, 0);
+    let out = healthy(&mut w, 0, 2_000);
+    assert!(
+        out.iter().all(|o| o.faults.is_empty()),
+        "not needed in Track"
+    );
+    w.mission(MissionState::Descend, true, 2_000 * MS);
+    w.message("pad/observation", 2_100 * MS, true);
+    assert!(
+        healthy(&mut w, 2_100, 2_400)
+            .iter()
+            .all(|o| o.faults.is_empty())
+    );
+    let out = healthy(&mut w, 2_400, 2_600);
+    let silent: Vec<_> = out.iter().flat_map(|o| o.faults.clone()).collect();
+    assert_eq!(silent.len(), 1, "{silent:?}");
+    assert_eq!(silent[0].1, Fault::Silent("pad/observation".into()));
+    assert!(
+        out.iter().all(|o| o.order.is_none()),
+        "the fsm handles a lost pad"
+    );
+}
+
+#[test]
+fn setpoints_that_stop_or_turn_to_garbage_in_the_air_order_a_landing() {
+    let mut w = watchdog();
+    w.mission(MissionState::Track, true, 0);
+    healthy(&mut w, 0, 1_000);
+    w.message("fsm/setpoint", 1_000 * MS, false);
+    let o = w.tick(1_000 * MS);
+    assert_eq!(
+        o.faults,
+        vec![(1_000 * MS, Fault::Garbage("fsm/setpoint".into()))]
+    );
+    assert_eq!(
+        o.order,
+        Some((SafetyAction::SafeLand, "garbage on fsm/setpoint".into()))
+    );
+
+    let mut w = watchdog();
+    w.mission(MissionState::Track, true, 0);
+    for p in ["fsm", "px4-link", "planner"] {
+        w.beat(p, 0);
+    }
+    w.message("fsm/setpoint", 0, true);
+    assert!(w.tick(200 * MS).order.is_none());
+    let o = w.tick(201 * MS);
+    assert_eq!(
+        o.faults,
+        vec![(201 * MS, Fault::Silent("fsm/setpoint".into()))]
+    );
+    assert!(o.order.is_some());
+}
+
+#[test]
+fn a_bad_configuration_names_what_is_wrong() {
+    let bad = |cfg: WatchdogConfig| Watchdog::new(cfg).err().map(|e| e.to_string());
+    let e = bad(WatchdogConfig {
+        processes: vec![WatchedProcess {
+            deadline_ms: f64::NAN,
+            ..process("fsm", true)
+        }],
+        paths: Vec::new(),
+    });
+    assert_eq!(
+        e.as_deref(),
+        Some("heartbeat deadline of fsm: NaN ms is not a positive number of milliseconds")
+    );
+    let e = bad(WatchdogConfig {
+        processes: vec![process("fsm", true), process("fsm", false)],
+        paths: Vec::new(),
+    });
+    assert_eq!(e.as_deref(), Some("fsm is watched twice"));
+    let e = bad(WatchdogConfig {
+        processes: (0..17).map(|k| process(&format!("p{k}"), false)).collect(),
+        paths: Vec::new(),
+    });
+    assert_eq!(e.as_deref(), Some("17 processes to watch: at most 16"));
+}
