@@ -124,12 +124,18 @@ fn paper_sim_lands_with_every_stage_its_own_process() {
         "fsm",
         "px4-link",
     ] {
-        assert!(
-            std::path::Path::new(logs)
-                .join(format!("{p}.log"))
-                .is_file(),
-            "{p}.log"
-        );
+        let log = std::path::Path::new(logs).join(format!("{p}.log"));
+        let text = std::fs::read_to_string(&log).unwrap_or_else(|e| panic!("{p}.log: {e}"));
+        // No message lost between any publisher and this subscriber over the whole
+        // mission: the stop line counts sequence gaps on every input (`lost_upstream`).
+        let stop = text
+            .lines()
+            .find(|l| l.contains(&format!("{p} stopped")))
+            .unwrap_or_else(|| panic!("{p} logged no stop line:\n{text}"));
+        assert!(stop.contains("lost_upstream=0"), "{stop}");
+        if p == "px4-link" {
+            assert!(stop.contains("messages_lost=0"), "{stop}");
+        }
     }
 }
 
