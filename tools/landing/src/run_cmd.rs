@@ -132,6 +132,22 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         .clone()
         .unwrap_or_else(|| graph::default_path(&deploy));
     let graph = graph::Graph::load(&graph_path)?;
+    // Faults go to processes of this graph, in the processes mode only.
+    if !args.inject.is_empty() && !args.processes {
+        anyhow::bail!("--inject needs --processes (faults are done to the stage processes)");
+    }
+    if let Some(i) = args
+        .inject
+        .iter()
+        .find(|i| !graph.nodes.iter().any(|n| n.name == i.process))
+    {
+        let names: Vec<&str> = graph.nodes.iter().map(|n| n.name.as_str()).collect();
+        anyhow::bail!(
+            "--inject {i}: no process {} in the graph (its processes: {})",
+            i.process,
+            names.join(", ")
+        );
+    }
     let seed = args.seed.unwrap_or(scn.scenario.seed);
     let fsm_cfg = run_lockstep::mission(&cfg, &scn)?;
     let rules = Rules::of(&scn)?;
@@ -171,9 +187,6 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
     runtime::shutdown::install();
     let mut died = None;
     let mut faults = Vec::new();
-    if !args.inject.is_empty() && !args.processes {
-        anyhow::bail!("--inject needs --processes (faults are done to the stage processes)");
-    }
     let (end, referee) = if args.processes {
         let log_dir = args.log_dir.clone().unwrap_or_else(|| {
             std::env::temp_dir().join(format!("landing-run-{}", std::process::id()))

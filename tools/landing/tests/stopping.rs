@@ -191,6 +191,21 @@ fn a_malformed_injection_is_one_line_naming_what_is_allowed() {
 }
 
 #[test]
+fn an_injection_into_a_process_the_graph_does_not_have_is_refused_before_the_flight() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_landing"))
+        .args(["run", "--processes", "--inject", "kill:fms@track"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("no process fms in the graph") && err.contains("px4-link"),
+        "{err}"
+    );
+}
+
+#[test]
 fn ctrl_c_ends_a_lockstep_run_as_interrupted_with_its_summary() {
     // Stopped at its first progress line (the flight takes a few seconds here).
     let mut landing = start(&["--scenario", "obstacle-demo", "--json"], &prefix("lock"));
