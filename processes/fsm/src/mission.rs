@@ -231,10 +231,8 @@ impl Fsm {
         // time out, only the camera's error left.
         let mut in_odometry = *obs;
         let d = self.odometry.offset_at(obs.msg.capture_ns);
-        let t = &mut in_odometry.world_from_pad.translation;
-        for k in 0..3 {
-            t[k] -= d[k];
-        }
+        let t = Vector3::from(obs.world_from_pad.translation) - d;
+        in_odometry.world_from_pad.translation = t.into();
         let u = self.filter.update(now_ns, &in_odometry);
         match u {
             Update::Restarted => tracing::warn!("pad observations jumped: pad filter restarted"),
@@ -1101,12 +1099,7 @@ impl Fsm {
         // set the descent oscillating (paper-sim seed 3 at 3 m, +-0.8 m/s).
         if self.state == MissionState::Land {
             let dv = (v - self.velocity()).xy() * self.cfg.relative_velocity_gain;
-            let cap = self.cfg.relative_accel_max_m_s2;
-            let dv = if dv.norm() > cap {
-                dv * (cap / dv.norm())
-            } else {
-                dv
-            };
+            let dv = dv.cap_magnitude(self.cfg.relative_accel_max_m_s2);
             a = Vector3::new(dv.x, dv.y, 0.0);
         }
         self.setpoint(now_ns, p, v, a)

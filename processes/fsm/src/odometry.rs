@@ -21,8 +21,9 @@ const CAPACITY: usize = 256;
 /// The integrated velocity and the recent offsets `estimate - odometry`.
 #[derive(Debug, Clone, Default)]
 pub struct Odometry {
-    /// Time, estimated position and velocity of the newest state, and the odometry there.
-    last: Option<(u64, Vector3<f64>, Vector3<f64>)>,
+    /// Time and estimated velocity of the newest state.
+    last: Option<(u64, Vector3<f64>)>,
+    /// The odometry at that state.
     odometry: Vector3<f64>,
     /// (time ns, estimate - odometry), in time order.
     offsets: VecDeque<(u64, Vector3<f64>)>,
@@ -33,14 +34,14 @@ impl Odometry {
     /// not newer than the last one (a repeat) changes nothing.
     pub fn on_state(&mut self, t_ns: u64, position: Vector3<f64>, velocity: Vector3<f64>) {
         match self.last {
-            Some((t0, _, _)) if t_ns <= t0 => return,
-            Some((t0, _, v0)) => {
+            Some((t0, _)) if t_ns <= t0 => return,
+            Some((t0, v0)) => {
                 let dt = (t_ns - t0) as f64 * 1e-9;
                 self.odometry += 0.5 * (v0 + velocity) * dt;
             }
             None => self.odometry = position,
         }
-        self.last = Some((t_ns, position, velocity));
+        self.last = Some((t_ns, velocity));
         if self.offsets.len() == CAPACITY {
             self.offsets.pop_front();
         }

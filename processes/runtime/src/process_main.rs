@@ -7,6 +7,31 @@ use std::process::ExitCode;
 use clap::Parser;
 use clap::error::ErrorKind;
 
+/// The command line as `A`, or the exit code to end with: `--help` and `--version` print
+/// and give 0; a usage mistake is one line naming what is wrong (clap's first line) and
+/// gives 2; a missing subcommand prints the help and gives 2. Every stack binary and
+/// `landing` parse through it.
+pub fn parse_args<A: Parser>() -> Result<A, ExitCode> {
+    match A::try_parse() {
+        Ok(a) => Ok(a),
+        Err(e) if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) => {
+            let _ = e.print();
+            Err(ExitCode::SUCCESS)
+        }
+        Err(e) if e.kind() == ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+            let _ = e.print();
+            Err(ExitCode::from(2))
+        }
+        Err(e) => {
+            // One line: what is wrong; --help has the rest.
+            let text = e.to_string();
+            let first = text.lines().next().unwrap_or("error: bad arguments");
+            eprintln!("{first} (see --help)");
+            Err(ExitCode::from(2))
+        }
+    }
+}
+
 /// Installs the SIGTERM/SIGINT handler before anything else (a stop that arrives while
 /// the process starts is kept, never fatal), parses the flags (a usage error is one line
 /// and exit code 2; `--help` and `--version` print and exit 0), starts logging at
@@ -21,19 +46,9 @@ where
     E: Display + AsRef<dyn std::error::Error + Send + Sync + 'static>,
 {
     crate::shutdown::install();
-    let args = match A::try_parse() {
+    let args = match parse_args::<A>() {
         Ok(a) => a,
-        Err(e) if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) => {
-            let _ = e.print();
-            return ExitCode::SUCCESS;
-        }
-        Err(e) => {
-            // One line: what is wrong; --help has the rest.
-            let text = e.to_string();
-            let first = text.lines().next().unwrap_or("error: bad arguments");
-            eprintln!("{first} (see --help)");
-            return ExitCode::from(2);
-        }
+        Err(code) => return code,
     };
     crate::logging::init(default_level);
     match run(&args) {

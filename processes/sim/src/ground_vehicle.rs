@@ -399,6 +399,13 @@ pub struct PadState {
 }
 
 impl PadState {
+    /// Velocity of the pad's rigid body at world point `p` (the pad turns as its vehicle
+    /// steers: a point off its centre moves otherwise than the centre), m/s: its
+    /// surface's (whose extent does not matter to a velocity).
+    pub fn velocity_at(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        self.surface([0.0, 0.0]).velocity_at(p)
+    }
+
     /// The pad as a surface the quadrotor can land on, `half_extent_m` in size
     /// (the vehicle's roof; beyond it the gear misses).
     pub fn surface(&self, half_extent_m: [f64; 2]) -> Surface {

@@ -453,8 +453,7 @@ pub fn world_truth_state(world: &World, now_ns: u64) -> TruthState {
             .map_or([0.0; 3], |p| p.world_from_pad.translation.vector.into()),
         pad_velocity: pad.as_ref().map_or([0.0; 3], |p| p.linear_velocity.into()),
         vehicle_velocity_rel_pad: pad.as_ref().map_or([0.0; 3], |p| {
-            let arm = truth.position - p.world_from_pad.translation.vector;
-            (truth.velocity - p.linear_velocity - p.angular_velocity.cross(&arm)).into()
+            (truth.velocity - p.velocity_at(&truth.position)).into()
         }),
         gear_pad: world.gear_in_pad().unwrap_or_default().map(Point2::from),
         contact: match world.resting_on_pad() {

@@ -23,6 +23,14 @@ pub enum Fault {
 }
 
 impl Fault {
+    /// Its name, as `--inject` and the summary write it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Kill => "kill",
+            Self::Stop => "stop",
+        }
+    }
+
     /// The signal that does it.
     pub fn signal(self) -> libc::c_int {
         match self {
@@ -100,10 +108,7 @@ impl FromStr for Injection {
 
 impl fmt::Display for Injection {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let fault = match self.fault {
-            Fault::Kill => "kill",
-            Fault::Stop => "stop",
-        };
+        let fault = self.fault.name();
         match self.when {
             When::At(t) => write!(f, "{fault}:{}@{t}", self.process),
             When::Phase(p) => write!(f, "{fault}:{}@{}", self.process, p.name()),

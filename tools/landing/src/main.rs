@@ -164,26 +164,10 @@ fn main() -> ExitCode {
     // panic in println!.
     // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
     unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
-    // A usage mistake is one line naming what is wrong (clap's own text, first line).
-    let cli = match Cli::try_parse() {
+    // A usage mistake is one line naming what is wrong, as in every stack binary.
+    let cli = match runtime::process_main::parse_args::<Cli>() {
         Ok(c) => c,
-        Err(e) => {
-            use clap::error::ErrorKind;
-            let _ = match e.kind() {
-                ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
-                    let _ = e.print();
-                    return ExitCode::SUCCESS;
-                }
-                ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => e.print(),
-                _ => {
-                    let text = e.to_string();
-                    let first = text.lines().next().unwrap_or("error: bad arguments");
-                    eprintln!("{first} (see --help)");
-                    Ok(())
-                }
-            };
-            return ExitCode::from(2);
-        }
+        Err(code) => return code,
     };
     runtime::logging::init("warn");
     let result = match cli.command {

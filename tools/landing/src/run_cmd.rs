@@ -272,7 +272,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         .collect();
     let log = flight_log(&scn.scenario.name, seed, &eval, obstacles);
     let (outcome, why) = run_eval::verdict(end, &eval, last_state.as_ref(), &rules);
-    let why = died.take().unwrap_or(why);
+    let why = died.unwrap_or(why);
     eprintln!("  referee: {outcome}: {why}");
     let replans = u32::try_from(stats.plans.saturating_sub(1)).unwrap_or(u32::MAX);
     let mut summary = RunSummary::from_log(

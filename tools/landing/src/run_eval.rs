@@ -221,8 +221,9 @@ pub struct RunStats {
 /// and the simulator's evaluator-only truth, exactly as `landing run` and `landing run
 /// --processes` receive them, and decides when and how the run ended by one rule: the
 /// fsm reached Landed, or SafeLand/Abort with the vehicle disarmed (the truth's armed
-/// flag), or the simulator reported a crash; the run goes on one simulated second after
-/// that so the touchdown settles in the log.
+/// flag), or the simulator reported a crash, or after a fault to a process the vehicle is
+/// down and disarmed; the run goes on one simulated second after that so the touchdown
+/// settles in the log.
 #[derive(Debug, Default)]
 pub struct Referee {
     /// The truth collected.
@@ -235,6 +236,8 @@ pub struct Referee {
     pub phase: MissionState,
     last_state: Option<TruthState>,
     ended: Option<(End, u64)>,
+    /// A process was killed, hung or exited: the run ends once the vehicle is down.
+    faulted: bool,
     /// The clock origin of the status messages' `since_ns` (0 in lockstep).
     start_ns: u64,
 }
@@ -295,10 +298,25 @@ impl Referee {
         self.check_end();
     }
 
+    /// A fault to a process (`--inject`, a stage that exited): from now on the run also
+    /// ends when the vehicle is down and disarmed, whoever brought it down (the fsm, or
+    /// PX4's offboard-loss failsafe with the fsm gone).
+    pub fn on_fault(&mut self) {
+        self.faulted = true;
+        self.check_end();
+    }
+
     fn check_end(&mut self) {
         if self.ended.is_none() {
             let down = self.last_state.is_some_and(|s| s.armed == 0);
-            self.ended = End::reached(self.phase, down).map(|e| (e, self.sim_time_ns()));
+            let at = self.sim_time_ns();
+            self.ended = End::reached(self.phase, down).map(|e| (e, at));
+            let on_something = self
+                .last_state
+                .is_some_and(|s| Contact::from_raw(s.contact) != Some(Contact::Airborne));
+            if self.ended.is_none() && self.faulted && down && on_something {
+                self.ended = Some((End::DownAfterFault, at));
+            }
         }
     }
 

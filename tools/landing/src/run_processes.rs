@@ -14,8 +14,8 @@ use anyhow::{Context, Result};
 use graph::{Graph, Node, RunValues};
 use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::msg::{
-    Contact, FsmStatus, LinkOutcome, LinkRequest, MissionState, PadObservation, PlannerGoal,
-    PlannerStats, Setpoint, Stage, Trajectory, TruthEvent, TruthState, VehicleState,
+    FsmStatus, LinkOutcome, LinkRequest, MissionState, PadObservation, PlannerGoal, PlannerStats,
+    Setpoint, Stage, Trajectory, TruthEvent, TruthState, VehicleState,
 };
 use ipc_types::{services, topics};
 use runtime::ipc::Subscriber;
@@ -135,7 +135,8 @@ fn stop_with_parent(cmd: &mut Command) {
 
 /// Runs the mission with every stage as a process, doing `launch.injections` on the way.
 /// A stage that dies (injected or not) does not end the run: the world flies on, and the
-/// run ends when the vehicle is down and disarmed (or by the fsm, or the time limit).
+/// referee ends it once the vehicle is down and disarmed (or by the fsm's end, or the time
+/// limit).
 /// The simulator's death ends it at once.
 pub fn run(
     launch: &Launch<'_>,
@@ -194,7 +195,6 @@ pub fn run(
     let mut faults: Vec<FaultRecord> = Vec::new();
     let mut done = vec![false; launch.injections.len()];
     let mut exits_seen: Vec<String> = Vec::new();
-    let mut down_since: Option<u64> = None;
     let mut next_progress = 0.0f64;
     let wall_limit = Instant::now() + Duration::from_secs_f64(scn.scenario.duration_s + 15.0);
     // A recording wakes on every recorded topic: subscriber queues are short.
@@ -278,7 +278,8 @@ pub fn run(
                     // SAFETY: signalling our own child.
                     unsafe { libc::kill(pid as i32, inj.fault.signal()) };
                     tracing::warn!(fault = %inj, at_s = t_s, "fault injected");
-                    faults.push(fault_record(format!("{:?}", inj.fault), &inj.process, t_s));
+                    faults.push(fault_record(inj.fault.name(), &inj.process, t_s));
+                    referee.on_fault();
                     if inj.fault == Fault::Kill {
                         exits_seen.push(inj.process.clone());
                     }
@@ -296,18 +297,8 @@ pub fn run(
                     return false;
                 }
                 tracing::warn!(process = name.as_str(), %status, "process exited during the mission");
-                faults.push(fault_record("exited".into(), &name, t_s));
-            }
-            // After a fault, the run ends once the vehicle is down and disarmed for a
-            // second, whoever brought it down (the fsm, PX4's failsafe).
-            let down = referee.last_state().is_some_and(|s| {
-                s.armed == 0 && Contact::from_raw(s.contact) != Some(Contact::Airborne)
-            });
-            let now = referee.sim_time_ns();
-            down_since = if down { down_since.or(Some(now)) } else { None };
-            if !faults.is_empty() && down_since.is_some_and(|d| now >= d + 1_000_000_000) {
-                result = Some(End::DownAfterFault);
-                return false;
+                faults.push(fault_record("exited", &name, t_s));
+                referee.on_fault();
             }
             true
         },
@@ -327,9 +318,9 @@ pub fn run(
     })
 }
 
-fn fault_record(fault: String, process: &str, at_s: f64) -> FaultRecord {
+fn fault_record(fault: &str, process: &str, at_s: f64) -> FaultRecord {
     FaultRecord {
-        fault: fault.to_lowercase(),
+        fault: fault.to_string(),
         process: process.to_string(),
         at_s,
         detected_after_ms: None,

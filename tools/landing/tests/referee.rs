@@ -312,10 +312,7 @@ fn a_vehicle_at_rest_off_centre_on_a_pad_driving_a_circle_is_landed() {
     s.run(1.0);
     let pad = s.world.pad().unwrap();
     let at = pad.world_from_pad * nalgebra::Point3::new(0.25, 0.0, 0.0);
-    let v = pad.linear_velocity
-        + pad
-            .angular_velocity
-            .cross(&(at.coords - pad.world_from_pad.translation.vector));
+    let v = pad.velocity_at(&at.coords);
     assert!(pad.angular_velocity.z > 0.7, "{:?}", pad.angular_velocity);
     s.place_over_pad(0.25, 0.0, 0.005, [v.x, v.y, -0.2], 0.0);
     s.run(1.0);

@@ -175,15 +175,21 @@ fn an_fsm_killed_while_tracking_leaves_px4s_offboard_loss_failsafe_to_land_the_v
     assert_nothing_left(&p);
 }
 
-#[test]
-fn a_malformed_injection_is_one_line_naming_what_is_allowed() {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_landing"))
-        .args(["run", "--processes", "--inject", "explode:fsm@track"])
+/// `landing run --processes --inject VALUE` refused: exit code 2, one line on stderr.
+fn refused_injection(value: &str) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_landing"))
+        .args(["run", "--processes", "--inject", value])
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
     assert_eq!(err.trim().lines().count(), 1, "{err}");
+    err
+}
+
+#[test]
+fn a_malformed_injection_is_one_line_naming_what_is_allowed() {
+    let err = refused_injection("explode:fsm@track");
     assert!(
         err.contains("unknown fault") && err.contains("kill or stop"),
         "{err}"
@@ -192,13 +198,7 @@ fn a_malformed_injection_is_one_line_naming_what_is_allowed() {
 
 #[test]
 fn an_injection_into_a_process_the_graph_does_not_have_is_refused_before_the_flight() {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_landing"))
-        .args(["run", "--processes", "--inject", "kill:fms@track"])
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    let err = refused_injection("kill:fms@track");
     assert!(
         err.contains("no process fms in the graph") && err.contains("px4-link"),
         "{err}"
