@@ -969,29 +969,69 @@ pub struct SafetyCommand {
     pub reason: Text,
 }
 
+/// How the watchdog sees one process.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Liveness {
+    /// No heartbeat yet.
+    #[default]
+    Starting = 0,
+    /// Beating within its deadline.
+    Alive = 1,
+    /// Its heartbeat missed the deadline (a hung loop, a stopped process).
+    Hung = 2,
+    /// Its iceoryx2 node is dead or gone.
+    Dead = 3,
+}
+
+impl Liveness {
+    /// Decodes a raw value; one no state has reads as [`Liveness::Dead`], the state nobody
+    /// should rely on.
+    pub fn from_raw(raw: u32) -> Self {
+        match raw {
+            0 => Self::Starting,
+            1 => Self::Alive,
+            2 => Self::Hung,
+            _ => Self::Dead,
+        }
+    }
+
+    /// Short name for logs and `landing status`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Starting => "starting",
+            Self::Alive => "alive",
+            Self::Hung => "hung",
+            Self::Dead => "dead",
+        }
+    }
+}
+
 /// Health of one supervised process as the watchdog sees it.
 #[repr(C)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("landing::ProcessHealth/v1")]
+#[type_name("landing::ProcessHealth/v2")]
 pub struct ProcessHealth {
     /// Process name.
     pub name: Text,
-    /// 1 while its heartbeat arrives within its deadline.
-    pub alive: u32,
+    /// Raw [`Liveness`].
+    pub liveness: u32,
     /// Heartbeat deadlines missed since start.
     pub missed_deadlines: u32,
-    /// When its last heartbeat arrived (monotonic ns).
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+    /// When its last heartbeat arrived (monotonic ns); 0 before the first.
     pub last_heartbeat_ns: u64,
-    /// When its newest output was published (monotonic ns); 0 when it has none.
-    pub last_output_ns: u64,
+    /// When it was last found hung or dead (monotonic ns); 0 when never.
+    pub fault_ns: u64,
 }
 
 /// The watchdog's view of the whole stack.
 #[repr(C)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("landing::WatchdogView/v1")]
+#[type_name("landing::WatchdogView/v2")]
 pub struct WatchdogView {
     /// Sequence, time, stage stamps.
     pub msg: Header,
@@ -999,8 +1039,60 @@ pub struct WatchdogView {
     pub count: u32,
     /// 1 once the watchdog has ordered a safe landing.
     pub safe_land_ordered: u32,
+    /// Faults found since start.
+    pub faults: u32,
+    /// Raw [`MissionState`] the watchdog last saw.
+    pub phase: u32,
+    /// When the newest fault was found (monotonic ns); 0 when none.
+    pub last_fault_ns: u64,
+    /// When the safe landing was ordered (monotonic ns); 0 when not.
+    pub order_ns: u64,
+    /// The newest fault, described.
+    pub last_fault: Text,
+    /// Why it was ordered, or what was done instead ("continue: ...").
+    pub action: Text,
     /// Per-process health.
     pub processes: [ProcessHealth; MAX_WATCHED],
+}
+
+/// What a [`ProcessEvent`] says.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ProcessEventKind {
+    /// A heartbeat arrived.
+    Beat = 1,
+    /// The process's iceoryx2 node is dead or gone.
+    Died = 2,
+}
+
+impl ProcessEventKind {
+    /// Decodes a raw kind; `None` for a value no kind has.
+    pub fn from_raw(raw: u32) -> Option<Self> {
+        match raw {
+            1 => Some(Self::Beat),
+            2 => Some(Self::Died),
+            _ => None,
+        }
+    }
+}
+
+/// A supervised process's sign of life or death as the runtime sees it (a heartbeat
+/// event, a dead or vanished iceoryx2 node): the watchdog stage's input. It never
+/// crosses shared memory: the runtime's supervision source delivers it inside the
+/// watchdog's own process.
+#[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::ProcessEvent/v1")]
+pub struct ProcessEvent {
+    /// Sequence, time.
+    pub msg: Header,
+    /// The process (its graph node name).
+    pub process: Text,
+    /// Raw [`ProcessEventKind`].
+    pub kind: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
 }
 
 /// Kinds of ground-truth events.

@@ -33,6 +33,10 @@ pub enum Payload {
     SafetyCommand,
     /// [`crate::msg::FsmStatus`].
     FsmStatus,
+    /// [`crate::msg::WatchdogView`].
+    WatchdogView,
+    /// [`crate::msg::ProcessEvent`] (delivered inside the watchdog's process).
+    ProcessEvent,
     /// [`crate::msg::TruthEvent`] (evaluator only).
     TruthEvent,
     /// [`crate::msg::TruthState`] (evaluator only).
@@ -58,6 +62,8 @@ impl Payload {
             Self::LinkOutcome => "landing::LinkOutcome/v1",
             Self::SafetyCommand => "landing::SafetyCommand/v1",
             Self::FsmStatus => "landing::FsmStatus/v1",
+            Self::WatchdogView => "landing::WatchdogView/v2",
+            Self::ProcessEvent => "landing::ProcessEvent/v1",
             Self::TruthEvent => "landing::TruthEvent/v2",
             Self::TruthState => "landing::TruthState/v3",
             Self::Mavlink => "MAVLink 2",
@@ -137,6 +143,11 @@ pub const FSM_SETPOINT: &str = "fsm/setpoint";
 pub const FSM_STATUS: &str = "fsm/status";
 /// Safety orders.
 pub const SAFETY_COMMAND: &str = "safety/command";
+/// The watchdog's view of the stack.
+pub const WATCHDOG_VIEW: &str = "watchdog/view";
+/// Heartbeats and deaths of the supervised processes, as the runtime sees them: served
+/// inside the watchdog's process (heartbeat events, iceoryx2's node list), not iceoryx2.
+pub const WATCHDOG_LIVENESS: &str = "watchdog/liveness";
 
 const fn row(name: &'static str, service: &'static str, payload: Payload) -> TopicInfo {
     TopicInfo {
@@ -218,6 +229,17 @@ pub const TABLE: &[TopicInfo] = &[
         services::SAFETY_COMMAND,
         Payload::SafetyCommand,
     ),
+    row(
+        WATCHDOG_VIEW,
+        services::WATCHDOG_VIEW,
+        Payload::WatchdogView,
+    ),
+    TopicInfo {
+        name: WATCHDOG_LIVENESS,
+        service: None,
+        payload: Payload::ProcessEvent,
+        evaluator_only: false,
+    },
 ];
 
 /// The row of `name`, if the stack has such a topic.

@@ -85,6 +85,10 @@ pub struct FsmConfig {
     pub lost_timeout_s: f64,
     /// Vehicle state older than this (or a link reported down) means telemetry is lost, s.
     pub telemetry_timeout_s: f64,
+    /// The watchdog's view older than this (once one came) means the stack is no longer
+    /// supervised: away from the pad the mission lands where it is, over it the descent
+    /// goes on, s.
+    pub watchdog_timeout_s: f64,
     /// Attempts per autopilot request (arm, take-off, OFFBOARD, land, disarm).
     pub request_attempts: u32,
     /// Wait between attempts, s.
@@ -146,6 +150,7 @@ impl Default for FsmConfig {
             lost_climb_max_m: 2.0,
             lost_timeout_s: 10.0,
             telemetry_timeout_s: 0.5,
+            watchdog_timeout_s: 1.0,
             request_attempts: 3,
             request_retry_s: 1.0,
             takeoff_timeout_s: 30.0,
@@ -283,6 +288,7 @@ impl Validate for FsmConfig {
             ("lost_climb_max_m", self.lost_climb_max_m, 0.0, 50.0),
             ("lost_timeout_s", self.lost_timeout_s, 0.1, 600.0),
             ("telemetry_timeout_s", self.telemetry_timeout_s, 0.05, 10.0),
+            ("watchdog_timeout_s", self.watchdog_timeout_s, 0.1, 60.0),
             ("request_retry_s", self.request_retry_s, 0.0, 60.0),
             ("takeoff_timeout_s", self.takeoff_timeout_s, 1.0, 3600.0),
             ("goto_timeout_s", self.goto_timeout_s, 1.0, 3600.0),

@@ -96,6 +96,8 @@ pub struct Fsm {
     /// The frame the filter runs in (the integrated velocity).
     odometry: Odometry,
     vehicle: Option<(u64, VehicleState)>,
+    /// When the watchdog's view last came.
+    watchdog_seen_ns: Option<u64>,
     trajectory: Option<(u64, BSpline, u64)>,
     takeoff: TakeoffStep,
     pending: Option<Pending>,
@@ -169,6 +171,7 @@ impl Fsm {
             transitioned: true,
             transitions: Vec::new(),
             safety_ordered: false,
+            watchdog_seen_ns: None,
         }
     }
 
@@ -296,6 +299,11 @@ impl Fsm {
                 }
             }
         }
+    }
+
+    /// The watchdog's view arrived at `now_ns`: the stack is supervised.
+    pub fn on_watchdog_view(&mut self, now_ns: u64) {
+        self.watchdog_seen_ns = Some(now_ns);
     }
 
     /// One step at `now_ns` (call at `rate_hz`).
@@ -426,6 +434,15 @@ impl Fsm {
         }
         if !self.link_fresh(now_ns) {
             self.go(now_ns, MissionState::SafeLand, "telemetry lost".into());
+            return;
+        }
+        // A silent watchdog is a fault of its own (it may have died, or hung): nothing
+        // would land the vehicle on the next fault. Over the pad the descent goes on.
+        let unsupervised = self
+            .watchdog_seen_ns
+            .is_some_and(|t| now_ns.saturating_sub(t) as f64 * 1e-9 > self.cfg.watchdog_timeout_s);
+        if unsupervised && !matches!(self.state, MissionState::Descend | MissionState::Land) {
+            self.go(now_ns, MissionState::SafeLand, "watchdog silent".into());
             return;
         }
         // Once in OFFBOARD, another mode shown for a while means the pilot or a PX4

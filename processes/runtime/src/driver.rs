@@ -14,7 +14,7 @@ use iceoryx2::prelude::IceoryxSend;
 use ipc_types::msg::{
     CameraFrameHeader, DepthFrameHeader, FsmStatus, LinkOutcome, LinkRequest, OccupancyMapHeader,
     PadObservation, PlannerGoal, PlannerStats, SafetyCommand, Setpoint, Trajectory, TruthEvent,
-    TruthState, VehicleState,
+    TruthState, VehicleState, WatchdogView,
 };
 use ipc_types::topics::{self, Payload};
 use stage::lockstep::NodeSpec;
@@ -105,6 +105,7 @@ enum InPort {
     LinkOutcome(Subscriber<LinkOutcome>),
     SafetyCommand(Subscriber<SafetyCommand>),
     FsmStatus(Subscriber<FsmStatus>),
+    WatchdogView(Subscriber<WatchdogView>),
 }
 
 /// One output port.
@@ -122,6 +123,7 @@ enum OutPort {
     LinkOutcome(Publisher<LinkOutcome>),
     SafetyCommand(Publisher<SafetyCommand>),
     FsmStatus(Publisher<FsmStatus>),
+    WatchdogView(Publisher<WatchdogView>),
     TruthEvent(Publisher<TruthEvent>),
     TruthState(Publisher<TruthState>),
     /// Served by the stage's [`External`].
@@ -149,7 +151,10 @@ fn open_in(ipc: &Ipc, service: &str, payload: Payload) -> Result<Option<InPort>,
         Payload::LinkOutcome => InPort::LinkOutcome(ipc.subscriber(service)?),
         Payload::SafetyCommand => InPort::SafetyCommand(ipc.subscriber(service)?),
         Payload::FsmStatus => InPort::FsmStatus(ipc.subscriber(service)?),
-        Payload::TruthEvent | Payload::TruthState | Payload::Mavlink => return Ok(None),
+        Payload::WatchdogView => InPort::WatchdogView(ipc.subscriber(service)?),
+        Payload::TruthEvent | Payload::TruthState | Payload::Mavlink | Payload::ProcessEvent => {
+            return Ok(None);
+        }
     }))
 }
 
@@ -174,9 +179,10 @@ fn open_out(
         Payload::LinkOutcome => OutPort::LinkOutcome(ipc.publisher(service)?),
         Payload::SafetyCommand => OutPort::SafetyCommand(ipc.publisher(service)?),
         Payload::FsmStatus => OutPort::FsmStatus(ipc.publisher(service)?),
+        Payload::WatchdogView => OutPort::WatchdogView(ipc.publisher(service)?),
         Payload::TruthEvent => OutPort::TruthEvent(ipc.publisher(service)?),
         Payload::TruthState => OutPort::TruthState(ipc.publisher(service)?),
-        Payload::Mavlink => return Ok(None),
+        Payload::Mavlink | Payload::ProcessEvent => return Ok(None),
     }))
 }
 
@@ -234,6 +240,7 @@ macro_rules! on_port {
             InPort::LinkOutcome($s) => $body,
             InPort::SafetyCommand($s) => $body,
             InPort::FsmStatus($s) => $body,
+            InPort::WatchdogView($s) => $body,
         }
     };
 }
@@ -302,6 +309,9 @@ impl InPort {
             Self::FsmStatus(s) => drain(s, newest, skipped, |x| {
                 call(Message::FsmStatus(x.payload()))
             }),
+            Self::WatchdogView(s) => drain(s, newest, skipped, |x| {
+                call(Message::WatchdogView(x.payload()))
+            }),
         }
     }
 }
@@ -354,6 +364,7 @@ impl Outbox for Ports<'_, '_> {
             (OutPort::LinkOutcome(p), Message::LinkOutcome(m)) => send_plain!(p, m),
             (OutPort::SafetyCommand(p), Message::SafetyCommand(m)) => send_plain!(p, m),
             (OutPort::FsmStatus(p), Message::FsmStatus(m)) => send_plain!(p, m),
+            (OutPort::WatchdogView(p), Message::WatchdogView(m)) => send_plain!(p, m),
             (OutPort::TruthEvent(p), Message::TruthEvent(m)) => send_plain!(p, m),
             (OutPort::TruthState(p), Message::TruthState(m)) => send_plain!(p, m),
             (_, m) => Err(StageError::WrongType {
@@ -435,6 +446,8 @@ struct Node<'a> {
     outputs: Vec<(&'static str, OutPort)>,
     external: Option<&'a mut dyn External>,
     heartbeat: crate::Heartbeat,
+    /// systemd's notify socket: `WATCHDOG=1` with every beat.
+    notify: crate::notify::Notifier,
     beat_ns: u64,
     next_beat_ns: u64,
     tick_ns: Option<u64>,
@@ -479,6 +492,7 @@ impl Node<'_> {
         }
         if now >= self.next_beat_ns {
             self.heartbeat.beat()?;
+            self.notify.alive();
             self.next_beat_ns = now + self.beat_ns;
         }
         if now >= self.next_report_ns {
@@ -603,6 +617,7 @@ pub fn run(
         outputs,
         external: external.take(),
         heartbeat,
+        notify: crate::notify::Notifier::from_env(),
         beat_ns,
         next_beat_ns: now,
         tick_ns,
@@ -617,6 +632,7 @@ pub fn run(
         "{} running",
         spec.name
     );
+    node.notify.ready();
     let periodic = spec
         .periodic
         .as_deref()
@@ -644,6 +660,7 @@ pub fn run(
             (Ok(_), None) => Ok(()),
         }
     };
+    node.notify.stopping();
     if stage.finished() {
         tracing::info!("{} finished", spec.name);
     }

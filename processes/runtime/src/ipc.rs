@@ -631,6 +631,32 @@ impl Ipc {
         })
     }
 
+    /// The names of the nodes of this stack, each with whether it is alive (a dead node is
+    /// one whose process is gone without cleaning up); `None` when the list could not be
+    /// read.
+    pub fn nodes(&self) -> Option<Vec<(String, bool)>> {
+        use iceoryx2::node::NodeView;
+        let mut out = Vec::new();
+        let listed = Node::<Svc>::list(&self.config, |state| {
+            let (details, alive) = match &state {
+                NodeState::Alive(v) => (v.details(), true),
+                NodeState::Dead(v) => (v.details(), false),
+                _ => return CallbackProgression::Continue,
+            };
+            if let Some(d) = details {
+                out.push((d.name().as_str().to_string(), alive));
+            }
+            CallbackProgression::Continue
+        });
+        listed.ok().map(|_| out)
+    }
+
+    /// Removes the resources dead nodes of this stack left (their ports in every
+    /// service), so that a restarted process reconnects; how many were cleaned.
+    pub fn cleanup_dead_nodes(&self) -> u64 {
+        self.node.try_cleanup_dead_nodes().cleanups
+    }
+
     /// A listener on `process`'s heartbeat, for a supervisor; attach it to the wait loop as
     /// a deadline to learn when the process hangs.
     pub fn heartbeat_listener(
@@ -981,6 +1007,39 @@ impl PeriodicWait {
             }
         }
     }
+}
+
+/// Sleeps until one of `listeners` has an event or `timeout_ns` passes; which did (their
+/// events are not drained).
+pub(crate) fn wait_any_readable(listeners: &[&Listener<Svc>], timeout_ns: u64) -> Vec<bool> {
+    use iceoryx2::prelude::FileDescriptorBased;
+    let mut pfds: Vec<libc::pollfd> = listeners
+        .iter()
+        .map(|l| libc::pollfd {
+            // SAFETY: the descriptor is only passed to ppoll while the listener, which
+            // owns it, is borrowed; it is not stored or closed.
+            fd: unsafe { l.file_descriptor().native_handle() },
+            events: libc::POLLIN,
+            revents: 0,
+        })
+        .collect();
+    let ts = libc::timespec {
+        tv_sec: (timeout_ns / 1_000_000_000) as libc::time_t,
+        tv_nsec: (timeout_ns % 1_000_000_000) as libc::c_long,
+    };
+    // SAFETY: `pfds` and `ts` are valid for the call; a null signal mask keeps the
+    // current one.
+    let rc = unsafe {
+        libc::ppoll(
+            pfds.as_mut_ptr(),
+            pfds.len() as libc::nfds_t,
+            &ts,
+            std::ptr::null(),
+        )
+    };
+    pfds.iter()
+        .map(|p| rc > 0 && p.revents & libc::POLLIN != 0)
+        .collect()
 }
 
 /// Sleeps until `listener` has an event or `timeout_ns` passes, with the kernel timer's

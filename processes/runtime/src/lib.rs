@@ -10,9 +10,11 @@ pub mod clock;
 pub mod driver;
 pub mod ipc;
 pub mod logging;
+pub mod notify;
 pub mod process_main;
 pub mod serve;
 pub mod shutdown;
+pub mod supervise;
 pub mod threads;
 pub mod udp;
 
@@ -29,5 +31,6 @@ pub use ipc::{
 };
 pub use process_main::process_main;
 pub use serve::{ServeError, StageArgs, serve};
+pub use supervise::{Supervision, SupervisionError};
 pub use threads::{JOIN_TIMEOUT, JoinError, StopFlag, ThreadRole, Worker};
 pub use udp::{Reply, UdpLink, UdpStats};

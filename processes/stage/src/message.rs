@@ -3,8 +3,8 @@
 
 use ipc_types::msg::{
     CameraFrameHeader, DepthFrameHeader, FsmStatus, Header, LinkOutcome, LinkRequest,
-    OccupancyMapHeader, PadObservation, PlannerGoal, PlannerStats, SafetyCommand, Setpoint,
-    Trajectory, TruthEvent, TruthState, VehicleState,
+    OccupancyMapHeader, PadObservation, PlannerGoal, PlannerStats, ProcessEvent, SafetyCommand,
+    Setpoint, Trajectory, TruthEvent, TruthState, VehicleState, WatchdogView,
 };
 use ipc_types::topics::Payload;
 
@@ -37,6 +37,10 @@ pub enum Message<'a> {
     SafetyCommand(&'a SafetyCommand),
     /// The mission status.
     FsmStatus(&'a FsmStatus),
+    /// The watchdog's view.
+    WatchdogView(&'a WatchdogView),
+    /// A heartbeat or death of a supervised process (watchdog input).
+    ProcessEvent(&'a ProcessEvent),
     /// A ground-truth event (evaluator only).
     TruthEvent(&'a TruthEvent),
     /// The ground-truth state (evaluator only).
@@ -62,6 +66,8 @@ impl Message<'_> {
             Self::LinkOutcome(_) => Payload::LinkOutcome,
             Self::SafetyCommand(_) => Payload::SafetyCommand,
             Self::FsmStatus(_) => Payload::FsmStatus,
+            Self::WatchdogView(_) => Payload::WatchdogView,
+            Self::ProcessEvent(_) => Payload::ProcessEvent,
             Self::TruthEvent(_) => Payload::TruthEvent,
             Self::TruthState(_) => Payload::TruthState,
             Self::Mavlink(_) => Payload::Mavlink,
@@ -84,6 +90,8 @@ impl Message<'_> {
             Self::LinkOutcome(m) => &m.msg,
             Self::SafetyCommand(m) => &m.msg,
             Self::FsmStatus(m) => &m.msg,
+            Self::WatchdogView(m) => &m.msg,
+            Self::ProcessEvent(m) => &m.msg,
             Self::TruthEvent(m) => &m.msg,
             Self::TruthState(m) => &m.msg,
             Self::Mavlink(_) => return None,
@@ -106,6 +114,8 @@ impl Message<'_> {
             Self::LinkOutcome(m) => OwnedMessage::LinkOutcome(*m),
             Self::SafetyCommand(m) => OwnedMessage::SafetyCommand(*m),
             Self::FsmStatus(m) => OwnedMessage::FsmStatus(*m),
+            Self::WatchdogView(m) => OwnedMessage::WatchdogView(Box::new(*m)),
+            Self::ProcessEvent(m) => OwnedMessage::ProcessEvent(*m),
             Self::TruthEvent(m) => OwnedMessage::TruthEvent(*m),
             Self::TruthState(m) => OwnedMessage::TruthState(*m),
             Self::Mavlink(b) => OwnedMessage::Mavlink(b.to_vec()),
@@ -144,6 +154,10 @@ pub enum OwnedMessage {
     SafetyCommand(SafetyCommand),
     /// See [`Message::FsmStatus`].
     FsmStatus(FsmStatus),
+    /// See [`Message::WatchdogView`] (boxed: 1.7 kB).
+    WatchdogView(Box<WatchdogView>),
+    /// See [`Message::ProcessEvent`].
+    ProcessEvent(ProcessEvent),
     /// See [`Message::TruthEvent`].
     TruthEvent(TruthEvent),
     /// See [`Message::TruthState`].
@@ -169,6 +183,8 @@ impl OwnedMessage {
             Self::LinkOutcome(m) => Message::LinkOutcome(m),
             Self::SafetyCommand(m) => Message::SafetyCommand(m),
             Self::FsmStatus(m) => Message::FsmStatus(m),
+            Self::WatchdogView(m) => Message::WatchdogView(m),
+            Self::ProcessEvent(m) => Message::ProcessEvent(m),
             Self::TruthEvent(m) => Message::TruthEvent(m),
             Self::TruthState(m) => Message::TruthState(m),
             Self::Mavlink(b) => Message::Mavlink(b),
@@ -191,6 +207,8 @@ impl OwnedMessage {
             Self::LinkOutcome(m) => &mut m.msg,
             Self::SafetyCommand(m) => &mut m.msg,
             Self::FsmStatus(m) => &mut m.msg,
+            Self::WatchdogView(m) => &mut m.msg,
+            Self::ProcessEvent(m) => &mut m.msg,
             Self::TruthEvent(m) => &mut m.msg,
             Self::TruthState(m) => &mut m.msg,
             Self::Mavlink(_) => return None,

@@ -4,7 +4,13 @@
 //! IPC, no clock, no sleep: a driver (iceoryx2 on the vehicle, lockstep in tests) feeds
 //! it. Which processes and paths to watch comes from the dataflow graph.
 
-use ipc_types::msg::{MAX_WATCHED, MissionState, ProcessHealth, SafetyAction, Text, WatchdogView};
+use ipc_types::msg::{
+    Liveness, MAX_WATCHED, MissionState, ProcessHealth, SafetyAction, Text, WatchdogView,
+};
+
+pub mod stage;
+
+pub use stage::{WatchdogStage, WatchdogStageConfig, watched_processes};
 use thiserror::Error;
 
 /// One supervised process.
@@ -32,6 +38,65 @@ pub struct PathRule {
     pub critical: bool,
 }
 
+/// What to do when a process or path that is not critical is lost in the air.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Action {
+    /// Land where the vehicle is (PX4 AUTO.LAND).
+    Land,
+    /// Hold where it is (PX4 AUTO.LOITER) for an operator.
+    Hold,
+    /// Order nothing: the fsm keeps landing on the pad, on its estimate. Only while the
+    /// estimate is fresh; otherwise the watchdog lands.
+    Continue,
+}
+
+impl Action {
+    /// Its name in config and logs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Land => "land",
+            Self::Hold => "hold",
+            Self::Continue => "continue",
+        }
+    }
+}
+
+/// What to do per mission phase when something not critical is lost in the air. A
+/// critical loss (the fsm, px4-link, the autopilot's telemetry, the setpoints) always
+/// lands; on the ground nothing is ordered (systemd restarts what died).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Policy {
+    /// The phases with their own action.
+    pub by_phase: Vec<(MissionState, Action)>,
+    /// Every other phase.
+    pub otherwise: Action,
+}
+
+impl Default for Policy {
+    /// Close over the pad the fsm goes on landing on its estimate (stopping to land in
+    /// place over a moving pad is what ends in a hard landing); anywhere else, land.
+    fn default() -> Self {
+        Self {
+            by_phase: vec![
+                (MissionState::Descend, Action::Continue),
+                (MissionState::Land, Action::Continue),
+            ],
+            otherwise: Action::Land,
+        }
+    }
+}
+
+impl Policy {
+    /// The action for a non-critical loss in `phase`.
+    pub fn action(&self, phase: MissionState) -> Action {
+        self.by_phase
+            .iter()
+            .find(|(p, _)| *p == phase)
+            .map_or(self.otherwise, |(_, a)| *a)
+    }
+}
+
 /// What to watch.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct WatchdogConfig {
@@ -39,6 +104,8 @@ pub struct WatchdogConfig {
     pub processes: Vec<WatchedProcess>,
     /// The data paths.
     pub paths: Vec<PathRule>,
+    /// What to do about a non-critical loss in the air.
+    pub policy: Policy,
 }
 
 /// Why a configuration was refused.
@@ -80,11 +147,22 @@ impl Fault {
     pub fn describe(&self) -> String {
         match self {
             Self::Dead(p) => format!("{p} died"),
-            Self::Hung(p) => format!("{p} hung (no heartbeat)"),
-            Self::Silent(t) => format!("{t} fell silent"),
+            Self::Hung(p) => format!("{p} hung"),
+            Self::Silent(t) => format!("{t} silent"),
             Self::Garbage(t) => format!("garbage on {t}"),
         }
     }
+}
+
+/// What the watchdog decided about one fault in the air.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Decision {
+    /// The fault.
+    pub fault: Fault,
+    /// What it does about it.
+    pub action: Action,
+    /// Why, in a line.
+    pub why: String,
 }
 
 /// What one [`Watchdog::tick`] decided.
@@ -92,24 +170,20 @@ impl Fault {
 pub struct Outputs {
     /// Faults found since the last tick (each reported once, until it clears).
     pub faults: Vec<(u64, Fault)>,
-    /// The order to give, once: a safe landing, with its reason.
+    /// What was decided about the faults standing in the air (each decided once).
+    pub decisions: Vec<Decision>,
+    /// The order to give: a safe landing or a hold, with its reason. Given once; a hold
+    /// may later become a landing.
     pub order: Option<(SafetyAction, String)>,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Health {
-    /// No heartbeat yet.
-    Starting,
-    Alive,
-    Hung,
-    Dead,
 }
 
 #[derive(Debug, Clone)]
 struct ProcessState {
-    health: Health,
+    liveness: Liveness,
     last_beat_ns: Option<u64>,
+    fault_ns: Option<u64>,
     missed: u32,
+    decided: bool,
 }
 
 #[derive(Debug, Clone)]
@@ -117,6 +191,7 @@ struct PathState {
     last_ns: Option<u64>,
     silent: bool,
     garbage: bool,
+    decided: bool,
 }
 
 /// The supervisor.
@@ -128,8 +203,13 @@ pub struct Watchdog {
     phase: MissionState,
     phase_since_ns: u64,
     airborne: bool,
+    pad_fresh: bool,
     pending: Vec<(u64, Fault)>,
-    ordered: bool,
+    order: Option<SafetyAction>,
+    order_ns: u64,
+    faults: u32,
+    last_fault: Option<(u64, String)>,
+    action: String,
 }
 
 impl Watchdog {
@@ -164,9 +244,11 @@ impl Watchdog {
         Ok(Self {
             processes: vec![
                 ProcessState {
-                    health: Health::Starting,
+                    liveness: Liveness::Starting,
                     last_beat_ns: None,
+                    fault_ns: None,
                     missed: 0,
+                    decided: false,
                 };
                 cfg.processes.len()
             ],
@@ -175,6 +257,7 @@ impl Watchdog {
                     last_ns: None,
                     silent: false,
                     garbage: false,
+                    decided: false,
                 };
                 cfg.paths.len()
             ],
@@ -182,8 +265,13 @@ impl Watchdog {
             phase: MissionState::Idle,
             phase_since_ns: 0,
             airborne: false,
+            pad_fresh: false,
             pending: Vec::new(),
-            ordered: false,
+            order: None,
+            order_ns: 0,
+            faults: 0,
+            last_fault: None,
+            action: String::new(),
         })
     }
 
@@ -193,16 +281,18 @@ impl Watchdog {
         if let Some(k) = self.process_index(process) {
             let p = &mut self.processes[k];
             p.last_beat_ns = Some(now_ns);
-            p.health = Health::Alive;
+            p.liveness = Liveness::Alive;
+            p.decided = false;
         }
     }
 
-    /// `process` is gone (its iceoryx2 node is dead, or its heartbeat notifier).
+    /// `process` is gone (its iceoryx2 node is dead, or no longer listed).
     pub fn died(&mut self, process: &str, now_ns: u64) {
         if let Some(k) = self.process_index(process)
-            && self.processes[k].health != Health::Dead
+            && self.processes[k].liveness != Liveness::Dead
         {
-            self.processes[k].health = Health::Dead;
+            self.processes[k].liveness = Liveness::Dead;
+            self.processes[k].fault_ns = Some(now_ns);
             self.pending
                 .push((now_ns, Fault::Dead(process.to_string())));
         }
@@ -223,31 +313,37 @@ impl Watchdog {
             }
             return;
         }
+        if path.garbage || path.silent {
+            path.decided = false;
+        }
         path.garbage = false;
         path.last_ns = Some(now_ns);
         path.silent = false;
     }
 
-    /// The mission's state (from the fsm's status) and whether the vehicle is in the air
-    /// (from the autopilot's landed state), at `now_ns`.
-    pub fn mission(&mut self, phase: MissionState, airborne: bool, now_ns: u64) {
+    /// The mission's state (from the fsm's status), whether the vehicle is in the air
+    /// (from the autopilot's landed state) and whether the fsm's pad estimate is fresh,
+    /// at `now_ns`.
+    pub fn mission(&mut self, phase: MissionState, airborne: bool, pad_fresh: bool, now_ns: u64) {
         if phase != self.phase {
             self.phase = phase;
             self.phase_since_ns = now_ns;
         }
         self.airborne = airborne;
+        self.pad_fresh = pad_fresh;
     }
 
-    /// Looks at every deadline at `now_ns`: new faults, and the order when the policy
-    /// asks for one (at most once per run).
+    /// Looks at every deadline at `now_ns`: new faults, what is done about those standing
+    /// in the air, and the order when one is due.
     pub fn tick(&mut self, now_ns: u64) -> Outputs {
         for (k, w) in self.cfg.processes.iter().enumerate() {
             let p = &mut self.processes[k];
             let late = p
                 .last_beat_ns
                 .is_some_and(|t| now_ns.saturating_sub(t) as f64 * 1e-6 > w.deadline_ms);
-            if p.health == Health::Alive && late {
-                p.health = Health::Hung;
+            if p.liveness == Liveness::Alive && late {
+                p.liveness = Liveness::Hung;
+                p.fault_ns = Some(now_ns);
                 p.missed = p.missed.saturating_add(1);
                 self.pending.push((now_ns, Fault::Hung(w.name.clone())));
             }
@@ -267,57 +363,110 @@ impl Watchdog {
             path.silent = silent;
         }
         let faults = std::mem::take(&mut self.pending);
-        let mut order = None;
-        if self.airborne
-            && !self.ordered
-            && let Some(why) = self.critical_fault()
-        {
-            self.ordered = true;
-            order = Some((SafetyAction::SafeLand, why));
+        if let Some((at, f)) = faults.last() {
+            self.last_fault = Some((*at, f.describe()));
         }
-        Outputs { faults, order }
+        self.faults = self.faults.saturating_add(faults.len() as u32);
+        let mut out = Outputs {
+            faults,
+            ..Outputs::default()
+        };
+        if !self.airborne {
+            return out;
+        }
+        for (fault, critical) in self.undecided() {
+            let action = match (critical, self.cfg.policy.action(self.phase)) {
+                (true, _) => Action::Land,
+                (false, Action::Continue) if !self.pad_fresh => Action::Land,
+                (false, a) => a,
+            };
+            // Short: the view keeps 48 bytes of it (the log the whole line).
+            let why = match (critical, action) {
+                (true, _) => format!("{}: land (critical)", fault.describe()),
+                (false, a)
+                    if a != Action::Continue
+                        && !self.pad_fresh
+                        && self.cfg.policy.action(self.phase) == Action::Continue =>
+                {
+                    format!(
+                        "{} in {}: land, no pad",
+                        fault.describe(),
+                        self.phase.name()
+                    )
+                }
+                (false, a) => format!(
+                    "{} in {}: {}",
+                    fault.describe(),
+                    self.phase.name(),
+                    a.name()
+                ),
+            };
+            let wanted = match action {
+                Action::Land => Some(SafetyAction::SafeLand),
+                Action::Hold => Some(SafetyAction::Hold),
+                Action::Continue => None,
+            };
+            if let Some(w) = wanted
+                && self.order != Some(SafetyAction::SafeLand)
+                && self.order != Some(w)
+            {
+                self.order = Some(w);
+                self.order_ns = now_ns;
+                out.order = Some((w, fault.describe()));
+            }
+            self.action.clone_from(&why);
+            out.decisions.push(Decision { fault, action, why });
+        }
+        out
     }
 
-    /// The first standing fault the policy lands for, described.
-    fn critical_fault(&self) -> Option<String> {
-        let process = self
-            .cfg
-            .processes
-            .iter()
-            .zip(&self.processes)
-            .find(|(w, p)| w.critical && matches!(p.health, Health::Hung | Health::Dead));
-        if let Some((w, p)) = process {
-            let f = if p.health == Health::Dead {
-                Fault::Dead(w.name.clone())
-            } else {
-                Fault::Hung(w.name.clone())
+    /// The standing faults not decided yet, each with whether it is critical; marked
+    /// decided.
+    fn undecided(&mut self) -> Vec<(Fault, bool)> {
+        let mut v = Vec::new();
+        for (w, p) in self.cfg.processes.iter().zip(self.processes.iter_mut()) {
+            let fault = match p.liveness {
+                Liveness::Dead => Fault::Dead(w.name.clone()),
+                Liveness::Hung => Fault::Hung(w.name.clone()),
+                Liveness::Starting | Liveness::Alive => continue,
             };
-            return Some(f.describe());
+            if !p.decided {
+                p.decided = true;
+                v.push((fault, w.critical));
+            }
         }
-        self.cfg
-            .paths
-            .iter()
-            .zip(&self.paths)
-            .find(|(r, s)| r.critical && (s.silent || s.garbage))
-            .map(|(r, s)| {
-                if s.silent {
-                    Fault::Silent(r.topic.clone()).describe()
-                } else {
-                    Fault::Garbage(r.topic.clone()).describe()
-                }
-            })
+        for (r, s) in self.cfg.paths.iter().zip(self.paths.iter_mut()) {
+            let fault = if s.garbage {
+                Fault::Garbage(r.topic.clone())
+            } else if s.silent {
+                Fault::Silent(r.topic.clone())
+            } else {
+                continue;
+            };
+            if !s.decided {
+                s.decided = true;
+                v.push((fault, r.critical));
+            }
+        }
+        v
     }
 
     /// True once a safe landing was ordered.
     pub fn ordered(&self) -> bool {
-        self.ordered
+        self.order == Some(SafetyAction::SafeLand)
     }
 
     /// The view of the stack for the recorder and `landing status`.
     pub fn view(&self) -> WatchdogView {
         let mut v = WatchdogView {
             count: self.cfg.processes.len().min(MAX_WATCHED) as u32,
-            safe_land_ordered: u32::from(self.ordered),
+            safe_land_ordered: u32::from(self.ordered()),
+            faults: self.faults,
+            phase: self.phase as u32,
+            last_fault_ns: self.last_fault.as_ref().map_or(0, |(t, _)| *t),
+            order_ns: self.order_ns,
+            last_fault: Text::new(self.last_fault.as_ref().map_or("", |(_, f)| f)),
+            action: Text::new(&self.action),
             ..WatchdogView::default()
         };
         for (slot, (w, p)) in v
@@ -327,10 +476,11 @@ impl Watchdog {
         {
             *slot = ProcessHealth {
                 name: Text::new(&w.name),
-                alive: u32::from(p.health == Health::Alive),
+                liveness: p.liveness as u32,
                 missed_deadlines: p.missed,
+                reserved: 0,
                 last_heartbeat_ns: p.last_beat_ns.unwrap_or(0),
-                last_output_ns: 0,
+                fault_ns: p.fault_ns.unwrap_or(0),
             };
         }
         v

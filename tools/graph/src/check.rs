@@ -152,16 +152,21 @@ fn topics(raw: &[TopicFile], path: &Path) -> Result<Vec<Topic>, GraphError> {
                     }));
                 }
             }
-            Transport::Mavlink => {
+            Transport::Mavlink | Transport::Runtime => {
+                let kind = if t.transport == Transport::Mavlink {
+                    "MAVLink"
+                } else {
+                    "runtime"
+                };
                 if t.service.is_some() || t.elements.is_some() {
-                    return Err(err(
-                        "service and elements do not apply to a MAVLink topic (allowed: name, transport, type, external)",
-                    ));
+                    return Err(err(&format!(
+                        "service and elements do not apply to a {kind} topic (allowed: name, transport, type, external)"
+                    )));
                 }
                 if t.evaluator_only {
-                    return Err(err(
-                        "evaluator_only = true on a MAVLink topic (allowed: only on the simulator's truth services)",
-                    ));
+                    return Err(err(&format!(
+                        "evaluator_only = true on a {kind} topic (allowed: only on the simulator's truth services)"
+                    )));
                 }
             }
         }
@@ -352,9 +357,9 @@ fn input(
                 "input topic {name}: depth {d} is out of range ({depths})"
             )));
         }
-        (Transport::Mavlink, Some(_)) => {
+        (Transport::Mavlink | Transport::Runtime, Some(_)) => {
             return Err(err(&format!(
-                "input topic {name}: depth does not apply to a MAVLink topic (allowed: no depth; the link's socket or port buffers)"
+                "input topic {name}: depth does not apply to a MAVLink or runtime topic (allowed: no depth; the link's socket or port buffers)"
             )));
         }
         _ => {}

@@ -127,7 +127,7 @@ fn a_node_without_a_binary_is_refused_with_the_stack_binaries() {
     let e = error(&with("binary = \"fsm\"\n", ""));
     assert_eq!(
         e,
-        "deploy/graph.toml: node fsm: no binary (allowed: a command name of lowercase letters, digits and -: one of the stack's (sim, camera-ingest, aruco-pnp, depth-map, planner, fsm, px4-link) or your own)"
+        "deploy/graph.toml: node fsm: no binary (allowed: a command name of lowercase letters, digits and -: one of the stack's (sim, camera-ingest, aruco-pnp, depth-map, planner, fsm, px4-link, watchdog) or your own)"
     );
 }
 
@@ -315,7 +315,7 @@ fn an_iceoryx2_input_needs_a_depth_and_a_mavlink_input_has_none() {
     let e = error(&mavlink);
     assert!(
         e.contains(
-            "node aruco-pnp: input topic fsm/setpoint: depth does not apply to a MAVLink topic"
+            "node aruco-pnp: input topic fsm/setpoint: depth does not apply to a MAVLink or runtime topic"
         ),
         "{e}"
     );

@@ -34,6 +34,7 @@ pub const STACK_BINARIES: &[&str] = &[
     "planner",
     "fsm",
     "px4-link",
+    "watchdog",
 ];
 
 /// The placeholders a node's `args` may use, filled in per run from [`RunValues`].
@@ -101,6 +102,9 @@ pub enum Transport {
     Iceoryx2,
     /// MAVLink 2 over UDP or a serial port (PX4, or the simulator standing in for it).
     Mavlink,
+    /// Served inside the reading process by the runtime itself (the watchdog's
+    /// heartbeats and dead nodes): no service, no publisher node.
+    Runtime,
 }
 
 /// One input of a node: the edge from the topic's publishers to it.

@@ -99,6 +99,7 @@ fn service(t: &Topic) -> &str {
     match t.transport {
         Transport::Iceoryx2 => t.service.as_deref().unwrap_or("-"),
         Transport::Mavlink => "(MAVLink)",
+        Transport::Runtime => "(runtime)",
     }
 }
 
@@ -153,6 +154,7 @@ pub fn dot(graph: &Graph) -> String {
         let shape = match t.transport {
             Transport::Iceoryx2 => "ellipse",
             Transport::Mavlink => "hexagon",
+            Transport::Runtime => "box",
         };
         let _ = writeln!(
             s,

@@ -22,7 +22,7 @@ fn shipped() -> Graph {
 }
 
 #[test]
-fn the_shipped_graph_loads_with_the_seven_processes() {
+fn the_shipped_graph_loads_with_the_eight_processes() {
     let g = shipped();
     let names: Vec<&str> = g.nodes.iter().map(|n| n.name.as_str()).collect();
     assert_eq!(
@@ -34,7 +34,8 @@ fn the_shipped_graph_loads_with_the_seven_processes() {
             "aruco-pnp",
             "depth-map",
             "planner",
-            "fsm"
+            "fsm",
+            "watchdog"
         ]
     );
     for n in &g.nodes {
@@ -171,6 +172,11 @@ fn every_topic_names_the_type_its_service_carries() {
             type_name::<msg::SafetyCommand>(),
             None,
         ),
+        (
+            services::WATCHDOG_VIEW,
+            type_name::<msg::WatchdogView>(),
+            None,
+        ),
     ];
     let g = shipped();
     for t in g.topics.iter().filter(|t| t.service.is_some()) {
@@ -199,7 +205,7 @@ fn landing_run_processes_starts_the_stack_as_it_did_before_the_graph() {
         commit_height: "0.6".into(),
     };
     // The list `landing run --processes` had hard-coded (tools/landing/src/run_processes.rs
-    // before the graph), with the same values.
+    // before the graph), with the same values; the watchdog came later.
     let before: Vec<(&str, Vec<&str>)> = vec![
         (
             "px4-link",
@@ -248,6 +254,10 @@ fn landing_run_processes_starts_the_stack_as_it_did_before_the_graph() {
                 "--preset=-4,-2,4.5",
                 "--commit-height=0.6",
             ],
+        ),
+        (
+            "watchdog",
+            vec!["--config", &v.config, "--deploy-dir", &v.deploy],
         ),
         (
             "sim",

@@ -32,6 +32,9 @@ pub struct StackConfig {
     /// The mission state machine and the pad filter.
     #[serde(default)]
     pub fsm: fsm::FsmConfig,
+    /// The supervisor: its deadlines, the data paths' limits, its policy.
+    #[serde(default)]
+    pub watchdog: watchdog::WatchdogStageConfig,
 }
 
 impl Validate for StackConfig {
@@ -46,6 +49,7 @@ impl Validate for StackConfig {
             .map_err(|e| e.under("depth_map"))?;
         self.planner.validate().map_err(|e| e.under("planner"))?;
         self.fsm.validate().map_err(|e| e.under("fsm"))?;
+        self.watchdog.validate().map_err(|e| e.under("watchdog"))?;
         if let Some(c) = &self.camera_ingest {
             c.validate().map_err(|e| e.under("camera_ingest"))?;
         }

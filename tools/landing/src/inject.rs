@@ -135,11 +135,18 @@ pub struct FaultRecord {
     pub process: String,
     /// Simulated time of the fault, s.
     pub at_s: f64,
-    /// How long until the stack noticed, ms; `null`: nothing in the stack watches yet
-    /// (the watchdog is issue 17's next part).
+    /// How long until the watchdog found the process hung or dead, ms (its view's
+    /// `fault_ns` against the monotonic time the signal was sent); `null`: it did not.
     pub detected_after_ms: Option<f64>,
-    /// What took over: `null` when nothing did.
+    /// What the watchdog decided about it (its decision line: "fsm died: critical,
+    /// land"); `null` when it decided nothing (on the ground, or not found).
     pub action: Option<String>,
+    /// How long until the watchdog's safe-land (or hold) order went out, ms; `null` when
+    /// none followed this fault.
+    pub ordered_after_ms: Option<f64>,
+    /// Monotonic time of the fault, ns (not in the summary).
+    #[serde(skip)]
+    pub at_ns: u64,
     /// The run's outcome.
     pub outcome: String,
 }

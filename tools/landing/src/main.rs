@@ -1,8 +1,8 @@
 //! `landing`: the one user-facing command of the landing stack.
 
 use landing::{
-    bench_aruco, bench_depth, bench_ipc, bench_perception, bench_planner, bench_sim, config_cmd,
-    graph_cmd, map_cmd, pad_detect, pad_print, plan_cmd, record, run_cmd,
+    bench_aruco, bench_depth, bench_faults, bench_ipc, bench_perception, bench_planner, bench_sim,
+    config_cmd, graph_cmd, map_cmd, pad_detect, pad_print, plan_cmd, record, run_cmd,
 };
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -120,6 +120,9 @@ enum BenchCommand {
     /// Planner success rate and planning time on random pillar fields and the paper's
     /// obstacle scene.
     Planner(bench_planner::PlannerArgs),
+    /// The fault matrix: every watched process killed and hung while tracking and while
+    /// descending; how each flight ends and how fast the watchdog orders.
+    Faults(bench_faults::FaultsArgs),
     /// Internal: the publishing side of `bench ipc`, started by it in a second process.
     #[command(hide = true)]
     IpcPeer(bench_ipc::PeerArgs),
@@ -182,6 +185,7 @@ fn main() -> ExitCode {
             bench_ipc::run_peer(&args, cli.ipc_prefix.as_deref())
         }
         Command::Bench(BenchCommand::Planner(args)) => bench_planner::run(&args),
+        Command::Bench(BenchCommand::Faults(args)) => bench_faults::run(&args),
         Command::Plan(args) => match plan_cmd::run(&args) {
             Ok(false) => return ExitCode::from(plan_cmd::NO_PLAN),
             other => other.map(|_| ()),

@@ -92,6 +92,8 @@ pub fn stage_for(node: &Node, setup: &Setup<'_>) -> Result<Option<Box<dyn Stage>
         )),
         "planner" => Box::new(PlannerStage::new(cfg.planner.clone())),
         "fsm" => Box::new(FsmStage::new(setup.fsm.clone())),
+        // In lockstep no process can die or hang: it watches the data paths only.
+        "watchdog" => Box::new(watchdog::WatchdogStage::new(cfg.watchdog.clone(), &[])?),
         _ => return Ok(None),
     }))
 }
@@ -110,7 +112,7 @@ pub fn driver(
             None => match extra(node) {
                 Some(s) => s,
                 None => bail!(
-                    "graph node `{}` has no stage to run in lockstep (known: sim, px4-link, camera-ingest, aruco-pnp, depth-map, planner, fsm)",
+                    "graph node `{}` has no stage to run in lockstep (known: sim, px4-link, camera-ingest, aruco-pnp, depth-map, planner, fsm, watchdog)",
                     node.name
                 ),
             },
@@ -192,11 +194,13 @@ fn observe(p: &Published<'_>, referee: &mut Referee, rec: &mut Recording) -> Res
         Message::LinkRequest(m) => rec.write(name, p.now_ns, m)?,
         Message::LinkOutcome(m) => rec.write(name, p.now_ns, m)?,
         Message::SafetyCommand(m) => rec.write(name, p.now_ns, m)?,
+        Message::WatchdogView(m) => rec.write(name, p.now_ns, m)?,
         // Frames, maps and MAVLink bytes are not recorded (yet: issue 18).
         Message::CameraFrame(..)
         | Message::DepthFrame(..)
         | Message::OccupancyMap(..)
-        | Message::Mavlink(_) => {}
+        | Message::Mavlink(_)
+        | Message::ProcessEvent(_) => {}
     }
     Ok(())
 }

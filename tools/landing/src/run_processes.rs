@@ -15,7 +15,7 @@ use graph::{Graph, Node, RunValues};
 use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::msg::{
     FsmStatus, LinkOutcome, LinkRequest, MissionState, PadObservation, PlannerGoal, PlannerStats,
-    Setpoint, Stage, Trajectory, TruthEvent, TruthState, VehicleState,
+    Setpoint, Stage, Trajectory, TruthEvent, TruthState, VehicleState, WatchdogView,
 };
 use ipc_types::{services, topics};
 use runtime::ipc::Subscriber;
@@ -153,6 +153,7 @@ pub fn run(
     let truth_state = ipc.subscriber::<TruthState>(services::SIM_TRUTH_STATE)?;
     let status = ipc.subscriber::<FsmStatus>(services::FSM_STATUS)?;
     let planner_stats = ipc.subscriber::<PlannerStats>(services::PLANNER_STATS)?;
+    let views = ipc.subscriber::<WatchdogView>(services::WATCHDOG_VIEW)?;
     let taps = match recorder {
         Some(_) => Some(Taps::open(&ipc)?),
         None => None,
@@ -198,7 +199,12 @@ pub fn run(
     let mut next_progress = 0.0f64;
     let wall_limit = Instant::now() + Duration::from_secs_f64(scn.scenario.duration_s + 15.0);
     // A recording wakes on every recorded topic: subscriber queues are short.
-    let mut listeners = vec![truth_state.listener(), status.listener(), truth.listener()];
+    let mut listeners = vec![
+        truth_state.listener(),
+        status.listener(),
+        truth.listener(),
+        views.listener(),
+    ];
     if let Some(t) = &taps {
         listeners.extend([
             t.states.listener(),
@@ -242,6 +248,14 @@ pub fn run(
                         r.write_message(&name(topics::SIM_TRUTH), monotonic_ns(), &t)?;
                     }
                     referee.on_truth(&t);
+                }
+                while let Some(v) = views.receive()? {
+                    if let Some(r) = recorder.as_mut() {
+                        r.write_message(&name(topics::WATCHDOG_VIEW), monotonic_ns(), v.payload())?;
+                    }
+                    for f in faults.iter_mut() {
+                        note_detection(f, v.payload());
+                    }
                 }
                 while let Some(s) = truth_state.receive()? {
                     if let Some(r) = recorder.as_mut() {
@@ -325,7 +339,32 @@ fn fault_record(fault: &str, process: &str, at_s: f64) -> FaultRecord {
         at_s,
         detected_after_ms: None,
         action: None,
+        ordered_after_ms: None,
         outcome: String::new(),
+        at_ns: monotonic_ns(),
+    }
+}
+
+/// What the watchdog's `view` says of the fault `f`: when it found the process hung or
+/// dead, what it decided, and when it ordered (the first time each, after the fault).
+fn note_detection(f: &mut FaultRecord, view: &WatchdogView) {
+    let after_ms = |t: u64| (t >= f.at_ns).then(|| (t - f.at_ns) as f64 * 1e-6);
+    let n = (view.count as usize).min(view.processes.len());
+    if f.detected_after_ms.is_none()
+        && let Some(p) = view.processes[..n]
+            .iter()
+            .find(|p| p.name.as_str() == f.process)
+    {
+        f.detected_after_ms = after_ms(p.fault_ns);
+    }
+    if f.detected_after_ms.is_some() {
+        let line = view.action.as_str();
+        if f.action.is_none() && line.starts_with(&format!("{} ", f.process)) {
+            f.action = Some(line.to_string());
+        }
+        if f.ordered_after_ms.is_none() && view.order_ns > 0 {
+            f.ordered_after_ms = after_ms(view.order_ns);
+        }
     }
 }
 

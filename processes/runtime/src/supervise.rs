@@ -1,0 +1,180 @@
+//! The supervision source: the liveness of the stack's processes as the runtime sees it,
+//! delivered to the watchdog stage as `watchdog/liveness` messages. A heartbeat event of a
+//! process is a beat; a node of the stack that is listed dead, or that was alive and is
+//! no longer listed, is a death (whoever cleaned it up first). After a death the source
+//! removes the dead node's resources, so that a process systemd restarts reconnects.
+
+use std::time::Duration;
+
+use iceoryx2::port::listener::Listener;
+use ipc_types::msg::{Header, ProcessEvent, ProcessEventKind, Text};
+use ipc_types::topics;
+use stage::{Counter, External, Flow, Input, Message, StageError};
+
+use crate::ipc::{Ipc, IpcPrefix, NodeError, ServiceError, Svc, wait_any_readable};
+
+/// One watched process.
+struct Watched {
+    name: String,
+    heartbeat: Listener<Svc>,
+    /// Seen alive in the node list.
+    listed: bool,
+    /// Reported dead since it was last seen alive.
+    reported: bool,
+}
+
+/// Why the supervision source could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum SupervisionError {
+    /// Its iceoryx2 node.
+    #[error(transparent)]
+    Node(#[from] NodeError),
+    /// A heartbeat service.
+    #[error(transparent)]
+    Service(#[from] ServiceError),
+}
+
+/// Heartbeats and node deaths of the watched processes, as an [`External`] source. It
+/// has its own iceoryx2 node (`<process>-supervision`), listed alive beside the stage's.
+pub struct Supervision {
+    ipc: Ipc,
+    watched: Vec<Watched>,
+    poll_ns: u64,
+    next_poll_ns: u64,
+    seq: u64,
+    beats: u64,
+    deaths: u64,
+    cleaned: u64,
+}
+
+impl Supervision {
+    /// Watches `processes` (name, heartbeat deadline) of the stack under `prefix` for the
+    /// process `owner`, listing its nodes every `poll`.
+    pub fn open(
+        owner: &str,
+        prefix: &IpcPrefix,
+        processes: &[(String, Duration)],
+        poll: Duration,
+    ) -> Result<Self, SupervisionError> {
+        let ipc = Ipc::open(&format!("{owner}-supervision"), prefix)?;
+        let mut watched = Vec::with_capacity(processes.len());
+        for (name, deadline) in processes {
+            watched.push(Watched {
+                name: name.clone(),
+                heartbeat: ipc.heartbeat_listener(name, *deadline)?,
+                listed: false,
+                reported: false,
+            });
+        }
+        Ok(Self {
+            ipc,
+            watched,
+            poll_ns: u64::try_from(poll.as_nanos()).unwrap_or(u64::MAX).max(1),
+            next_poll_ns: 0,
+            seq: 0,
+            beats: 0,
+            deaths: 0,
+            cleaned: 0,
+        })
+    }
+
+    fn event(&mut self, k: usize, kind: ProcessEventKind, now_ns: u64) -> ProcessEvent {
+        self.seq += 1;
+        ProcessEvent {
+            msg: Header {
+                seq: self.seq,
+                ..Header::captured_at(now_ns)
+            },
+            process: Text::new(&self.watched[k].name),
+            kind: kind as u32,
+            reserved: 0,
+        }
+    }
+
+    /// Lists the stack's nodes; the watched processes that died since the last look.
+    fn poll_nodes(&mut self) -> Vec<usize> {
+        let Some(nodes) = self.ipc.nodes() else {
+            return Vec::new();
+        };
+        let mut died = Vec::new();
+        for (k, w) in self.watched.iter_mut().enumerate() {
+            let alive = nodes.iter().any(|(n, a)| *a && *n == w.name);
+            if alive {
+                w.listed = true;
+                w.reported = false;
+            } else if w.listed && !w.reported {
+                w.listed = false;
+                w.reported = true;
+                died.push(k);
+            }
+        }
+        if nodes.iter().any(|(_, alive)| !alive) {
+            self.cleaned += self.ipc.cleanup_dead_nodes();
+        }
+        died
+    }
+}
+
+impl External for Supervision {
+    fn topics(&self) -> &[&'static str] {
+        &[topics::WATCHDOG_LIVENESS]
+    }
+
+    fn wait(
+        &mut self,
+        timeout_ns: u64,
+        clock: &dyn Fn() -> u64,
+        deliver: &mut dyn FnMut(Input<'_>, u64) -> Result<(), StageError>,
+    ) -> Result<Flow, StageError> {
+        let now = clock();
+        let until_poll = self.next_poll_ns.saturating_sub(now);
+        let listeners: Vec<&Listener<Svc>> = self.watched.iter().map(|w| &w.heartbeat).collect();
+        let ready = wait_any_readable(&listeners, timeout_ns.min(until_poll));
+        let at = clock();
+        for (k, beat) in ready.into_iter().enumerate() {
+            if !beat {
+                continue;
+            }
+            let _ = self.watched[k].heartbeat.try_wait(|_| {});
+            self.beats += 1;
+            let e = self.event(k, ProcessEventKind::Beat, at);
+            deliver(
+                Input {
+                    topic: topics::WATCHDOG_LIVENESS,
+                    msg: Message::ProcessEvent(&e),
+                },
+                at,
+            )?;
+        }
+        if at >= self.next_poll_ns {
+            self.next_poll_ns = at + self.poll_ns;
+            for k in self.poll_nodes() {
+                self.deaths += 1;
+                let at = clock();
+                let e = self.event(k, ProcessEventKind::Died, at);
+                deliver(
+                    Input {
+                        topic: topics::WATCHDOG_LIVENESS,
+                        msg: Message::ProcessEvent(&e),
+                    },
+                    at,
+                )?;
+            }
+        }
+        Ok(Flow::Open)
+    }
+
+    fn send(&mut self, topic: &str, _msg: Message<'_>) -> Result<(), StageError> {
+        Err(StageError::Transport(format!(
+            "the supervision source takes nothing (`{topic}`)"
+        )))
+    }
+
+    fn counters(&self) -> Vec<Counter> {
+        vec![
+            ("heartbeat_events", self.beats),
+            ("nodes_gone", self.deaths),
+            ("dead_nodes_cleaned", self.cleaned),
+        ]
+    }
+}

@@ -1,0 +1,377 @@
+//! The watchdog as a pipeline stage: liveness events (`watchdog/liveness`, served by the
+//! runtime's supervision source in a process; none in lockstep), the vehicle state, the
+//! mission status, setpoints, pad observations and camera frames in; `safety/command`
+//! (repeated while it stands, so a restarted px4-link still gets it) and `watchdog/view`
+//! out.
+
+use ipc_types::msg::{
+    CameraFrameHeader, Header, LandedState, MissionState, PadObservation, ProcessEventKind,
+    SafetyAction, SafetyCommand, Setpoint, Stage as StageId, Text, VehicleState,
+};
+use ipc_types::topics;
+use serde::Deserialize;
+use stack_config::{Invalid, Validate, check_range};
+use stage::{Counter, Input, Message, Outbox, Stage, StageError};
+
+use crate::{Action, PathRule, Policy, Watchdog, WatchdogConfig, WatchedProcess};
+
+/// The processes whose loss in the air always lands: nothing else flies the vehicle.
+pub const CRITICAL: &[&str] = &["fsm", "px4-link"];
+
+/// `[watchdog]` of the stack configuration.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WatchdogStageConfig {
+    /// How often the deadlines are looked at, ms (the resolution of a hang's detection).
+    pub tick_ms: u64,
+    /// How often the stack's iceoryx2 nodes are listed for dead ones, ms (the resolution
+    /// of a death's detection).
+    pub node_poll_ms: u64,
+    /// How often the view is published (and a standing order repeated), ms.
+    pub view_period_ms: u64,
+    /// The autopilot's telemetry (vehicle/state) silent this long in the air: land, ms.
+    pub state_silence_ms: f64,
+    /// Setpoints silent this long while the fsm flies offboard: land, ms.
+    pub setpoint_silence_ms: f64,
+    /// Camera frames silent this long: the policy's action, ms.
+    pub camera_silence_ms: f64,
+    /// The fsm's pad estimate counts as fresh this long after the last observation, ms.
+    pub pad_fresh_ms: f64,
+    /// What to do about a non-critical loss in the air, per phase.
+    pub policy: PolicyConfig,
+}
+
+/// `[watchdog.policy]`: "land", "hold" or "continue" for the descent and the touchdown,
+/// and for every other phase.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PolicyConfig {
+    /// While descending onto the pad.
+    pub descend: Action,
+    /// During the touchdown.
+    pub land: Action,
+    /// Every other phase (take-off, going to the preset, waiting, tracking).
+    pub otherwise: Action,
+}
+
+impl Default for PolicyConfig {
+    fn default() -> Self {
+        let p = Policy::default();
+        Self {
+            descend: p.action(MissionState::Descend),
+            land: p.action(MissionState::Land),
+            otherwise: p.otherwise,
+        }
+    }
+}
+
+impl Default for WatchdogStageConfig {
+    fn default() -> Self {
+        Self {
+            tick_ms: 10,
+            node_poll_ms: 20,
+            view_period_ms: 200,
+            state_silence_ms: 500.0,
+            setpoint_silence_ms: 500.0,
+            camera_silence_ms: 1000.0,
+            pad_fresh_ms: 500.0,
+            policy: PolicyConfig::default(),
+        }
+    }
+}
+
+impl Validate for WatchdogStageConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        check_range("tick_ms", self.tick_ms, 1, 1000)?;
+        check_range("node_poll_ms", self.node_poll_ms, 1, 1000)?;
+        check_range("view_period_ms", self.view_period_ms, 10, 10_000)?;
+        for (k, v) in [
+            ("state_silence_ms", self.state_silence_ms),
+            ("setpoint_silence_ms", self.setpoint_silence_ms),
+            ("camera_silence_ms", self.camera_silence_ms),
+            ("pad_fresh_ms", self.pad_fresh_ms),
+        ] {
+            check_range(k, v, 10.0, 60_000.0)?;
+        }
+        Ok(())
+    }
+}
+
+impl WatchdogStageConfig {
+    /// What the watchdog watches: `processes` (graph node name, heartbeat deadline in ms),
+    /// the fsm and px4-link critical, and the data paths.
+    pub fn watchdog_config(&self, processes: &[(String, f64)]) -> WatchdogConfig {
+        use MissionState as M;
+        let offboard = vec![M::GoToPreset, M::WaitForPad, M::Track, M::Descend, M::Land];
+        WatchdogConfig {
+            processes: processes
+                .iter()
+                .map(|(name, deadline_ms)| WatchedProcess {
+                    name: name.clone(),
+                    deadline_ms: *deadline_ms,
+                    critical: CRITICAL.contains(&name.as_str()),
+                })
+                .collect(),
+            paths: vec![
+                PathRule {
+                    topic: topics::VEHICLE_STATE.into(),
+                    phases: Vec::new(),
+                    max_silence_ms: self.state_silence_ms,
+                    critical: true,
+                },
+                PathRule {
+                    topic: topics::FSM_SETPOINT.into(),
+                    phases: offboard,
+                    max_silence_ms: self.setpoint_silence_ms,
+                    critical: true,
+                },
+                PathRule {
+                    topic: topics::CAMERA_FRAME.into(),
+                    phases: Vec::new(),
+                    max_silence_ms: self.camera_silence_ms,
+                    critical: false,
+                },
+            ],
+            policy: Policy {
+                by_phase: vec![
+                    (M::Descend, self.policy.descend),
+                    (M::Land, self.policy.land),
+                ],
+                otherwise: self.policy.otherwise,
+            },
+        }
+    }
+}
+
+#[derive(Debug, Default, Clone, Copy)]
+struct Counts {
+    beats: u64,
+    deaths: u64,
+    messages: u64,
+    garbage: u64,
+    faults: u64,
+    orders: u64,
+    views: u64,
+}
+
+/// The watchdog stage.
+pub struct WatchdogStage {
+    dog: Watchdog,
+    cfg: WatchdogStageConfig,
+    phase: MissionState,
+    pad_valid: bool,
+    airborne: bool,
+    last_pad_ns: Option<u64>,
+    order: Option<SafetyCommand>,
+    next_view_ns: u64,
+    seq: u64,
+    counts: Counts,
+}
+
+impl WatchdogStage {
+    /// The stage watching `processes` (name, heartbeat deadline ms) with `cfg` (validated
+    /// by the caller).
+    pub fn new(
+        cfg: WatchdogStageConfig,
+        processes: &[(String, f64)],
+    ) -> Result<Self, crate::ConfigError> {
+        Ok(Self {
+            dog: Watchdog::new(cfg.watchdog_config(processes))?,
+            cfg,
+            phase: MissionState::Idle,
+            pad_valid: false,
+            airborne: false,
+            last_pad_ns: None,
+            order: None,
+            next_view_ns: 0,
+            seq: 0,
+            counts: Counts::default(),
+        })
+    }
+
+    /// The supervisor, to read its view.
+    pub fn watchdog(&self) -> &Watchdog {
+        &self.dog
+    }
+
+    fn header(&mut self, now_ns: u64) -> Header {
+        self.seq += 1;
+        let mut h = Header::captured_at(now_ns);
+        h.seq = self.seq;
+        h.push_stage(StageId::Watchdog, now_ns, now_ns);
+        h
+    }
+
+    fn mission(&mut self, now_ns: u64) {
+        let fresh = self.pad_valid
+            && self
+                .last_pad_ns
+                .is_some_and(|t| now_ns.saturating_sub(t) as f64 * 1e-6 <= self.cfg.pad_fresh_ms);
+        self.dog.mission(self.phase, self.airborne, fresh, now_ns);
+    }
+}
+
+fn finite(v: &[f64]) -> bool {
+    v.iter().all(|x| x.is_finite() && x.abs() < 1e6)
+}
+
+fn sane_state(s: &VehicleState) -> bool {
+    let p = &s.world_from_body;
+    finite(&p.translation) && finite(&p.rotation_xyzw) && finite(&s.velocity)
+}
+
+fn sane_setpoint(s: &Setpoint) -> bool {
+    finite(&s.position) && finite(&s.velocity) && finite(&s.acceleration) && s.yaw.is_finite()
+}
+
+fn sane_observation(o: &PadObservation) -> bool {
+    let (c, w) = (&o.camera_from_pad, &o.world_from_pad);
+    finite(&c.translation)
+        && finite(&c.rotation_xyzw)
+        && finite(&w.translation)
+        && finite(&w.rotation_xyzw)
+        && o.reprojection_error_px.is_finite()
+}
+
+fn sane_frame(h: &CameraFrameHeader, pixels: &[u8]) -> bool {
+    h.width > 0 && h.height > 0 && h.expected_len().is_some_and(|n| n <= pixels.len())
+}
+
+impl Stage for WatchdogStage {
+    fn name(&self) -> &'static str {
+        "watchdog"
+    }
+
+    fn tick_period_ns(&self) -> Option<u64> {
+        Some(self.cfg.tick_ms * 1_000_000)
+    }
+
+    fn on_input(
+        &mut self,
+        now_ns: u64,
+        input: Input<'_>,
+        _out: &mut dyn Outbox,
+    ) -> Result<(), StageError> {
+        let (topic, sane) = match input.msg {
+            Message::ProcessEvent(e) => {
+                match ProcessEventKind::from_raw(e.kind) {
+                    Some(ProcessEventKind::Beat) => {
+                        self.counts.beats += 1;
+                        self.dog.beat(e.process.as_str(), now_ns);
+                    }
+                    Some(ProcessEventKind::Died) => {
+                        self.counts.deaths += 1;
+                        self.dog.died(e.process.as_str(), now_ns);
+                    }
+                    None => {}
+                }
+                return Ok(());
+            }
+            Message::VehicleState(s) => {
+                let sane = sane_state(s);
+                if sane {
+                    self.airborne = matches!(
+                        LandedState::from_raw(s.landed_state),
+                        LandedState::InAir | LandedState::Takeoff | LandedState::Landing
+                    );
+                }
+                (topics::VEHICLE_STATE, sane)
+            }
+            Message::FsmStatus(s) => {
+                self.phase = MissionState::from_raw(s.state).unwrap_or(self.phase);
+                self.pad_valid = s.pad_valid == 1;
+                (topics::FSM_STATUS, true)
+            }
+            Message::Setpoint(s) => (topics::FSM_SETPOINT, sane_setpoint(s)),
+            Message::PadObservation(o) => {
+                let sane = sane_observation(o);
+                if sane {
+                    self.last_pad_ns = Some(now_ns);
+                }
+                (topics::PAD_OBSERVATION, sane)
+            }
+            Message::CameraFrame(h, px) => (topics::CAMERA_FRAME, sane_frame(h, px)),
+            _ => return Ok(()),
+        };
+        self.counts.messages += 1;
+        if !sane {
+            self.counts.garbage += 1;
+        }
+        self.dog.message(topic, now_ns, sane);
+        Ok(())
+    }
+
+    fn on_tick(&mut self, now_ns: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
+        self.mission(now_ns);
+        let o = self.dog.tick(now_ns);
+        for (_, f) in &o.faults {
+            self.counts.faults += 1;
+            tracing::warn!(fault = %f.describe(), "watchdog: fault");
+        }
+        for d in &o.decisions {
+            tracing::warn!(action = d.action.name(), "watchdog: {}", d.why);
+        }
+        let mut send_now = false;
+        if let Some((action, why)) = o.order {
+            self.counts.orders += 1;
+            tracing::error!(action = ?action, "watchdog orders: {why}");
+            self.order = Some(SafetyCommand {
+                msg: Header::default(),
+                action: action as u32,
+                reserved: 0,
+                source: Text::new("watchdog"),
+                reason: Text::new(&why),
+            });
+            send_now = true;
+        }
+        let view_due = now_ns >= self.next_view_ns;
+        if (send_now || view_due)
+            && let Some(mut c) = self.order
+        {
+            c.msg = self.header(now_ns);
+            out.publish(topics::SAFETY_COMMAND, Message::SafetyCommand(&c))?;
+        }
+        if view_due || send_now || !o.faults.is_empty() {
+            self.next_view_ns = now_ns + self.cfg.view_period_ms * 1_000_000;
+            let mut v = self.dog.view();
+            v.msg = self.header(now_ns);
+            self.counts.views += 1;
+            out.publish(topics::WATCHDOG_VIEW, Message::WatchdogView(&v))?;
+        }
+        Ok(())
+    }
+
+    fn counters(&self) -> Vec<Counter> {
+        let c = &self.counts;
+        vec![
+            ("beats", c.beats),
+            ("deaths", c.deaths),
+            ("messages", c.messages),
+            ("garbage", c.garbage),
+            ("faults", c.faults),
+            ("orders", c.orders),
+            ("views", c.views),
+        ]
+    }
+}
+
+/// The safety action a view's order stands for, for tools (`None`: nothing ordered).
+pub fn ordered_action(v: &ipc_types::msg::WatchdogView) -> Option<SafetyAction> {
+    (v.order_ns > 0).then(|| {
+        if v.safe_land_ordered == 1 {
+            SafetyAction::SafeLand
+        } else {
+            SafetyAction::Hold
+        }
+    })
+}
+
+/// The processes a watchdog of `graph` watches: every vehicle node but itself, with its
+/// heartbeat deadline, ms.
+pub fn watched_processes(graph: &graph::Graph) -> Vec<(String, f64)> {
+    graph
+        .vehicle_nodes()
+        .filter(|n| n.name != "watchdog")
+        .map(|n| (n.name.clone(), n.heartbeat_deadline_ms as f64))
+        .collect()
+}

@@ -1,0 +1,183 @@
+//! `landing bench faults`: the fault matrix. Every process the watchdog watches is killed
+//! (SIGKILL) and stopped (SIGSTOP: a hang) while the fsm tracks and while it descends,
+//! one `landing run --processes --inject` flight each; each row says how the flight
+//! ended, how long the watchdog took to find the fault and to order, and what it decided.
+//! The headline: fault -> safe-land order, p50 / p95 / max, for dead and for hung
+//! processes, over the rows that ordered.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use serde::Serialize;
+use serde_json::Value;
+
+use crate::stats::percentile;
+
+/// Arguments of `landing bench faults`.
+#[derive(Debug, Args)]
+pub struct FaultsArgs {
+    /// The scenario flown.
+    #[arg(long, default_value = "paper-sim")]
+    scenario: String,
+    /// Its seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// The processes to fault (default: every process the watchdog watches).
+    #[arg(long, value_delimiter = ',')]
+    processes: Vec<String>,
+    /// The faults, each `kill` or `stop`.
+    #[arg(long, value_delimiter = ',', default_value = "kill,stop")]
+    faults: Vec<String>,
+    /// When, each a mission phase (`takeoff`, `track`, `descend`, `land`).
+    #[arg(long, value_delimiter = ',', default_value = "track,descend")]
+    phases: Vec<String>,
+    /// Print one JSON object instead of a Markdown table.
+    #[arg(long)]
+    json: bool,
+    /// The deploy directory (default: found above the current directory or executable).
+    #[arg(long)]
+    deploy_dir: Option<PathBuf>,
+}
+
+/// One flight of the matrix.
+#[derive(Debug, Clone, Serialize)]
+struct Row {
+    inject: String,
+    fault: String,
+    process: String,
+    phase: String,
+    outcome: String,
+    touchdown_error_m: Option<f64>,
+    detected_after_ms: Option<f64>,
+    ordered_after_ms: Option<f64>,
+    action: Option<String>,
+}
+
+/// Runs the matrix.
+pub fn run(args: &FaultsArgs) -> Result<()> {
+    let deploy = args
+        .deploy_dir
+        .clone()
+        .unwrap_or_else(stack_config::deploy_dir);
+    let processes = if args.processes.is_empty() {
+        let graph = graph::Graph::load(&graph::default_path(&deploy))?;
+        watchdog::watched_processes(&graph)
+            .into_iter()
+            .map(|(n, _)| n)
+            .collect()
+    } else {
+        args.processes.clone()
+    };
+    for f in &args.faults {
+        if !["kill", "stop"].contains(&f.as_str()) {
+            bail!("--faults: `{f}` is not allowed (allowed: kill, stop)");
+        }
+    }
+    let exe = std::env::current_exe().context("finding the landing binary")?;
+    let total = processes.len() * args.faults.len() * args.phases.len();
+    let mut rows = Vec::with_capacity(total);
+    for process in &processes {
+        for fault in &args.faults {
+            for phase in &args.phases {
+                let inject = format!("{fault}:{process}@{phase}");
+                eprintln!("[{}/{total}] {inject}", rows.len() + 1);
+                let out = Command::new(&exe)
+                    .args(["run", "--processes", "--json", "--scenario", &args.scenario])
+                    .args(["--seed", &args.seed.to_string(), "--inject", &inject])
+                    .arg("--deploy-dir")
+                    .arg(&deploy)
+                    .output()
+                    .with_context(|| format!("running {inject}"))?;
+                let s: Value = serde_json::from_slice(&out.stdout).with_context(|| {
+                    format!(
+                        "{inject}: no summary; its stderr: {}",
+                        String::from_utf8_lossy(&out.stderr)
+                    )
+                })?;
+                let f = &s["faults"][0];
+                rows.push(Row {
+                    inject: inject.clone(),
+                    fault: fault.clone(),
+                    process: process.clone(),
+                    phase: phase.clone(),
+                    outcome: s["outcome"].as_str().unwrap_or("?").to_string(),
+                    touchdown_error_m: s["touchdown_error_m"].as_f64(),
+                    detected_after_ms: f["detected_after_ms"].as_f64(),
+                    ordered_after_ms: f["ordered_after_ms"].as_f64(),
+                    action: f["action"].as_str().map(str::to_string),
+                });
+            }
+        }
+    }
+    let summary = |fault: &str, pick: fn(&Row) -> Option<f64>| {
+        let v: Vec<f64> = rows
+            .iter()
+            .filter(|r| r.fault == fault)
+            .filter_map(pick)
+            .collect();
+        serde_json::json!({
+            "n": v.len(),
+            "p50": percentile(&v, 50.0),
+            "p95": percentile(&v, 95.0),
+            "max": v.iter().copied().fold(0.0, f64::max),
+        })
+    };
+    let headline = serde_json::json!({
+        "dead": {
+            "detected_ms": summary("kill", |r| r.detected_after_ms),
+            "ordered_ms": summary("kill", |r| r.ordered_after_ms),
+        },
+        "hung": {
+            "detected_ms": summary("stop", |r| r.detected_after_ms),
+            "ordered_ms": summary("stop", |r| r.ordered_after_ms),
+        },
+    });
+    if args.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "scenario": args.scenario,
+                "seed": args.seed,
+                "rows": rows,
+                "summary": headline,
+            })
+        );
+        return Ok(());
+    }
+    println!(
+        "| fault | outcome | touchdown error (m) | detected (ms) | ordered (ms) | watchdog's decision |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- |");
+    let ms = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.0}"));
+    for r in &rows {
+        println!(
+            "| {} | {} | {} | {} | {} | {} |",
+            r.inject,
+            r.outcome,
+            r.touchdown_error_m
+                .map_or("-".to_string(), |x| format!("{x:.2}")),
+            ms(r.detected_after_ms),
+            ms(r.ordered_after_ms),
+            r.action.as_deref().unwrap_or("-"),
+        );
+    }
+    println!();
+    for (name, key) in [("dead (kill)", "dead"), ("hung (stop)", "hung")] {
+        let o = &headline[key]["ordered_ms"];
+        let d = &headline[key]["detected_ms"];
+        println!(
+            "{name}: found p50 {:.0} ms, p95 {:.0} ms, max {:.0} ms (n={}); order p50 {:.0} ms, p95 {:.0} ms, max {:.0} ms (n={})",
+            d["p50"].as_f64().unwrap_or(0.0),
+            d["p95"].as_f64().unwrap_or(0.0),
+            d["max"].as_f64().unwrap_or(0.0),
+            d["n"],
+            o["p50"].as_f64().unwrap_or(0.0),
+            o["p95"].as_f64().unwrap_or(0.0),
+            o["max"].as_f64().unwrap_or(0.0),
+            o["n"],
+        );
+    }
+    Ok(())
+}
