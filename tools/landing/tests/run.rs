@@ -123,6 +123,7 @@ fn paper_sim_lands_with_every_stage_its_own_process() {
         "planner",
         "fsm",
         "px4-link",
+        "watchdog",
     ] {
         let log = std::path::Path::new(logs).join(format!("{p}.log"));
         let text = std::fs::read_to_string(&log).unwrap_or_else(|e| panic!("{p}.log: {e}"));
@@ -135,6 +136,15 @@ fn paper_sim_lands_with_every_stage_its_own_process() {
         assert!(stop.contains("lost_upstream=0"), "{stop}");
         if p == "px4-link" {
             assert!(stop.contains("messages_lost=0"), "{stop}");
+        }
+        if p == "watchdog" {
+            // A healthy flight: every process beat within its deadline, every path
+            // flowed, nothing was ordered.
+            assert!(
+                stop.contains(" faults=0 ") && stop.contains(" orders=0 "),
+                "{stop}"
+            );
+            assert!(!stop.contains(" heartbeat_events=0 "), "{stop}");
         }
     }
 }

@@ -157,9 +157,10 @@ fn the_simulator_dying_ends_the_run_with_a_summary_naming_it() {
 }
 
 #[test]
-fn an_fsm_killed_while_tracking_leaves_px4s_offboard_loss_failsafe_to_land_the_vehicle() {
-    // No watchdog yet: the setpoints stop, and PX4 (COM_OBL_RC_ACT = 4 in the airframe,
-    // deploy/README.md) lands where it is after COM_OF_LOSS_T. The vehicle must end on
+fn an_fsm_killed_while_tracking_is_found_by_the_watchdog_which_orders_a_landing() {
+    // The watchdog finds the fsm's node dead and orders px4-link to land (AUTO.LAND);
+    // had px4-link died too, PX4's offboard-loss failsafe (COM_OBL_RC_ACT = 4 in the
+    // airframe, deploy/README.md) would land after COM_OF_LOSS_T. The vehicle must end on
     // the ground, disarmed, without a crash or a hard landing.
     let p = prefix("fsm");
     let landing = start(&["--processes", "--json", "--inject", "kill:fsm@track"], &p);
@@ -172,6 +173,9 @@ fn an_fsm_killed_while_tracking_leaves_px4s_offboard_loss_failsafe_to_land_the_v
     assert_eq!(faults[0]["process"], "fsm");
     assert_eq!(faults[0]["outcome"], "safe_landed");
     assert!(faults[0]["at_s"].as_f64().unwrap() > 1.0, "{s}");
+    assert_eq!(faults[0]["action"], "fsm died: land (critical)", "{s}");
+    assert!(faults[0]["detected_after_ms"].as_f64().is_some(), "{s}");
+    assert!(faults[0]["ordered_after_ms"].as_f64().is_some(), "{s}");
     assert_nothing_left(&p);
 }
 

@@ -1,0 +1,53 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a panic is a failed test
+//! The fault matrix (issue 17): every process the watchdog watches, killed (SIGKILL) and
+//! stopped (SIGSTOP: a hang), while the fsm tracks the pad and while it descends onto
+//! it, on paper-sim with every stage its own process (`landing bench faults`, 24
+//! flights). Behaviour only, by the referee's rules: every flight ends on the ground
+//! without a crash, the watchdog finds every fault, and it decides what its policy says.
+//! How fast it finds and orders is the benchmark's figure (docs/faults.md), not asserted
+//! here.
+
+mod common;
+
+use serde_json::Value;
+
+#[test]
+fn every_watched_process_killed_or_hung_while_tracking_or_descending_ends_on_the_ground() {
+    let out = common::landing(&["bench", "faults", "--json"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 6 * 2 * 2, "{v}");
+    let mut wrong = Vec::new();
+    for r in rows {
+        let inject = r["inject"].as_str().unwrap();
+        let process = r["process"].as_str().unwrap();
+        let phase = r["phase"].as_str().unwrap();
+        let action = r["action"].as_str().unwrap_or("");
+        let outcome = r["outcome"].as_str().unwrap();
+        if !["landed", "safe_landed"].contains(&outcome) {
+            wrong.push(format!("{inject}: ended {outcome}"));
+        }
+        if r["detected_after_ms"].is_null() {
+            wrong.push(format!("{inject}: the watchdog never found it"));
+            continue;
+        }
+        let critical = ["fsm", "px4-link"].contains(&process);
+        let want_order = critical || phase == "track";
+        if want_order && r["ordered_after_ms"].is_null() {
+            wrong.push(format!("{inject}: no order ({action})"));
+        }
+        let expected = match (critical, phase) {
+            (true, _) => "land (critical)",
+            (false, "track") => "in track: land",
+            // Over the pad the fsm goes on while its estimate is fresh, else lands.
+            _ if action.ends_with("land, no pad") => "land, no pad",
+            _ => "in descend: continue",
+        };
+        if !action.ends_with(expected) {
+            wrong.push(format!("{inject}: decided `{action}`, wanted `{expected}`"));
+        }
+    }
+    assert!(wrong.is_empty(), "{}\n{v}", wrong.join("\n"));
+}
