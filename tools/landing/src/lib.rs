@@ -27,3 +27,4 @@ pub mod run_eval;
 pub mod run_lockstep;
 pub mod run_processes;
 pub mod stats;
+pub mod status_cmd;

@@ -2,7 +2,7 @@
 
 use landing::{
     bench_aruco, bench_depth, bench_faults, bench_ipc, bench_perception, bench_planner, bench_sim,
-    config_cmd, graph_cmd, map_cmd, pad_detect, pad_print, plan_cmd, record, run_cmd,
+    config_cmd, graph_cmd, map_cmd, pad_detect, pad_print, plan_cmd, record, run_cmd, status_cmd,
 };
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -57,6 +57,11 @@ enum Command {
     /// else `landing_`), so that restarted processes reconnect; the resources of live
     /// processes are kept. systemd runs it before the stack (landing-clean.service).
     Clean,
+    /// The watchdog's view of a running stack (under --ipc-prefix, else
+    /// $LANDING_IPC_PREFIX, else `landing_`): every process alive, hung or dead, its last
+    /// heartbeat and missed deadlines, the newest fault and what the watchdog decided.
+    /// Once, or live with --watch; exit code 2 when no watchdog answers.
+    Status(status_cmd::StatusArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -204,6 +209,7 @@ fn main() -> ExitCode {
         Command::Mcap(McapCommand::Info { file, json }) => mcap_info(&file, json),
         Command::Graph(args) => graph_cmd::run(&args),
         Command::Clean => clean(cli.ipc_prefix.as_deref()),
+        Command::Status(args) => status_cmd::run(&args, cli.ipc_prefix.as_deref()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

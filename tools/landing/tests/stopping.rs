@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 use serde_json::Value;
 
 /// The stage processes of deploy/graph.toml.
-const STAGES: usize = 7;
+const STAGES: usize = 8;
 
 fn prefix(tag: &str) -> String {
     format!("lt_{tag}{}_", std::process::id())
@@ -254,6 +254,64 @@ fn landing_clean_removes_what_a_stack_killed_outright_left_behind() {
         .unwrap();
     let said = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{said}");
-    assert!(said.contains(&format!("{} dead", STAGES + 1)), "{said}");
+    // Every stage, `landing run`'s own node and the watchdog's supervision node.
+    assert!(said.contains(&format!("{} dead", STAGES + 2)), "{said}");
     assert!(files_of(&p).is_empty(), "left: {:?}", files_of(&p));
+}
+
+#[test]
+fn landing_status_shows_a_process_hung_in_flight_and_the_watchdogs_order() {
+    let p = prefix("status");
+    let landing = start(
+        &["--processes", "--json", "--inject", "stop:planner@track"],
+        &p,
+    );
+    let end = Instant::now() + Duration::from_secs(60);
+    let mut last = Value::Null;
+    while Instant::now() < end {
+        let out = Command::new(env!("CARGO_BIN_EXE_landing"))
+            .args(["--ipc-prefix", &p, "status", "--json", "--wait-s", "2"])
+            .output()
+            .unwrap();
+        if out.status.success() {
+            last = serde_json::from_slice(&out.stdout).unwrap();
+            let planner = last["processes"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|x| x["name"] == "planner")
+                .cloned()
+                .unwrap();
+            if planner["state"] == "hung" {
+                assert_eq!(planner["missed_deadlines"], 1, "{last}");
+                assert_eq!(last["last_fault"], "planner hung", "{last}");
+                assert_eq!(last["decision"], "planner hung in track: land", "{last}");
+                assert_eq!(last["safe_land_ordered"], true, "{last}");
+                break;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    assert_eq!(last["last_fault"], "planner hung", "never saw it: {last}");
+    let (_, s, log) = summary(landing);
+    assert_eq!(s["outcome"], "safe_landed", "{s}\n{log}");
+    assert_nothing_left(&p);
+}
+
+#[test]
+fn landing_status_without_a_running_stack_is_one_line_and_exit_2() {
+    let out = Command::new(env!("CARGO_BIN_EXE_landing"))
+        .args([
+            "--ipc-prefix",
+            &prefix("nostack"),
+            "status",
+            "--wait-s",
+            "0.3",
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("no watchdog view under prefix"), "{err}");
 }
