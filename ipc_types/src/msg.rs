@@ -1055,6 +1055,54 @@ pub struct WatchdogView {
     pub processes: [ProcessHealth; MAX_WATCHED],
 }
 
+/// What a [`FaultOrder`] does to a process's outputs.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PortFault {
+    /// Clears every fault.
+    Clear = 0,
+    /// Each output waits `value` ms before it is sent (a slow stage).
+    Delay = 1,
+    /// Each output is dropped with probability `value` (0..=1).
+    Drop = 2,
+    /// Each output's payload is overwritten with all-ones bytes after its header: NaN in
+    /// every float, the largest value in every integer.
+    Corrupt = 3,
+}
+
+impl PortFault {
+    /// Decodes a raw fault; `None` for a value no fault has.
+    pub fn from_raw(raw: u32) -> Option<Self> {
+        Some(match raw {
+            0 => Self::Clear,
+            1 => Self::Delay,
+            2 => Self::Drop,
+            3 => Self::Corrupt,
+            _ => return None,
+        })
+    }
+}
+
+/// A fault to inject into one process's output ports (`landing run --inject`,
+/// `landing inject`). Only processes started with `LANDING_FAULT_INJECTION=1` listen:
+/// a deployed stack has no such door.
+#[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::FaultOrder/v1")]
+pub struct FaultOrder {
+    /// Sequence, issue time.
+    pub msg: Header,
+    /// The process whose outputs it concerns.
+    pub process: Text,
+    /// Raw [`PortFault`].
+    pub fault: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+    /// Its parameter: delay in ms, drop probability.
+    pub value: f64,
+}
+
 /// What a [`ProcessEvent`] says.
 #[repr(u32)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

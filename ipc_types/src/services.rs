@@ -42,6 +42,9 @@ pub const FSM_STATUS: &str = "landing/fsm/status";
 pub const SAFETY_COMMAND: &str = "landing/safety/command";
 /// The watchdog's view of every process.
 pub const WATCHDOG_VIEW: &str = "landing/watchdog/view";
+/// Faults to inject into processes' outputs (fault tests only: a process listens only
+/// when started with `LANDING_FAULT_INJECTION=1`).
+pub const FAULT_INJECT: &str = "landing/fault/inject";
 /// Benchmarks and tests.
 pub const BENCH_FRAME: &str = "landing/bench/frame";
 

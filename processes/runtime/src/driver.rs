@@ -12,9 +12,9 @@ use std::time::Duration;
 use iceoryx2::prelude::IceoryxSend;
 
 use ipc_types::msg::{
-    CameraFrameHeader, DepthFrameHeader, FsmStatus, LinkOutcome, LinkRequest, OccupancyMapHeader,
-    PadObservation, PlannerGoal, PlannerStats, SafetyCommand, Setpoint, Trajectory, TruthEvent,
-    TruthState, VehicleState, WatchdogView,
+    CameraFrameHeader, DepthFrameHeader, FaultOrder, FsmStatus, LinkOutcome, LinkRequest,
+    OccupancyMapHeader, PadObservation, PlannerGoal, PlannerStats, SafetyCommand, Setpoint,
+    Trajectory, TruthEvent, TruthState, VehicleState, WatchdogView,
 };
 use ipc_types::topics::{self, Payload};
 use stage::lockstep::NodeSpec;
@@ -28,6 +28,7 @@ use crate::ipc::{
     HeartbeatError, Ipc, PeriodicWait, Publisher, ReceiveError, ServiceError, SlicePublisher,
     SliceSubscriber, Subscriber, WaitError, Wake, run_wait_loop,
 };
+use crate::port_faults::{self, PortFaults};
 
 /// How often a running stage logs its counters, ns.
 const REPORT_PERIOD_NS: u64 = 10_000_000_000;
@@ -323,6 +324,8 @@ struct Ports<'a, 'e> {
     /// While the external source delivers (it is busy), what the stage publishes on its
     /// topics waits here and is sent when the source's `wait` returns.
     deferred: Option<&'a mut Vec<(&'static str, OwnedMessage)>>,
+    /// Injected faults (fault tests only).
+    faults: &'a mut PortFaults,
 }
 
 fn transport(e: impl std::fmt::Display) -> StageError {
@@ -330,8 +333,12 @@ fn transport(e: impl std::fmt::Display) -> StageError {
 }
 
 macro_rules! send_plain {
-    ($port:expr, $m:expr) => {{
+    ($faults:expr, $port:expr, $m:expr) => {{
         let mut v = *$m;
+        if !$faults.pass() {
+            return Ok(());
+        }
+        $faults.corrupt(&mut v);
         v.msg.close_stage(monotonic_ns());
         $port.send(v.msg, &v).map(|_| ()).map_err(transport)
     }};
@@ -354,19 +361,23 @@ impl Outbox for Ports<'_, '_> {
                 }
                 (None, None) => Err(StageError::Transport(format!("nothing serves `{topic}`"))),
             },
-            (OutPort::VehicleState(p), Message::VehicleState(m)) => send_plain!(p, m),
-            (OutPort::PadObservation(p), Message::PadObservation(m)) => send_plain!(p, m),
-            (OutPort::PlannerGoal(p), Message::PlannerGoal(m)) => send_plain!(p, m),
-            (OutPort::Trajectory(p), Message::Trajectory(m)) => send_plain!(p, m),
-            (OutPort::PlannerStats(p), Message::PlannerStats(m)) => send_plain!(p, m),
-            (OutPort::Setpoint(p), Message::Setpoint(m)) => send_plain!(p, m),
-            (OutPort::LinkRequest(p), Message::LinkRequest(m)) => send_plain!(p, m),
-            (OutPort::LinkOutcome(p), Message::LinkOutcome(m)) => send_plain!(p, m),
-            (OutPort::SafetyCommand(p), Message::SafetyCommand(m)) => send_plain!(p, m),
-            (OutPort::FsmStatus(p), Message::FsmStatus(m)) => send_plain!(p, m),
-            (OutPort::WatchdogView(p), Message::WatchdogView(m)) => send_plain!(p, m),
-            (OutPort::TruthEvent(p), Message::TruthEvent(m)) => send_plain!(p, m),
-            (OutPort::TruthState(p), Message::TruthState(m)) => send_plain!(p, m),
+            (OutPort::VehicleState(p), Message::VehicleState(m)) => send_plain!(self.faults, p, m),
+            (OutPort::PadObservation(p), Message::PadObservation(m)) => {
+                send_plain!(self.faults, p, m)
+            }
+            (OutPort::PlannerGoal(p), Message::PlannerGoal(m)) => send_plain!(self.faults, p, m),
+            (OutPort::Trajectory(p), Message::Trajectory(m)) => send_plain!(self.faults, p, m),
+            (OutPort::PlannerStats(p), Message::PlannerStats(m)) => send_plain!(self.faults, p, m),
+            (OutPort::Setpoint(p), Message::Setpoint(m)) => send_plain!(self.faults, p, m),
+            (OutPort::LinkRequest(p), Message::LinkRequest(m)) => send_plain!(self.faults, p, m),
+            (OutPort::LinkOutcome(p), Message::LinkOutcome(m)) => send_plain!(self.faults, p, m),
+            (OutPort::SafetyCommand(p), Message::SafetyCommand(m)) => {
+                send_plain!(self.faults, p, m)
+            }
+            (OutPort::FsmStatus(p), Message::FsmStatus(m)) => send_plain!(self.faults, p, m),
+            (OutPort::WatchdogView(p), Message::WatchdogView(m)) => send_plain!(self.faults, p, m),
+            (OutPort::TruthEvent(p), Message::TruthEvent(m)) => send_plain!(self.faults, p, m),
+            (OutPort::TruthState(p), Message::TruthState(m)) => send_plain!(self.faults, p, m),
             (_, m) => Err(StageError::WrongType {
                 topic: topic.to_string(),
                 expected: topics::find(topic).map_or("?", |t| t.payload.type_name()),
@@ -387,6 +398,9 @@ impl Outbox for Ports<'_, '_> {
                 topic: topic.to_string(),
             });
         };
+        if !self.faults.pass() {
+            return Ok(false);
+        }
         // A loan that fails (every sample held by subscribers) drops this message: the
         // stage counts it, the process never waits.
         match port {
@@ -399,6 +413,7 @@ impl Outbox for Ports<'_, '_> {
                 else {
                     return Ok(false);
                 };
+                self.faults.corrupt(&mut h);
                 h.msg.close_stage(monotonic_ns());
                 *sample.user_header_mut() = h;
                 p.send(sample).map_err(transport)?;
@@ -412,6 +427,7 @@ impl Outbox for Ports<'_, '_> {
                 else {
                     return Ok(false);
                 };
+                self.faults.corrupt(&mut h);
                 h.msg.close_stage(monotonic_ns());
                 *sample.user_header_mut() = h;
                 p.send(sample).map_err(transport)?;
@@ -425,6 +441,7 @@ impl Outbox for Ports<'_, '_> {
                 else {
                     return Ok(false);
                 };
+                self.faults.corrupt(&mut h);
                 h.msg.close_stage(monotonic_ns());
                 *sample.user_header_mut() = h;
                 p.send(sample).map_err(transport)?;
@@ -448,6 +465,10 @@ struct Node<'a> {
     heartbeat: crate::Heartbeat,
     /// systemd's notify socket: `WATCHDOG=1` with every beat.
     notify: crate::notify::Notifier,
+    /// Fault orders, when the process takes them (`LANDING_FAULT_INJECTION=1`).
+    fault_orders: Option<Subscriber<FaultOrder>>,
+    faults: PortFaults,
+    name: String,
     beat_ns: u64,
     next_beat_ns: u64,
     tick_ns: Option<u64>,
@@ -465,12 +486,18 @@ impl Node<'_> {
         stage: &mut dyn Stage,
         external_inputs: u64,
     ) -> Result<(), DriverError> {
+        if let Some(orders) = &self.fault_orders {
+            while let Some(o) = orders.receive()? {
+                self.faults.apply(&self.name, o.payload());
+            }
+        }
         let now = monotonic_ns();
         let mut taken = external_inputs;
         let mut out = Ports {
             outputs: &mut self.outputs,
             external: self.external.as_deref_mut(),
             deferred: None,
+            faults: &mut self.faults,
         };
         for i in inputs {
             taken += i
@@ -523,7 +550,15 @@ impl Node<'_> {
         {
             line.push_str(&format!(" {k}={v}"));
         }
-        format!("{line} skipped={} lost_upstream={lost}", self.skipped)
+        let mut line = format!("{line} skipped={} lost_upstream={lost}", self.skipped);
+        if self.fault_orders.is_some() {
+            let f = &self.faults;
+            line.push_str(&format!(
+                " injected_dropped={} injected_corrupted={} injected_delayed={}",
+                f.dropped, f.corrupted, f.delayed
+            ));
+        }
+        line
     }
 }
 
@@ -607,6 +642,17 @@ pub fn run(
             topic: format!("heartbeat/{}", spec.name),
             source,
         })?;
+    let fault_orders = if port_faults::enabled() {
+        Some(
+            ipc.subscriber::<FaultOrder>(ipc_types::services::FAULT_INJECT)
+                .map_err(|source| DriverError::Open {
+                    topic: "fault/inject".into(),
+                    source,
+                })?,
+        )
+    } else {
+        None
+    };
     let now = monotonic_ns();
     let tick_ns = stage.tick_period_ns().filter(|p| *p > 0);
     let beat_ns = u64::try_from(beat.period.as_nanos())
@@ -618,6 +664,9 @@ pub fn run(
         external: external.take(),
         heartbeat,
         notify: crate::notify::Notifier::from_env(),
+        fault_orders,
+        faults: PortFaults::default(),
+        name: spec.name.clone(),
         beat_ns,
         next_beat_ns: now,
         tick_ns,
@@ -716,6 +765,7 @@ fn run_external(
                     outputs: &mut node.outputs,
                     external: None,
                     deferred: Some(&mut deferred),
+                    faults: &mut node.faults,
                 };
                 ext.wait(timeout, &monotonic_ns, &mut |input, at| {
                     delivered += 1;

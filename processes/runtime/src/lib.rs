@@ -11,6 +11,7 @@ pub mod driver;
 pub mod ipc;
 pub mod logging;
 pub mod notify;
+pub mod port_faults;
 pub mod process_main;
 pub mod serve;
 pub mod shutdown;

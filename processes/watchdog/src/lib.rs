@@ -32,7 +32,8 @@ pub struct PathRule {
     pub topic: String,
     /// The mission states in which it must flow (empty: always, once it has started).
     pub phases: Vec<MissionState>,
-    /// Silent for longer than this is a fault, ms.
+    /// Silent for longer than this is a fault, ms; infinite for a path that may rightly
+    /// stop (pad observations: the pad out of view), watched for garbage only.
     pub max_silence_ms: f64,
     /// Its silence in the air orders a safe landing.
     pub critical: bool,
@@ -229,7 +230,7 @@ impl Watchdog {
                     .map(|r| ("silence limit", &r.topic, r.max_silence_ms)),
             );
         for (what, name, value) in limits {
-            if !(value.is_finite() && value > 0.0) {
+            if !(value > 0.0 && !value.is_nan()) {
                 return Err(ConfigError::BadLimit {
                     what,
                     name: name.clone(),

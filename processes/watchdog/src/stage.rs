@@ -131,6 +131,13 @@ impl WatchdogStageConfig {
                     max_silence_ms: self.camera_silence_ms,
                     critical: false,
                 },
+                // Observations stop whenever the pad is out of view: garbage only.
+                PathRule {
+                    topic: topics::PAD_OBSERVATION.into(),
+                    phases: Vec::new(),
+                    max_silence_ms: f64::INFINITY,
+                    critical: false,
+                },
             ],
             policy: Policy {
                 by_phase: vec![

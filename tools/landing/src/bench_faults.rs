@@ -1,6 +1,7 @@
 //! `landing bench faults`: the fault matrix. Every process the watchdog watches is killed
-//! (SIGKILL) and stopped (SIGSTOP: a hang) while the fsm tracks and while it descends,
-//! one `landing run --processes --inject` flight each; each row says how the flight
+//! (SIGKILL) and stopped (SIGSTOP: a hang), and the camera frames and pad observations
+//! are delayed, half dropped and corrupted (in the publishers' ports), while the fsm
+//! tracks and while it descends, one `landing run --processes --inject` flight each; each row says how the flight
 //! ended, how long the watchdog took to find the fault and to order, and what it decided.
 //! The headline: fault -> safe-land order, p50 / p95 / max, for dead and for hung
 //! processes, over the rows whose fault the watchdog landed for. A row it decided to
@@ -30,9 +31,17 @@ pub struct FaultsArgs {
     /// The processes to fault (default: every process the watchdog watches).
     #[arg(long, value_delimiter = ',')]
     processes: Vec<String>,
-    /// The faults, each `kill` or `stop`.
+    /// The faults to each process, each `kill` or `stop`.
     #[arg(long, value_delimiter = ',', default_value = "kill,stop")]
     faults: Vec<String>,
+    /// Faults in data paths, each FAULT:PROCESS as `--inject` writes them (the process's
+    /// outputs: camera-ingest's camera frames, aruco-pnp's pad observations).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "delay:100:camera-ingest,drop:0.5:camera-ingest,corrupt:camera-ingest,delay:100:aruco-pnp,drop:0.5:aruco-pnp,corrupt:aruco-pnp"
+    )]
+    data_faults: Vec<String>,
     /// When, each a mission phase (`takeoff`, `track`, `descend`, `land`).
     #[arg(long, value_delimiter = ',', default_value = "track,descend")]
     phases: Vec<String>,
@@ -79,39 +88,50 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
         }
     }
     let exe = std::env::current_exe().context("finding the landing binary")?;
-    let total = processes.len() * args.faults.len() * args.phases.len();
-    let mut rows = Vec::with_capacity(total);
+    // (fault, process) pairs: every process's, then the data paths'.
+    let mut pairs: Vec<(String, String)> = Vec::new();
     for process in &processes {
         for fault in &args.faults {
-            for phase in &args.phases {
-                let inject = format!("{fault}:{process}@{phase}");
-                eprintln!("[{}/{total}] {inject}", rows.len() + 1);
-                let out = Command::new(&exe)
-                    .args(["run", "--processes", "--json", "--scenario", &args.scenario])
-                    .args(["--seed", &args.seed.to_string(), "--inject", &inject])
-                    .arg("--deploy-dir")
-                    .arg(&deploy)
-                    .output()
-                    .with_context(|| format!("running {inject}"))?;
-                let s: Value = serde_json::from_slice(&out.stdout).with_context(|| {
-                    format!(
-                        "{inject}: no summary; its stderr: {}",
-                        String::from_utf8_lossy(&out.stderr)
-                    )
-                })?;
-                let f = &s["faults"][0];
-                rows.push(Row {
-                    inject: inject.clone(),
-                    fault: fault.clone(),
-                    process: process.clone(),
-                    phase: phase.clone(),
-                    outcome: s["outcome"].as_str().unwrap_or("?").to_string(),
-                    touchdown_error_m: s["touchdown_error_m"].as_f64(),
-                    detected_after_ms: f["detected_after_ms"].as_f64(),
-                    ordered_after_ms: f["ordered_after_ms"].as_f64(),
-                    action: f["action"].as_str().map(str::to_string),
-                });
-            }
+            pairs.push((fault.clone(), process.clone()));
+        }
+    }
+    for d in args.data_faults.iter().filter(|d| !d.is_empty()) {
+        let Some((fault, process)) = d.rsplit_once(':') else {
+            bail!("--data-faults: `{d}` is not FAULT:PROCESS (e.g. drop:0.5:aruco-pnp)");
+        };
+        pairs.push((fault.to_string(), process.to_string()));
+    }
+    let total = pairs.len() * args.phases.len();
+    let mut rows = Vec::with_capacity(total);
+    for (fault, process) in &pairs {
+        for phase in &args.phases {
+            let inject = format!("{fault}:{process}@{phase}");
+            eprintln!("[{}/{total}] {inject}", rows.len() + 1);
+            let out = Command::new(&exe)
+                .args(["run", "--processes", "--json", "--scenario", &args.scenario])
+                .args(["--seed", &args.seed.to_string(), "--inject", &inject])
+                .arg("--deploy-dir")
+                .arg(&deploy)
+                .output()
+                .with_context(|| format!("running {inject}"))?;
+            let s: Value = serde_json::from_slice(&out.stdout).with_context(|| {
+                format!(
+                    "{inject}: no summary; its stderr: {}",
+                    String::from_utf8_lossy(&out.stderr)
+                )
+            })?;
+            let f = &s["faults"][0];
+            rows.push(Row {
+                inject: inject.clone(),
+                fault: fault.clone(),
+                process: process.clone(),
+                phase: phase.clone(),
+                outcome: s["outcome"].as_str().unwrap_or("?").to_string(),
+                touchdown_error_m: s["touchdown_error_m"].as_f64(),
+                detected_after_ms: f["detected_after_ms"].as_f64(),
+                ordered_after_ms: f["ordered_after_ms"].as_f64(),
+                action: f["action"].as_str().map(str::to_string),
+            });
         }
     }
     let continued = |r: &Row| r.action.as_deref().is_some_and(|a| a.ends_with("continue"));

@@ -1,41 +1,61 @@
 //! `landing run --processes --inject FAULT:PROCESS@WHEN`: faults done to the stack's
 //! processes in flight, and what became of them.
 //!
-//! Only the faults a signal can do are here (`kill`: SIGKILL, a crash; `stop`: SIGSTOP,
-//! a hang). Faults inside the data paths (delay, drop, corrupt) belong in the runtime's
-//! ports and are not built yet (issue 17).
+//! A signal does `kill` (SIGKILL, a crash) and `stop` (SIGSTOP, a hang); the runtime's
+//! output ports do `delay:MS`, `drop:FRACTION` and `corrupt`, ordered through
+//! `landing/fault/inject` (`runtime::port_faults`), which the stage processes listen to
+//! because `landing run` starts them with `LANDING_FAULT_INJECTION=1`.
 
 use std::fmt;
 use std::str::FromStr;
 
-use ipc_types::msg::MissionState;
+use ipc_types::msg::{MissionState, PortFault};
 use serde::Serialize;
 use thiserror::Error;
 
 /// What is done to the process.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Fault {
     /// SIGKILL: the process is gone at once, as after a crash.
     Kill,
     /// SIGSTOP: the process hangs (never continued during the run).
     Stop,
+    /// Each of its outputs waits this many ms before it is sent.
+    Delay(f64),
+    /// Each of its outputs is dropped with this probability.
+    Drop(f64),
+    /// Its outputs' payloads are overwritten: NaN and out-of-range values.
+    Corrupt,
 }
 
 impl Fault {
-    /// Its name, as `--inject` and the summary write it.
-    pub fn name(self) -> &'static str {
+    /// Its name, as `--inject` and the summary write it (`delay:50`).
+    pub fn name(self) -> String {
         match self {
-            Self::Kill => "kill",
-            Self::Stop => "stop",
+            Self::Kill => "kill".into(),
+            Self::Stop => "stop".into(),
+            Self::Delay(ms) => format!("delay:{ms}"),
+            Self::Drop(f) => format!("drop:{f}"),
+            Self::Corrupt => "corrupt".into(),
         }
     }
 
-    /// The signal that does it.
-    pub fn signal(self) -> libc::c_int {
+    /// The signal that does it, for a fault to the whole process.
+    pub fn signal(self) -> Option<libc::c_int> {
         match self {
-            Self::Kill => libc::SIGKILL,
-            Self::Stop => libc::SIGSTOP,
+            Self::Kill => Some(libc::SIGKILL),
+            Self::Stop => Some(libc::SIGSTOP),
+            _ => None,
+        }
+    }
+
+    /// The order to its output ports, for a fault in its data paths.
+    pub fn order(self) -> Option<(PortFault, f64)> {
+        match self {
+            Self::Delay(ms) => Some((PortFault::Delay, ms)),
+            Self::Drop(f) => Some((PortFault::Drop, f)),
+            Self::Corrupt => Some((PortFault::Corrupt, 0.0)),
+            _ => None,
         }
     }
 }
@@ -63,7 +83,7 @@ pub struct Injection {
 /// Why an `--inject` value was refused.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 #[error(
-    "--inject {value}: {why} (FAULT:PROCESS@WHEN, FAULT kill or stop, WHEN takeoff, track, descend, land or seconds, e.g. kill:fsm@track or stop:planner@12.5)"
+    "--inject {value}: {why} (FAULT:PROCESS@WHEN, FAULT kill or stop, delay:MS (0-10000), drop:FRACTION (0-1) or corrupt, WHEN takeoff, track, descend, land or seconds, e.g. kill:fsm@track, stop:planner@12.5, drop:0.5:aruco-pnp@descend)"
 )]
 pub struct InjectionError {
     value: String,
@@ -78,11 +98,21 @@ impl FromStr for Injection {
             value: s.to_string(),
             why,
         };
-        let (fault, rest) = s.split_once(':').ok_or_else(|| err("no ':'"))?;
-        let (process, when) = rest.split_once('@').ok_or_else(|| err("no '@'"))?;
-        let fault = match fault {
-            "kill" => Fault::Kill,
-            "stop" => Fault::Stop,
+        if !s.contains(':') {
+            return Err(err("no ':'"));
+        }
+        let (left, when) = s.rsplit_once('@').ok_or_else(|| err("no '@'"))?;
+        let parts: Vec<&str> = left.split(':').collect();
+        let number = |v: &str, hi: f64| match v.parse::<f64>() {
+            Ok(x) if x.is_finite() && x > 0.0 && x <= hi => Ok(x),
+            _ => Err(err("value out of range")),
+        };
+        let (fault, process) = match parts[..] {
+            ["kill", p] => (Fault::Kill, p),
+            ["stop", p] => (Fault::Stop, p),
+            ["corrupt", p] => (Fault::Corrupt, p),
+            ["delay", ms, p] => (Fault::Delay(number(ms, 10_000.0)?), p),
+            ["drop", f, p] => (Fault::Drop(number(f, 1.0)?), p),
             _ => return Err(err("unknown fault")),
         };
         if process.is_empty() {

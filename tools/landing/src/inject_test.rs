@@ -30,4 +30,36 @@ fn a_bad_injection_names_what_is_wrong_and_what_is_allowed() {
         let e = e.unwrap_or_default();
         assert!(e.contains(why) && e.contains("kill or stop"), "{bad}: {e}");
     }
+    for (bad, why) in [
+        ("delay:fsm@track", "unknown fault"),
+        ("delay:0:fsm@track", "value out of range"),
+        ("drop:1.5:aruco-pnp@track", "value out of range"),
+        ("drop:NaN:aruco-pnp@track", "value out of range"),
+    ] {
+        let e = bad.parse::<Injection>().err().map(|e| e.to_string());
+        let e = e.unwrap_or_default();
+        assert!(e.contains(why) && e.contains("drop:FRACTION"), "{bad}: {e}");
+    }
+}
+
+#[test]
+fn port_faults_parse_with_their_value() {
+    let i: Injection = "delay:50:camera-ingest@track"
+        .parse()
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        (i.fault, i.process.as_str()),
+        (Fault::Delay(50.0), "camera-ingest")
+    );
+    assert_eq!(i.fault.order(), Some((PortFault::Delay, 50.0)));
+    assert_eq!(i.fault.signal(), None);
+    let i: Injection = "drop:0.5:aruco-pnp@descend"
+        .parse()
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(i.fault, Fault::Drop(0.5));
+    assert_eq!(i.to_string(), "drop:0.5:aruco-pnp@descend");
+    let i: Injection = "corrupt:aruco-pnp@3"
+        .parse()
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((i.fault, i.when), (Fault::Corrupt, When::At(3.0)));
 }

@@ -14,8 +14,9 @@ use anyhow::{Context, Result};
 use graph::{Graph, Node, RunValues};
 use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::msg::{
-    FsmStatus, LinkOutcome, LinkRequest, MissionState, PadObservation, PlannerGoal, PlannerStats,
-    Setpoint, Stage, Trajectory, TruthEvent, TruthState, VehicleState, WatchdogView,
+    FaultOrder, FsmStatus, Header, LinkOutcome, LinkRequest, MissionState, PadObservation,
+    PlannerGoal, PlannerStats, Setpoint, Stage, Text, Trajectory, TruthEvent, TruthState,
+    VehicleState, WatchdogView,
 };
 use ipc_types::{services, topics};
 use runtime::ipc::Subscriber;
@@ -154,6 +155,8 @@ pub fn run(
     let status = ipc.subscriber::<FsmStatus>(services::FSM_STATUS)?;
     let planner_stats = ipc.subscriber::<PlannerStats>(services::PLANNER_STATS)?;
     let views = ipc.subscriber::<WatchdogView>(services::WATCHDOG_VIEW)?;
+    // Faults in the data paths go to the stages' output ports through this.
+    let mut fault_orders = ipc.publisher::<FaultOrder>(services::FAULT_INJECT)?;
     let taps = match recorder {
         Some(_) => Some(Taps::open(&ipc)?),
         None => None,
@@ -176,7 +179,11 @@ pub fn run(
     for node in launch.graph.start_order() {
         let log: PathBuf = launch.log_dir.join(format!("{}.log", node.name));
         let file = File::create(&log).with_context(|| format!("creating {}", log.display()))?;
-        let child = command(node, &values, &prefix, launch.graph_path)?
+        let mut cmd = command(node, &values, &prefix, launch.graph_path)?;
+        if !launch.injections.is_empty() {
+            cmd.env(runtime::port_faults::ENV, "1");
+        }
+        let child = cmd
             .env("LANDING_LOG", "info")
             .stdout(Stdio::null())
             .stderr(file)
@@ -288,15 +295,30 @@ pub fn run(
                     continue;
                 }
                 *done = true;
-                if let Some(pid) = children.pid_of(&inj.process) {
+                let Some(pid) = children.pid_of(&inj.process) else {
+                    continue;
+                };
+                let record = fault_record(&inj.fault.name(), &inj.process, t_s);
+                if let Some(sig) = inj.fault.signal() {
                     // SAFETY: signalling our own child.
-                    unsafe { libc::kill(pid as i32, inj.fault.signal()) };
-                    tracing::warn!(fault = %inj, at_s = t_s, "fault injected");
-                    faults.push(fault_record(inj.fault.name(), &inj.process, t_s));
-                    referee.on_fault();
-                    if inj.fault == Fault::Kill {
-                        exits_seen.push(inj.process.clone());
+                    unsafe { libc::kill(pid as i32, sig) };
+                } else if let Some((fault, value)) = inj.fault.order() {
+                    let order = FaultOrder {
+                        process: Text::new(&inj.process),
+                        fault: fault as u32,
+                        value,
+                        ..FaultOrder::default()
+                    };
+                    if let Err(e) = fault_orders.send(Header::captured_at(record.at_ns), &order) {
+                        failure = Some(e.into());
+                        return false;
                     }
+                }
+                tracing::warn!(fault = %inj, at_s = t_s, "fault injected");
+                faults.push(record);
+                referee.on_fault();
+                if inj.fault == Fault::Kill {
+                    exits_seen.push(inj.process.clone());
                 }
             }
             while let Some((name, status)) = children.newly_exited(&exits_seen) {
@@ -346,20 +368,26 @@ fn fault_record(fault: &str, process: &str, at_s: f64) -> FaultRecord {
 }
 
 /// What the watchdog's `view` says of the fault `f`: when it found the process hung or
-/// dead, what it decided, and when it ordered (the first time each, after the fault).
+/// dead (a fault in a process's data paths: the first fault it found after it), what it
+/// decided, and when it ordered (the first time each, after the fault).
 fn note_detection(f: &mut FaultRecord, view: &WatchdogView) {
     let after_ms = |t: u64| (t >= f.at_ns).then(|| (t - f.at_ns) as f64 * 1e-6);
     let n = (view.count as usize).min(view.processes.len());
-    if f.detected_after_ms.is_none()
-        && let Some(p) = view.processes[..n]
-            .iter()
-            .find(|p| p.name.as_str() == f.process)
-    {
-        f.detected_after_ms = after_ms(p.fault_ns);
+    let whole_process = f.fault == "kill" || f.fault == "stop" || f.fault == "exited";
+    if f.detected_after_ms.is_none() {
+        f.detected_after_ms = if whole_process {
+            view.processes[..n]
+                .iter()
+                .find(|p| p.name.as_str() == f.process)
+                .and_then(|p| after_ms(p.fault_ns))
+        } else {
+            after_ms(view.last_fault_ns)
+        };
     }
     if f.detected_after_ms.is_some() {
         let line = view.action.as_str();
-        if f.action.is_none() && line.starts_with(&format!("{} ", f.process)) {
+        let about_it = !whole_process || line.starts_with(&format!("{} ", f.process));
+        if f.action.is_none() && about_it && !line.is_empty() {
             f.action = Some(line.to_string());
         }
         if f.ordered_after_ms.is_none() && view.order_ns > 0 {
