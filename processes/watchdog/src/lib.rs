@@ -230,7 +230,7 @@ impl Watchdog {
                     .map(|r| ("silence limit", &r.topic, r.max_silence_ms)),
             );
         for (what, name, value) in limits {
-            if !(value > 0.0 && !value.is_nan()) {
+            if value <= 0.0 || value.is_nan() {
                 return Err(ConfigError::BadLimit {
                     what,
                     name: name.clone(),

@@ -6,7 +6,7 @@
 
 use ipc_types::msg::{
     CameraFrameHeader, Header, LandedState, MissionState, PadObservation, ProcessEventKind,
-    SafetyAction, SafetyCommand, Setpoint, Stage as StageId, Text, VehicleState,
+    SafetyCommand, Setpoint, Stage as StageId, Text, VehicleState,
 };
 use ipc_types::topics;
 use serde::Deserialize;
@@ -360,17 +360,6 @@ impl Stage for WatchdogStage {
             ("views", c.views),
         ]
     }
-}
-
-/// The safety action a view's order stands for, for tools (`None`: nothing ordered).
-pub fn ordered_action(v: &ipc_types::msg::WatchdogView) -> Option<SafetyAction> {
-    (v.order_ns > 0).then(|| {
-        if v.safe_land_ordered == 1 {
-            SafetyAction::SafeLand
-        } else {
-            SafetyAction::Hold
-        }
-    })
 }
 
 /// The processes a watchdog of `graph` watches: every vehicle node but itself, with its

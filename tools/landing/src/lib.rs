@@ -14,6 +14,7 @@ pub mod config_cmd;
 pub mod flight_log;
 pub mod graph_cmd;
 pub mod inject;
+pub mod inject_cmd;
 pub mod map_cmd;
 pub mod map_pilot;
 pub mod pad_detect;

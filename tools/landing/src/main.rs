@@ -2,7 +2,8 @@
 
 use landing::{
     bench_aruco, bench_depth, bench_faults, bench_ipc, bench_perception, bench_planner, bench_sim,
-    config_cmd, graph_cmd, map_cmd, pad_detect, pad_print, plan_cmd, record, run_cmd, status_cmd,
+    config_cmd, graph_cmd, inject_cmd, map_cmd, pad_detect, pad_print, plan_cmd, record, run_cmd,
+    status_cmd,
 };
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -62,6 +63,11 @@ enum Command {
     /// heartbeat and missed deadlines, the newest fault and what the watchdog decided.
     /// Once, or live with --watch; exit code 2 when no watchdog answers.
     Status(status_cmd::StatusArgs),
+    /// Do a fault to a running stack now: kill or stop (SIGSTOP) one of its processes,
+    /// cont to resume it, or delay, drop or corrupt its outputs (processes started with
+    /// LANDING_FAULT_INJECTION=1 only), clear to undo. For fault tests by hand; `landing
+    /// run --processes --inject` does the same on a schedule.
+    Inject(inject_cmd::InjectArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -210,6 +216,7 @@ fn main() -> ExitCode {
         Command::Graph(args) => graph_cmd::run(&args),
         Command::Clean => clean(cli.ipc_prefix.as_deref()),
         Command::Status(args) => status_cmd::run(&args, cli.ipc_prefix.as_deref()),
+        Command::Inject(args) => inject_cmd::run(&args, cli.ipc_prefix.as_deref()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -97,8 +97,8 @@ pub fn text(v: &WatchdogView, prefix: &str, now_ns: u64) -> String {
     );
     let _ = writeln!(
         s,
-        "  {:<14} {:<9} {:>14} {:>7}  {}",
-        "process", "state", "last beat", "missed", "found hung/dead"
+        "  {:<14} {:<9} {:>14} {:>7}  found hung/dead",
+        "process", "state", "last beat", "missed"
     );
     for p in &v.processes[..(v.count as usize).min(v.processes.len())] {
         let _ = writeln!(

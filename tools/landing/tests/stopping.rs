@@ -315,3 +315,66 @@ fn landing_status_without_a_running_stack_is_one_line_and_exit_2() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(err.contains("no watchdog view under prefix"), "{err}");
 }
+
+#[test]
+fn landing_inject_corrupts_a_running_stacks_pad_observations_and_stops_its_planner() {
+    let p = prefix("inject");
+    let logs = std::env::temp_dir().join(format!("lt-inject-{}", std::process::id()));
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_landing"));
+    cmd.args([
+        "--ipc-prefix",
+        &p,
+        "run",
+        "--processes",
+        "--json",
+        "--log-dir",
+    ])
+    .arg(&logs)
+    .env("LANDING_LOG", "warn")
+    .env("LANDING_FAULT_INJECTION", "1")
+    .stdout(Stdio::piped())
+    .stderr(Stdio::piped());
+    let landing = cmd.spawn().unwrap();
+    wait_for_stages(&p, landing.id());
+    let inject = |what: &str| {
+        Command::new(env!("CARGO_BIN_EXE_landing"))
+            .args(["--ipc-prefix", &p, "inject", what])
+            .output()
+            .unwrap()
+    };
+    // Wait for the pad to be tracked: observations flow.
+    let end = Instant::now() + Duration::from_secs(60);
+    loop {
+        assert!(Instant::now() < end, "never tracked");
+        let out = Command::new(env!("CARGO_BIN_EXE_landing"))
+            .args(["--ipc-prefix", &p, "status", "--json", "--wait-s", "2"])
+            .output()
+            .unwrap();
+        let v: Value = serde_json::from_slice(&out.stdout).unwrap_or(Value::Null);
+        if v["phase"] == "track" {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let bad = inject("explode:planner");
+    assert_eq!(bad.status.code(), Some(2));
+    assert_eq!(
+        String::from_utf8_lossy(&bad.stderr).trim().lines().count(),
+        1
+    );
+    assert!(inject("corrupt:aruco-pnp").status.success());
+    assert!(inject("stop:planner").status.success());
+    let (_, s, log) = summary(landing);
+    // Garbage or a hung planner before the descent: the watchdog lands where it is.
+    assert_eq!(s["outcome"], "safe_landed", "{s}\n{log}");
+    let aruco = std::fs::read_to_string(logs.join("aruco-pnp.log")).unwrap();
+    let stop = aruco
+        .lines()
+        .find(|l| l.contains("aruco-pnp stopped"))
+        .unwrap();
+    assert!(!stop.contains("injected_corrupted=0 "), "{stop}");
+    let dog = std::fs::read_to_string(logs.join("watchdog.log")).unwrap();
+    assert!(dog.contains("planner hung"), "{dog}");
+    assert_nothing_left(&p);
+    let _ = std::fs::remove_dir_all(&logs);
+}
