@@ -60,9 +60,10 @@ pub struct RunArgs {
     #[arg(long, value_name = "DIR")]
     log_dir: Option<PathBuf>,
     /// --processes: a fault to do in flight, FAULT:PROCESS@WHEN (repeatable): FAULT kill
-    /// (SIGKILL) or stop (SIGSTOP, a hang); PROCESS a node of the graph; WHEN a mission
-    /// state (takeoff, track, descend, land) or seconds after the start. The summary
-    /// lists the faults.
+    /// (SIGKILL), stop (SIGSTOP, a hang), delay:MS, drop:FRACTION or corrupt (the
+    /// process's outputs); PROCESS a node of the graph; WHEN a mission state (takeoff,
+    /// track, descend, land) or seconds after the start. The summary lists the faults,
+    /// when the watchdog found each and what it decided (docs/faults.md).
     #[arg(long, value_name = "FAULT:PROCESS@WHEN")]
     inject: Vec<crate::inject::Injection>,
 }
