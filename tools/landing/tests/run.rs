@@ -156,7 +156,7 @@ fn no_message_lost(logs: &str) {
 
 #[test]
 fn two_minutes_of_flight_with_every_stage_its_own_process_lose_no_message() {
-    // A world where the pad's vehicle waits 60 s, 36 m away, then drives by: the vehicle
+    // A world where the pad's vehicle waits 60 s, 49 m away, then drives by: the vehicle
     // takes off, waits at the preset point for two minutes of steady state (camera and
     // depth frames, states, maps, setpoints, status, the watchdog), then tracks the pad
     // and lands on it.
@@ -169,7 +169,7 @@ fn two_minutes_of_flight_with_every_stage_its_own_process_lose_no_message() {
         .replace("name = \"paper-sim\"", "name = \"soak\"")
         .replace("duration_s = 120.0", "duration_s = 200.0")
         .replace("start_delay_s = 5.0", "start_delay_s = 60.0")
-        .replace("start_m = [-6.0, -2.0]", "start_m = [-42.0, -2.0]");
+        .replace("start_m = [-6.0, -2.0]", "start_m = [-55.0, -2.0]");
     assert_ne!(world, paper);
     let file = temp("soak.toml", &world);
     let logs = std::env::temp_dir().join(format!("landing-soak-logs-{}", std::process::id()));
