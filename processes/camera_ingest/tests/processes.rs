@@ -42,6 +42,13 @@ fn summary_count(log: &str, key: &str) -> u64 {
         .unwrap_or_else(|| panic!("no {key} in `{line}`"))
 }
 
+/// camera-ingest's heartbeat deadline as the graph declares it (a listener must open the
+/// heartbeat's event service with the deadline its notifier declared).
+fn heartbeat_deadline() -> Duration {
+    let g = graph::Graph::load(&workspace().join("deploy/graph.toml")).unwrap();
+    Duration::from_millis(g.node("camera-ingest").unwrap().heartbeat_deadline_ms)
+}
+
 fn start_sim(prefix: &IpcPrefix) -> Running {
     let sim = Running::start(
         "sim",
@@ -267,7 +274,7 @@ fn bad_frames_from_a_misbehaving_producer_are_dropped_and_good_ones_still_flow()
         .slice_subscriber::<u8, CameraFrameHeader>(services::CAMERA_FRAME)
         .unwrap();
     let heartbeat = ipc
-        .heartbeat_listener("camera-ingest", Duration::from_millis(500))
+        .heartbeat_listener("camera-ingest", heartbeat_deadline())
         .unwrap();
     let mut ingest = start_ingest(&prefix, &["--source", "sim"]);
     ingest.wait_for("camera-ingest running", Duration::from_secs(30));
@@ -510,7 +517,7 @@ fn a_camera_that_stops_delivering_is_reopened_and_the_process_keeps_heartbeating
     let prefix = IpcPrefix::unique("ingestgst");
     let ipc = Ipc::open("ingest-test", &prefix).unwrap();
     let heartbeat = ipc
-        .heartbeat_listener("camera-ingest", Duration::from_millis(500))
+        .heartbeat_listener("camera-ingest", heartbeat_deadline())
         .unwrap();
     let source = format!("gst:{}", test_camera_pipeline(15));
     let mut ingest = start_ingest(&prefix, &["--source", &source]);
