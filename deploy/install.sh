@@ -35,7 +35,7 @@ done
 R=${ROOT%/}
 
 # What runs on the vehicle (the simulator does not), and `landing` for `landing clean`.
-BINARIES="camera-ingest aruco-pnp depth-map planner fsm px4-link landing"
+BINARIES="camera-ingest aruco-pnp depth-map planner fsm px4-link watchdog landing"
 UNITS_DIR="$R/etc/systemd/system"
 USER_NAME=landing
 

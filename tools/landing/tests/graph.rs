@@ -9,7 +9,7 @@ use std::process::Output;
 use common::landing;
 use serde_json::Value;
 
-const NODES: [&str; 7] = [
+const NODES: [&str; 8] = [
     "sim",
     "camera-ingest",
     "aruco-pnp",
@@ -17,6 +17,7 @@ const NODES: [&str; 7] = [
     "planner",
     "fsm",
     "px4-link",
+    "watchdog",
 ];
 
 fn shipped() -> String {
@@ -60,7 +61,7 @@ fn json_is_one_object_with_every_node_and_topic() {
     assert_eq!(out.trim().lines().count(), 1, "{out}");
     let v: Value = serde_json::from_str(out.trim()).unwrap();
     let nodes = v["nodes"].as_array().unwrap();
-    assert_eq!(nodes.len(), 7);
+    assert_eq!(nodes.len(), 8);
     for n in nodes {
         for key in ["name", "inputs", "outputs", "rate_hz"] {
             assert!(!n[key].is_null(), "{key}: {n}");
@@ -148,7 +149,7 @@ fn a_node_without_a_binary_is_one_line_naming_the_allowed_binaries() {
     let path = broken("no_binary.toml", "binary = \"planner\"\n", "");
     let err = refused(&path, "planner");
     assert!(
-        err.contains("no binary (allowed: a command name of lowercase letters, digits and -: one of the stack's (sim, camera-ingest, aruco-pnp, depth-map, planner, fsm, px4-link) or your own)"),
+        err.contains("no binary (allowed: a command name of lowercase letters, digits and -: one of the stack's (sim, camera-ingest, aruco-pnp, depth-map, planner, fsm, px4-link, watchdog) or your own)"),
         "{err}"
     );
 }
