@@ -1089,7 +1089,7 @@ impl PortFault {
 #[repr(C)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("landing::FaultOrder/v1")]
+#[type_name("landing::FaultOrder/v2")]
 pub struct FaultOrder {
     /// Sequence, issue time.
     pub msg: Header,
@@ -1101,6 +1101,12 @@ pub struct FaultOrder {
     pub reserved: u32,
     /// Its parameter: delay in ms, drop probability.
     pub value: f64,
+    /// The one output topic it concerns (short name); empty: every output.
+    pub topic: Text,
+    /// Keeps the layout free of implicit padding.
+    pub reserved2: u32,
+    /// How long it lasts, s; 0: until cleared.
+    pub for_s: f64,
 }
 
 /// What a [`ProcessEvent`] says.

@@ -51,7 +51,7 @@ impl Transport {
             LinkAddress::Udp(listen) => Self::Udp(UdpLink::bind(
                 *listen,
                 Some(remote),
-                Reply::PeerElseRemote,
+                Reply::FirstPeerElseRemote,
                 topics::MAVLINK_FROM_PX4,
                 topics::MAVLINK_TO_PX4,
             )?),

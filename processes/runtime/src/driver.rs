@@ -333,12 +333,21 @@ fn transport(e: impl std::fmt::Display) -> StageError {
 }
 
 macro_rules! send_plain {
-    ($faults:expr, $port:expr, $m:expr) => {{
+    ($faults:expr, $topic:expr, $port:expr, $m:expr) => {{
         let mut v = *$m;
-        if !$faults.pass() {
+        if !$faults.pass($topic) {
             return Ok(());
         }
-        $faults.corrupt(&mut v);
+        $faults.corrupt($topic, &mut v);
+        v.msg.close_stage(monotonic_ns());
+        $port.send(v.msg, &v).map(|_| ()).map_err(transport)
+    }};
+}
+
+/// The evaluator's truth: never faulted (it is the world's record, not the stack's data).
+macro_rules! send_truth {
+    ($port:expr, $m:expr) => {{
+        let mut v = *$m;
         v.msg.close_stage(monotonic_ns());
         $port.send(v.msg, &v).map(|_| ()).map_err(transport)
     }};
@@ -352,32 +361,48 @@ impl Outbox for Ports<'_, '_> {
                 topic: topic.to_string(),
             });
         };
+        let name: &'static str = name;
         match (port, msg) {
+            (OutPort::External, _) if !self.faults.pass(name) => Ok(()),
             (OutPort::External, m) => match (self.external.as_deref_mut(), &mut self.deferred) {
                 (Some(ext), _) => ext.send(topic, m),
                 (None, Some(later)) => {
-                    later.push((*name, m.to_owned()));
+                    later.push((name, m.to_owned()));
                     Ok(())
                 }
                 (None, None) => Err(StageError::Transport(format!("nothing serves `{topic}`"))),
             },
-            (OutPort::VehicleState(p), Message::VehicleState(m)) => send_plain!(self.faults, p, m),
+            (OutPort::VehicleState(p), Message::VehicleState(m)) => {
+                send_plain!(self.faults, name, p, m)
+            }
             (OutPort::PadObservation(p), Message::PadObservation(m)) => {
-                send_plain!(self.faults, p, m)
+                send_plain!(self.faults, name, p, m)
             }
-            (OutPort::PlannerGoal(p), Message::PlannerGoal(m)) => send_plain!(self.faults, p, m),
-            (OutPort::Trajectory(p), Message::Trajectory(m)) => send_plain!(self.faults, p, m),
-            (OutPort::PlannerStats(p), Message::PlannerStats(m)) => send_plain!(self.faults, p, m),
-            (OutPort::Setpoint(p), Message::Setpoint(m)) => send_plain!(self.faults, p, m),
-            (OutPort::LinkRequest(p), Message::LinkRequest(m)) => send_plain!(self.faults, p, m),
-            (OutPort::LinkOutcome(p), Message::LinkOutcome(m)) => send_plain!(self.faults, p, m),
+            (OutPort::PlannerGoal(p), Message::PlannerGoal(m)) => {
+                send_plain!(self.faults, name, p, m)
+            }
+            (OutPort::Trajectory(p), Message::Trajectory(m)) => {
+                send_plain!(self.faults, name, p, m)
+            }
+            (OutPort::PlannerStats(p), Message::PlannerStats(m)) => {
+                send_plain!(self.faults, name, p, m)
+            }
+            (OutPort::Setpoint(p), Message::Setpoint(m)) => send_plain!(self.faults, name, p, m),
+            (OutPort::LinkRequest(p), Message::LinkRequest(m)) => {
+                send_plain!(self.faults, name, p, m)
+            }
+            (OutPort::LinkOutcome(p), Message::LinkOutcome(m)) => {
+                send_plain!(self.faults, name, p, m)
+            }
             (OutPort::SafetyCommand(p), Message::SafetyCommand(m)) => {
-                send_plain!(self.faults, p, m)
+                send_plain!(self.faults, name, p, m)
             }
-            (OutPort::FsmStatus(p), Message::FsmStatus(m)) => send_plain!(self.faults, p, m),
-            (OutPort::WatchdogView(p), Message::WatchdogView(m)) => send_plain!(self.faults, p, m),
-            (OutPort::TruthEvent(p), Message::TruthEvent(m)) => send_plain!(self.faults, p, m),
-            (OutPort::TruthState(p), Message::TruthState(m)) => send_plain!(self.faults, p, m),
+            (OutPort::FsmStatus(p), Message::FsmStatus(m)) => send_plain!(self.faults, name, p, m),
+            (OutPort::WatchdogView(p), Message::WatchdogView(m)) => {
+                send_plain!(self.faults, name, p, m)
+            }
+            (OutPort::TruthEvent(p), Message::TruthEvent(m)) => send_truth!(p, m),
+            (OutPort::TruthState(p), Message::TruthState(m)) => send_truth!(p, m),
             (_, m) => Err(StageError::WrongType {
                 topic: topic.to_string(),
                 expected: topics::find(topic).map_or("?", |t| t.payload.type_name()),
@@ -398,7 +423,7 @@ impl Outbox for Ports<'_, '_> {
                 topic: topic.to_string(),
             });
         };
-        if !self.faults.pass() {
+        if !self.faults.pass(topic) {
             return Ok(false);
         }
         // A loan that fails (every sample held by subscribers) drops this message: the
@@ -413,7 +438,7 @@ impl Outbox for Ports<'_, '_> {
                 else {
                     return Ok(false);
                 };
-                self.faults.corrupt(&mut h);
+                self.faults.corrupt(topic, &mut h);
                 h.msg.close_stage(monotonic_ns());
                 *sample.user_header_mut() = h;
                 p.send(sample).map_err(transport)?;
@@ -427,7 +452,7 @@ impl Outbox for Ports<'_, '_> {
                 else {
                     return Ok(false);
                 };
-                self.faults.corrupt(&mut h);
+                self.faults.corrupt(topic, &mut h);
                 h.msg.close_stage(monotonic_ns());
                 *sample.user_header_mut() = h;
                 p.send(sample).map_err(transport)?;
@@ -441,7 +466,7 @@ impl Outbox for Ports<'_, '_> {
                 else {
                     return Ok(false);
                 };
-                self.faults.corrupt(&mut h);
+                self.faults.corrupt(topic, &mut h);
                 h.msg.close_stage(monotonic_ns());
                 *sample.user_header_mut() = h;
                 p.send(sample).map_err(transport)?;
@@ -488,7 +513,7 @@ impl Node<'_> {
     ) -> Result<(), DriverError> {
         if let Some(orders) = &self.fault_orders {
             while let Some(o) = orders.receive()? {
-                self.faults.apply(&self.name, o.payload());
+                self.faults.apply(&self.name, o.payload(), monotonic_ns());
             }
         }
         let now = monotonic_ns();

@@ -1,8 +1,10 @@
 //! Faults injected into a process's output ports, for fault tests: a delay before each
-//! send, a fraction of the messages dropped, the payloads corrupted. Ordered at run time
-//! through `landing/fault/inject` ([`FaultOrder`]), which a process listens to only when
-//! started with `LANDING_FAULT_INJECTION=1` (`landing run --processes --inject` sets it;
-//! a deployed stack does not). The stages never know: it happens in the driver's ports.
+//! send, a fraction of the messages dropped, the payloads corrupted; on every output or
+//! one topic (a world fault: the simulator's camera cut for two seconds), until cleared
+//! or for a time. Ordered at run time through `landing/fault/inject` ([`FaultOrder`]),
+//! which a process listens to only when started with `LANDING_FAULT_INJECTION=1`
+//! (`landing run --processes --inject` sets it; a deployed stack does not). The stages
+//! never know: it happens in the driver's ports.
 
 use ipc_types::msg::{FaultOrder, Header, PortFault};
 
@@ -14,12 +16,21 @@ pub fn enabled() -> bool {
     std::env::var(ENV).is_ok_and(|v| v == "1")
 }
 
-/// The faults standing on this process's outputs, and what they did.
-#[derive(Debug, Default, Clone)]
-pub struct PortFaults {
+/// The faults on one output topic, or on all (`topic` `None`).
+#[derive(Debug, Clone, Default)]
+struct Rule {
+    topic: Option<String>,
     delay_ns: u64,
     drop: f64,
     corrupt: bool,
+    /// When it ends (monotonic ns); `None`: until cleared.
+    until_ns: Option<u64>,
+}
+
+/// The faults standing on this process's outputs, and what they did.
+#[derive(Debug, Default, Clone)]
+pub struct PortFaults {
+    rules: Vec<Rule>,
     rng: u64,
     /// Messages dropped by the fault.
     pub dropped: u64,
@@ -30,8 +41,8 @@ pub struct PortFaults {
 }
 
 impl PortFaults {
-    /// Takes `order` when it is for `process`; whether it was.
-    pub fn apply(&mut self, process: &str, order: &FaultOrder) -> bool {
+    /// Takes `order`, given at `now_ns`, when it is for `process`; whether it was.
+    pub fn apply(&mut self, process: &str, order: &FaultOrder, now_ns: u64) -> bool {
         if order.process.as_str() != process {
             return false;
         }
@@ -40,34 +51,65 @@ impl PortFaults {
         } else {
             0.0
         };
-        match PortFault::from_raw(order.fault) {
-            Some(PortFault::Clear) => {
-                self.delay_ns = 0;
-                self.drop = 0.0;
-                self.corrupt = false;
+        let topic = Some(order.topic.as_str().to_string()).filter(|t| !t.is_empty());
+        let Some(fault) = PortFault::from_raw(order.fault) else {
+            return false;
+        };
+        if fault == PortFault::Clear {
+            // Clearing every output clears every rule.
+            self.rules.retain(|r| topic.is_some() && r.topic != topic);
+            return true;
+        }
+        let until_ns = (order.for_s.is_finite() && order.for_s > 0.0)
+            .then(|| now_ns.saturating_add((order.for_s.min(3600.0) * 1e9) as u64));
+        let k = match self.rules.iter().position(|r| r.topic == topic) {
+            Some(k) => k,
+            None => {
+                self.rules.push(Rule {
+                    topic: topic.clone(),
+                    ..Rule::default()
+                });
+                self.rules.len() - 1
             }
-            Some(PortFault::Delay) => self.delay_ns = (v.clamp(0.0, 10_000.0) * 1e6) as u64,
-            Some(PortFault::Drop) => self.drop = v.clamp(0.0, 1.0),
-            Some(PortFault::Corrupt) => self.corrupt = true,
-            None => return false,
+        };
+        let r = &mut self.rules[k];
+        r.until_ns = until_ns;
+        match fault {
+            PortFault::Delay => r.delay_ns = (v.clamp(0.0, 10_000.0) * 1e6) as u64,
+            PortFault::Drop => r.drop = v.clamp(0.0, 1.0),
+            PortFault::Corrupt => r.corrupt = true,
+            PortFault::Clear => {}
         }
         tracing::warn!(
             fault = order.fault,
             value = v,
+            topic = topic.as_deref().unwrap_or("every output"),
+            for_s = order.for_s,
             "fault injected into the outputs"
         );
         true
     }
 
-    /// Whether any fault stands.
-    pub fn any(&self) -> bool {
-        self.delay_ns > 0 || self.drop > 0.0 || self.corrupt
+    /// The rules standing for `topic` at `now_ns` (ended ones removed).
+    fn standing(&mut self, topic: &str, now_ns: u64) -> (u64, f64, bool) {
+        self.rules
+            .retain(|r| r.until_ns.is_none_or(|end| now_ns < end));
+        self.rules
+            .iter()
+            .filter(|r| r.topic.as_deref().is_none_or(|t| t == topic))
+            .fold((0, 0.0f64, false), |(d, p, c), r| {
+                (d.max(r.delay_ns), p.max(r.drop), c || r.corrupt)
+            })
     }
 
-    /// Called before a message goes out: `false` when it is to be dropped; otherwise
-    /// waits the delay first.
-    pub fn pass(&mut self) -> bool {
-        if self.drop > 0.0 {
+    /// Called before a message on `topic` goes out: `false` when it is to be dropped;
+    /// otherwise waits the delay first.
+    pub fn pass(&mut self, topic: &str) -> bool {
+        if self.rules.is_empty() {
+            return true;
+        }
+        let (delay_ns, drop, _) = self.standing(topic, crate::monotonic_ns());
+        if drop > 0.0 {
             // xorshift64*: no dependency, and a drop pattern that does not repeat.
             if self.rng == 0 {
                 self.rng = crate::monotonic_ns() | 1;
@@ -77,22 +119,22 @@ impl PortFaults {
             self.rng ^= self.rng >> 27;
             let r =
                 (self.rng.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64;
-            if r < self.drop {
+            if r < drop {
                 self.dropped += 1;
                 return false;
             }
         }
-        if self.delay_ns > 0 {
+        if delay_ns > 0 {
             self.delayed += 1;
-            std::thread::sleep(std::time::Duration::from_nanos(self.delay_ns));
+            std::thread::sleep(std::time::Duration::from_nanos(delay_ns));
         }
         true
     }
 
     /// Overwrites what follows the [`Header`] at the start of `v` with all-ones bytes,
-    /// when corrupting.
-    pub fn corrupt<T: Copy>(&mut self, v: &mut T) {
-        if !self.corrupt {
+    /// when corrupting `topic`.
+    pub fn corrupt<T: Copy>(&mut self, topic: &str, v: &mut T) {
+        if self.rules.is_empty() || !self.standing(topic, crate::monotonic_ns()).2 {
             return;
         }
         let start = std::mem::size_of::<Header>();

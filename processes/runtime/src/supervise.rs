@@ -131,35 +131,28 @@ impl External for Supervision {
         let listeners: Vec<&Listener<Svc>> = self.watched.iter().map(|w| &w.heartbeat).collect();
         let ready = wait_any_readable(&listeners, timeout_ns.min(until_poll));
         let at = clock();
+        let mut events = Vec::new();
         for (k, beat) in ready.into_iter().enumerate() {
-            if !beat {
-                continue;
+            if beat {
+                let _ = self.watched[k].heartbeat.try_wait(|_| {});
+                self.beats += 1;
+                events.push((k, ProcessEventKind::Beat));
             }
-            let _ = self.watched[k].heartbeat.try_wait(|_| {});
-            self.beats += 1;
-            let e = self.event(k, ProcessEventKind::Beat, at);
-            deliver(
-                Input {
-                    topic: topics::WATCHDOG_LIVENESS,
-                    msg: Message::ProcessEvent(&e),
-                },
-                at,
-            )?;
         }
         if at >= self.next_poll_ns {
             self.next_poll_ns = at + self.poll_ns;
             for k in self.poll_nodes() {
                 self.deaths += 1;
-                let at = clock();
-                let e = self.event(k, ProcessEventKind::Died, at);
-                deliver(
-                    Input {
-                        topic: topics::WATCHDOG_LIVENESS,
-                        msg: Message::ProcessEvent(&e),
-                    },
-                    at,
-                )?;
+                events.push((k, ProcessEventKind::Died));
             }
+        }
+        for (k, kind) in events {
+            let e = self.event(k, kind, at);
+            let input = Input {
+                topic: topics::WATCHDOG_LIVENESS,
+                msg: Message::ProcessEvent(&e),
+            };
+            deliver(input, at)?;
         }
         Ok(Flow::Open)
     }

@@ -16,8 +16,12 @@ const DATAGRAM_MAX: usize = 65_536;
 /// Whom a datagram goes to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Reply {
-    /// The peer last heard from, else the configured remote (a companion).
-    PeerElseRemote,
+    /// The first peer heard from, kept, else the configured remote (px4-link toward the
+    /// autopilot): once the autopilot has spoken, datagrams from any other sender are
+    /// counted (`foreign_datagrams`) and dropped, never delivered, and never take the
+    /// link over. (Which system and component may speak is issue 20's signing and
+    /// source checks.)
+    FirstPeerElseRemote,
     /// The peer last heard from and the configured remote (PX4 SITL's onboard link keeps
     /// sending to its configured companion port even after another peer spoke).
     PeerAndRemote,
@@ -32,6 +36,8 @@ pub struct UdpStats {
     pub datagrams_out: u64,
     /// Receives or sends that failed (the link goes on).
     pub io_errors: u64,
+    /// Datagrams from a sender other than the kept peer, dropped.
+    pub foreign_datagrams: u64,
 }
 
 /// Why the link could not be opened.
@@ -131,7 +137,14 @@ impl External for UdpLink {
             match self.socket.recv_from(&mut self.buf) {
                 Ok((n, from)) => {
                     self.stats.datagrams_in += 1;
-                    self.peer = Some(from);
+                    match (self.reply, self.peer) {
+                        (Reply::FirstPeerElseRemote, Some(kept)) if kept != from => {
+                            self.stats.foreign_datagrams += 1;
+                            wait = Duration::from_micros(1);
+                            continue;
+                        }
+                        _ => self.peer = Some(from),
+                    }
                     let input = Input {
                         topic: self.topics[0],
                         msg: Message::Mavlink(self.buf.get(..n).unwrap_or(&[])),
@@ -164,7 +177,8 @@ impl External for UdpLink {
             });
         };
         match (self.reply, self.peer, self.remote) {
-            (Reply::PeerElseRemote, Some(to), _) | (Reply::PeerElseRemote, None, Some(to)) => {
+            (Reply::FirstPeerElseRemote, Some(to), _)
+            | (Reply::FirstPeerElseRemote, None, Some(to)) => {
                 self.send_to(to, frame);
             }
             (Reply::PeerAndRemote, peer, remote) => {
@@ -175,7 +189,7 @@ impl External for UdpLink {
                     self.send_to(to, frame);
                 }
             }
-            (Reply::PeerElseRemote, None, None) => {}
+            (Reply::FirstPeerElseRemote, None, None) => {}
         }
         Ok(())
     }
@@ -185,6 +199,7 @@ impl External for UdpLink {
             ("datagrams_in", self.stats.datagrams_in),
             ("datagrams_out", self.stats.datagrams_out),
             ("io_errors", self.stats.io_errors),
+            ("foreign_datagrams", self.stats.foreign_datagrams),
         ]
     }
 }

@@ -29,7 +29,8 @@ pub struct WatchdogStageConfig {
     pub node_poll_ms: u64,
     /// How often the view is published (and a standing order repeated), ms.
     pub view_period_ms: u64,
-    /// The autopilot's telemetry (vehicle/state) silent this long in the air: land, ms.
+    /// The autopilot's telemetry (new telemetry in vehicle/state) silent this long in the
+    /// air: land, ms.
     pub state_silence_ms: f64,
     /// Setpoints silent this long while the fsm flies offboard: land, ms.
     pub setpoint_silence_ms: f64,
@@ -169,6 +170,8 @@ pub struct WatchdogStage {
     pad_valid: bool,
     airborne: bool,
     last_pad_ns: Option<u64>,
+    /// The newest autopilot telemetry time seen in a vehicle state.
+    last_telemetry_ns: u64,
     order: Option<SafetyCommand>,
     next_view_ns: u64,
     seq: u64,
@@ -189,6 +192,7 @@ impl WatchdogStage {
             pad_valid: false,
             airborne: false,
             last_pad_ns: None,
+            last_telemetry_ns: 0,
             order: None,
             next_view_ns: 0,
             seq: 0,
@@ -282,6 +286,13 @@ impl Stage for WatchdogStage {
                         LandedState::InAir | LandedState::Takeoff | LandedState::Landing
                     );
                 }
+                // px4-link publishes a state at least every 100 ms, telemetry or not: the
+                // path is alive when the autopilot's telemetry in it is new.
+                let new = s.link.last_telemetry_ns > self.last_telemetry_ns;
+                if sane && !new {
+                    return Ok(());
+                }
+                self.last_telemetry_ns = self.last_telemetry_ns.max(s.link.last_telemetry_ns);
                 (topics::VEHICLE_STATE, sane)
             }
             Message::FsmStatus(s) => {

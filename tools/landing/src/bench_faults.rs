@@ -1,6 +1,7 @@
 //! `landing bench faults`: the fault matrix. Every process the watchdog watches is killed
-//! (SIGKILL) and stopped (SIGSTOP: a hang), and the camera frames and pad observations
-//! are delayed, half dropped and corrupted (in the publishers' ports), while the fsm
+//! (SIGKILL) and stopped (SIGSTOP: a hang), the camera frames and pad observations are
+//! delayed, half dropped and corrupted (in the publishers' ports), and the world fails
+//! (the camera unplugged, the telemetry lost, noise on the MAVLink port), while the fsm
 //! tracks and while it descends, one `landing run --processes --inject` flight each; each row says how the flight
 //! ended, how long the watchdog took to find the fault and to order, and what it decided.
 //! The headline: fault -> safe-land order, p50 / p95 / max, for dead and for hung
@@ -31,15 +32,17 @@ pub struct FaultsArgs {
     /// The processes to fault (default: every process the watchdog watches).
     #[arg(long, value_delimiter = ',')]
     processes: Vec<String>,
-    /// The faults to each process, each `kill` or `stop`.
+    /// The faults to each process, each `kill` or `stop` (`--faults ''`: none).
     #[arg(long, value_delimiter = ',', default_value = "kill,stop")]
     faults: Vec<String>,
-    /// Faults in data paths, each FAULT:PROCESS as `--inject` writes them (the process's
-    /// outputs: camera-ingest's camera frames, aruco-pnp's pad observations).
+    /// Faults in data paths and of the world, each FAULT:TARGET as `--inject` writes
+    /// them: a process's outputs (camera-ingest's camera frames, aruco-pnp's pad
+    /// observations), the camera unplugged for 2 s, the autopilot's telemetry lost for
+    /// 1 s, 5000 datagrams of noise at px4-link's port.
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "delay:100:camera-ingest,drop:0.5:camera-ingest,corrupt:camera-ingest,delay:100:aruco-pnp,drop:0.5:aruco-pnp,corrupt:aruco-pnp"
+        default_value = "delay:100:camera-ingest,drop:0.5:camera-ingest,corrupt:camera-ingest,delay:100:aruco-pnp,drop:0.5:aruco-pnp,corrupt:aruco-pnp,cut:2:sim/camera,cut:1:mavlink/from-px4,garbage:5000:px4-link"
     )]
     data_faults: Vec<String>,
     /// When, each a mission phase (`takeoff`, `track`, `descend`, `land`).
@@ -82,7 +85,7 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
     } else {
         args.processes.clone()
     };
-    for f in &args.faults {
+    for f in args.faults.iter().filter(|f| !f.is_empty()) {
         if !["kill", "stop"].contains(&f.as_str()) {
             bail!("--faults: `{f}` is not allowed (allowed: kill, stop)");
         }
@@ -91,13 +94,13 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
     // (fault, process) pairs: every process's, then the data paths'.
     let mut pairs: Vec<(String, String)> = Vec::new();
     for process in &processes {
-        for fault in &args.faults {
+        for fault in args.faults.iter().filter(|f| !f.is_empty()) {
             pairs.push((fault.clone(), process.clone()));
         }
     }
     for d in args.data_faults.iter().filter(|d| !d.is_empty()) {
         let Some((fault, process)) = d.rsplit_once(':') else {
-            bail!("--data-faults: `{d}` is not FAULT:PROCESS (e.g. drop:0.5:aruco-pnp)");
+            bail!("--data-faults: `{d}` is not FAULT:TARGET (e.g. drop:0.5:aruco-pnp)");
         };
         pairs.push((fault.to_string(), process.to_string()));
     }

@@ -26,6 +26,13 @@ pub enum Fault {
     Drop(f64),
     /// Its outputs' payloads are overwritten: NaN and out-of-range values.
     Corrupt,
+    /// A world fault: one topic stops for this many seconds, then comes back (the
+    /// simulator's camera unplugged and plugged in again, the autopilot's telemetry
+    /// lost). The injection names the topic; its publisher does it.
+    Cut(f64),
+    /// A world fault: this many datagrams of random bytes at the process's MAVLink UDP
+    /// port, from another port, as fast as they go.
+    Garbage(u32),
 }
 
 impl Fault {
@@ -37,6 +44,8 @@ impl Fault {
             Self::Delay(ms) => format!("delay:{ms}"),
             Self::Drop(f) => format!("drop:{f}"),
             Self::Corrupt => "corrupt".into(),
+            Self::Cut(s) => format!("cut:{s}"),
+            Self::Garbage(n) => format!("garbage:{n}"),
         }
     }
 
@@ -55,6 +64,7 @@ impl Fault {
             Self::Delay(ms) => Some((PortFault::Delay, ms)),
             Self::Drop(f) => Some((PortFault::Drop, f)),
             Self::Corrupt => Some((PortFault::Corrupt, 0.0)),
+            Self::Cut(_) => Some((PortFault::Drop, 1.0)),
             _ => None,
         }
     }
@@ -74,8 +84,11 @@ pub enum When {
 pub struct Injection {
     /// What.
     pub fault: Fault,
-    /// To which process (a node of the graph).
+    /// To which process (a node of the graph; for a cut, the topic's publisher, filled
+    /// in from the graph by [`Injection::resolve`]).
     pub process: String,
+    /// The one topic it concerns (a cut), else every output.
+    pub topic: Option<String>,
     /// When.
     pub when: When,
 }
@@ -83,7 +96,7 @@ pub struct Injection {
 /// Why an `--inject` value was refused.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 #[error(
-    "--inject {value}: {why} (FAULT:PROCESS@WHEN, FAULT kill or stop, delay:MS (0-10000), drop:FRACTION (0-1) or corrupt, WHEN takeoff, track, descend, land or seconds, e.g. kill:fsm@track, stop:planner@12.5, drop:0.5:aruco-pnp@descend)"
+    "--inject {value}: {why} (FAULT:PROCESS@WHEN, FAULT kill or stop, delay:MS (0-10000), drop:FRACTION (0-1) or corrupt, or a world fault cut:SECONDS:TOPIC (0-600) or garbage:DATAGRAMS:px4-link (1-1000000), WHEN takeoff, track, descend, land or seconds, e.g. kill:fsm@track, stop:planner@12.5, drop:0.5:aruco-pnp@descend, cut:2:sim/camera@track)"
 )]
 pub struct InjectionError {
     value: String,
@@ -107,15 +120,27 @@ impl FromStr for Injection {
             Ok(x) if x.is_finite() && x > 0.0 && x <= hi => Ok(x),
             _ => Err(err("value out of range")),
         };
+        let mut topic = None;
         let (fault, process) = match parts[..] {
             ["kill", p] => (Fault::Kill, p),
             ["stop", p] => (Fault::Stop, p),
             ["corrupt", p] => (Fault::Corrupt, p),
             ["delay", ms, p] => (Fault::Delay(number(ms, 10_000.0)?), p),
             ["drop", f, p] => (Fault::Drop(number(f, 1.0)?), p),
+            ["cut", secs, t] if t.contains('/') => {
+                topic = Some(t.to_string());
+                (Fault::Cut(number(secs, 600.0)?), "")
+            }
+            ["garbage", n, p] => {
+                let n = number(n, 1_000_000.0)?;
+                if n.fract() != 0.0 {
+                    return Err(err("value out of range"));
+                }
+                (Fault::Garbage(n as u32), p)
+            }
             _ => return Err(err("unknown fault")),
         };
-        if process.is_empty() {
+        if process.is_empty() && topic.is_none() {
             return Err(err("no process"));
         }
         let when = match when {
@@ -131,6 +156,7 @@ impl FromStr for Injection {
         Ok(Self {
             fault,
             process: process.to_string(),
+            topic,
             when,
         })
     }
@@ -139,14 +165,44 @@ impl FromStr for Injection {
 impl fmt::Display for Injection {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let fault = self.fault.name();
+        let target = self.topic.as_deref().unwrap_or(&self.process);
         match self.when {
-            When::At(t) => write!(f, "{fault}:{}@{t}", self.process),
-            When::Phase(p) => write!(f, "{fault}:{}@{}", self.process, p.name()),
+            When::At(t) => write!(f, "{fault}:{target}@{t}"),
+            When::Phase(p) => write!(f, "{fault}:{target}@{}", p.name()),
         }
     }
 }
 
 impl Injection {
+    /// The process it is done to, from `graph`: its own, or the publisher of its topic;
+    /// the error names what the graph has.
+    pub fn resolve(&mut self, graph: &graph::Graph) -> Result<(), String> {
+        if let Some(t) = &self.topic {
+            let Some(n) = graph.publishers(t).next() else {
+                let topics: Vec<&str> = graph.topics.iter().map(|t| t.name.as_str()).collect();
+                return Err(format!(
+                    "--inject {self}: no node publishes {t} (topics: {})",
+                    topics.join(", ")
+                ));
+            };
+            self.process = n.name.clone();
+        }
+        if !graph.nodes.iter().any(|n| n.name == self.process) {
+            let names: Vec<&str> = graph.nodes.iter().map(|n| n.name.as_str()).collect();
+            return Err(format!(
+                "--inject {self}: no process {} in the graph (its processes: {})",
+                self.process,
+                names.join(", ")
+            ));
+        }
+        if matches!(self.fault, Fault::Garbage(_)) && self.process != "px4-link" {
+            return Err(format!(
+                "--inject {self}: garbage goes to px4-link's MAVLink port (allowed: garbage:N:px4-link)"
+            ));
+        }
+        Ok(())
+    }
+
     /// Due at simulated time `t_s` in mission state `phase`.
     pub fn due(&self, t_s: f64, phase: MissionState) -> bool {
         match self.when {

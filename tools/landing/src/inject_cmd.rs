@@ -17,7 +17,8 @@ use crate::inject::{Fault, Injection};
 #[derive(Debug, Args)]
 pub struct InjectArgs {
     /// FAULT:PROCESS: FAULT kill, stop, cont, delay:MS, drop:FRACTION, corrupt or clear;
-    /// PROCESS a node of the graph (e.g. stop:planner, drop:0.5:aruco-pnp, clear:aruco-pnp).
+    /// PROCESS a node of the graph (e.g. stop:planner, drop:0.5:aruco-pnp, clear:aruco-pnp);
+    /// or cut:SECONDS:TOPIC, a topic stopped for a while (cut:2:sim/camera).
     fault: String,
 }
 
@@ -45,47 +46,69 @@ fn pids_of(binary: &str, prefix: &str) -> Vec<i32> {
         .collect()
 }
 
+/// The order for `process`'s outputs: `fault` with `value`, on `topic` (else every
+/// output), for `for_s` seconds (0: until cleared).
+fn order(
+    process: &str,
+    (fault, value): (PortFault, f64),
+    topic: Option<&str>,
+    for_s: f64,
+) -> FaultOrder {
+    FaultOrder {
+        process: Text::new(process),
+        fault: fault as u32,
+        value,
+        topic: Text::new(topic.unwrap_or("")),
+        for_s,
+        ..FaultOrder::default()
+    }
+}
+
 /// Runs `landing inject`.
 pub fn run(args: &InjectArgs, prefix: Option<&str>) -> Result<()> {
     let prefix = IpcPrefix::from_flag_or_env(prefix)?;
-    let (fault, process) = match args.fault.split_once(':') {
-        Some(("cont", p)) => (None, p.to_string()),
-        Some(("clear", p)) => (Some((PortFault::Clear, 0.0)), p.to_string()),
+    let order = match args.fault.split_once(':') {
+        Some(("cont", p)) => return signal(p, prefix.as_str(), libc::SIGCONT),
+        Some(("clear", p)) => order(p, (PortFault::Clear, 0.0), None, 0.0),
         _ => {
             // The --inject grammar, done now.
-            let i: Injection = format!("{}@0", args.fault).parse().map_err(|_| {
+            let mut i: Injection = format!("{}@0", args.fault).parse().map_err(|_| {
                 anyhow::anyhow!(
-                    "`{}`: not allowed (allowed: FAULT:PROCESS, FAULT kill, stop, cont, delay:MS, drop:FRACTION, corrupt or clear)",
+                    "`{}`: not allowed (allowed: FAULT:PROCESS, FAULT kill, stop, cont, delay:MS, drop:FRACTION, corrupt or clear; or cut:SECONDS:TOPIC)",
                     args.fault
                 )
             })?;
-            match i.fault {
-                Fault::Kill | Fault::Stop => {
-                    let sig = i.fault.signal().unwrap_or(libc::SIGSTOP);
-                    return signal(&i.process, prefix.as_str(), sig);
-                }
-                f => (f.order(), i.process),
+            if i.topic.is_some() {
+                let deploy = stack_config::deploy_dir();
+                let graph = graph::Graph::load(&graph::default_path(&deploy))?;
+                i.resolve(&graph).map_err(anyhow::Error::msg)?;
+            }
+            if let Some(sig) = i.fault.signal() {
+                return signal(&i.process, prefix.as_str(), sig);
+            }
+            let for_s = match i.fault {
+                Fault::Cut(s) => s,
+                _ => 0.0,
+            };
+            match i.fault.order() {
+                Some(o) => order(&i.process, o, i.topic.as_deref(), for_s),
+                None => bail!(
+                    "`{}`: garbage needs px4-link's UDP port, which only `landing run --inject` knows",
+                    args.fault
+                ),
             }
         }
     };
-    let Some((fault, value)) = fault else {
-        return signal(&process, prefix.as_str(), libc::SIGCONT);
-    };
     let ipc = Ipc::open("landing-inject", &prefix)?;
     let mut orders = ipc.publisher::<FaultOrder>(services::FAULT_INJECT)?;
-    let order = FaultOrder {
-        process: Text::new(&process),
-        fault: fault as u32,
-        value,
-        ..FaultOrder::default()
-    };
     orders.send(Header::captured_at(monotonic_ns()), &order)?;
     // The stages look at their orders every loop (at least every heartbeat, 50 ms): stay
     // until they have, the sample lives in this publisher's memory.
     std::thread::sleep(std::time::Duration::from_millis(300));
     println!(
-        "ordered {} into {process}'s outputs under `{}` (taken only if it runs with {}=1)",
+        "ordered {} into {}'s outputs under `{}` (taken only if it runs with {}=1)",
         args.fault,
+        order.process.as_str(),
         prefix.as_str(),
         runtime::port_faults::ENV
     );

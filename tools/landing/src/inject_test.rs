@@ -63,3 +63,29 @@ fn port_faults_parse_with_their_value() {
         .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!((i.fault, i.when), (Fault::Corrupt, When::At(3.0)));
 }
+
+#[test]
+fn world_faults_parse_with_their_topic_or_count() {
+    let i: Injection = "cut:2:sim/camera@track"
+        .parse()
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(i.fault, Fault::Cut(2.0));
+    assert_eq!(i.topic.as_deref(), Some("sim/camera"));
+    assert_eq!(i.fault.order(), Some((PortFault::Drop, 1.0)));
+    assert_eq!(i.to_string(), "cut:2:sim/camera@track");
+    let i: Injection = "garbage:5000:px4-link@descend"
+        .parse()
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        (i.fault, i.process.as_str()),
+        (Fault::Garbage(5000), "px4-link")
+    );
+    assert_eq!((i.fault.signal(), i.fault.order()), (None, None));
+    for bad in [
+        "cut:0:sim/camera@track",
+        "garbage:1.5:px4-link@track",
+        "cut:2:camera@track",
+    ] {
+        assert!(bad.parse::<Injection>().is_err(), "{bad}");
+    }
+}

@@ -61,7 +61,9 @@ pub struct RunArgs {
     log_dir: Option<PathBuf>,
     /// --processes: a fault to do in flight, FAULT:PROCESS@WHEN (repeatable): FAULT kill
     /// (SIGKILL), stop (SIGSTOP, a hang), delay:MS, drop:FRACTION or corrupt (the
-    /// process's outputs); PROCESS a node of the graph; WHEN a mission state (takeoff,
+    /// process's outputs), or a world fault: cut:SECONDS:TOPIC (the topic stops, then
+    /// comes back: cut:2:sim/camera, cut:1:mavlink/from-px4) or garbage:N:px4-link
+    /// (random datagrams at its MAVLink port); PROCESS a node of the graph; WHEN a mission state (takeoff,
     /// track, descend, land) or seconds after the start. The summary lists the faults,
     /// when the watchdog found each and what it decided (docs/faults.md).
     #[arg(long, value_name = "FAULT:PROCESS@WHEN")]
@@ -137,17 +139,9 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
     if !args.inject.is_empty() && !args.processes {
         anyhow::bail!("--inject needs --processes (faults are done to the stage processes)");
     }
-    if let Some(i) = args
-        .inject
-        .iter()
-        .find(|i| !graph.nodes.iter().any(|n| n.name == i.process))
-    {
-        let names: Vec<&str> = graph.nodes.iter().map(|n| n.name.as_str()).collect();
-        anyhow::bail!(
-            "--inject {i}: no process {} in the graph (its processes: {})",
-            i.process,
-            names.join(", ")
-        );
+    let mut injections = args.inject.clone();
+    for i in &mut injections {
+        i.resolve(&graph).map_err(anyhow::Error::msg)?;
     }
     let seed = args.seed.unwrap_or(scn.scenario.seed);
     let fsm_cfg = run_lockstep::mission(&cfg, &scn)?;
@@ -201,7 +195,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             ipc_prefix,
             graph: &graph,
             graph_path: &graph_path,
-            injections: &args.inject,
+            injections: &injections,
         };
         let r = run_processes::run(&launch, &mut recorder, progress)?;
         if tty {

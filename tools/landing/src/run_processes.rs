@@ -298,15 +298,28 @@ pub fn run(
                 let Some(pid) = children.pid_of(&inj.process) else {
                     continue;
                 };
-                let record = fault_record(&inj.fault.name(), &inj.process, t_s);
+                let mut record = fault_record(&inj.fault.name(), &inj.process, t_s);
+                if let Some(t) = &inj.topic {
+                    record.process = t.clone();
+                }
                 if let Some(sig) = inj.fault.signal() {
                     // SAFETY: signalling our own child.
                     unsafe { libc::kill(pid as i32, sig) };
+                } else if let Fault::Garbage(n) = inj.fault {
+                    if let Err(e) = garbage(&values.link_addr, n) {
+                        failure = Some(e);
+                        return false;
+                    }
                 } else if let Some((fault, value)) = inj.fault.order() {
                     let order = FaultOrder {
                         process: Text::new(&inj.process),
                         fault: fault as u32,
                         value,
+                        topic: Text::new(inj.topic.as_deref().unwrap_or("")),
+                        for_s: match inj.fault {
+                            Fault::Cut(s) => s,
+                            _ => 0.0,
+                        },
                         ..FaultOrder::default()
                     };
                     if let Err(e) = fault_orders.send(Header::captured_at(record.at_ns), &order) {
@@ -354,6 +367,29 @@ pub fn run(
     })
 }
 
+/// `n` datagrams of random bytes (1 to 280 bytes, the MAVLink frame sizes) at `to`, from
+/// a port of their own, as fast as they go: a radio's noise, a peer gone mad.
+fn garbage(to: &str, n: u32) -> Result<()> {
+    let socket = std::net::UdpSocket::bind("127.0.0.1:0")?;
+    let mut rng = monotonic_ns() | 1;
+    let mut buf = [0u8; 280];
+    for _ in 0..n {
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            rng
+        };
+        let len = 1 + (next() % buf.len() as u64) as usize;
+        for b in buf.iter_mut().take(len) {
+            *b = next() as u8;
+        }
+        // A full socket buffer drops the datagram, as a network would.
+        let _ = socket.send_to(&buf[..len], to);
+    }
+    Ok(())
+}
+
 fn fault_record(fault: &str, process: &str, at_s: f64) -> FaultRecord {
     FaultRecord {
         fault: fault.to_string(),
@@ -374,6 +410,11 @@ fn note_detection(f: &mut FaultRecord, view: &WatchdogView) {
     let after_ms = |t: u64| (t >= f.at_ns).then(|| (t - f.at_ns) as f64 * 1e-6);
     let n = (view.count as usize).min(view.processes.len());
     let whole_process = f.fault == "kill" || f.fault == "stop" || f.fault == "exited";
+    if f.fault.starts_with("garbage") {
+        // Noise on the link is px4-link's to drop (its stop line counts it), not a fault
+        // of the stack's.
+        return;
+    }
     if f.detected_after_ms.is_none() {
         f.detected_after_ms = if whole_process {
             view.processes[..n]
