@@ -352,9 +352,15 @@ impl Watchdog {
         for (k, r) in self.cfg.paths.iter().enumerate() {
             let needed = r.phases.is_empty() || r.phases.contains(&self.phase);
             let path = &mut self.paths[k];
-            // Counted from the later of its last message and the phase's start: a path
-            // needed only while descending has until its limit after the descent begins.
-            let since = path.last_ns.unwrap_or(0).max(self.phase_since_ns);
+            // A path needed only in some phases is counted from the later of its last
+            // message and the phase's start (it has until its limit after the descent
+            // begins); one needed always, from its last message (a phase change, the fsm
+            // reacting to the very silence, must not restart the count).
+            let since = if r.phases.is_empty() {
+                path.last_ns.unwrap_or(0)
+            } else {
+                path.last_ns.unwrap_or(0).max(self.phase_since_ns)
+            };
             let started = path.last_ns.is_some() || !r.phases.is_empty();
             let silent =
                 needed && started && now_ns.saturating_sub(since) as f64 * 1e-6 > r.max_silence_ms;

@@ -254,3 +254,22 @@ fn a_bad_configuration_names_what_is_wrong() {
     });
     assert_eq!(e.as_deref(), Some("17 processes to watch: at most 16"));
 }
+
+#[test]
+fn a_path_needed_always_stays_silent_across_a_phase_change() {
+    let mut w = watchdog();
+    w.mission(MissionState::Track, true, true, 0);
+    healthy(&mut w, 0, 1_000);
+    // Setpoints stop at 980 ms; the fsm changes phase at 1 100 ms (reacting to
+    // something): the silence is still counted from 980 ms.
+    for p in ["fsm", "px4-link", "planner"] {
+        w.beat(p, 1_100 * MS);
+    }
+    w.mission(MissionState::Lost, true, true, 1_100 * MS);
+    assert!(w.tick(1_150 * MS).faults.is_empty());
+    let o = w.tick(1_190 * MS);
+    assert_eq!(
+        o.faults,
+        vec![(1_190 * MS, Fault::Silent("fsm/setpoint".into()))]
+    );
+}

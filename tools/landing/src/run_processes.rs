@@ -329,7 +329,13 @@ pub fn run(
                 }
                 tracing::warn!(fault = %inj, at_s = t_s, "fault injected");
                 faults.push(record);
-                referee.on_fault();
+                // A process gone or hung may be the fsm, which would never end the
+                // mission: the referee ends the run once the vehicle is down. Faults in
+                // the data and the world leave every process running: the fsm's end is
+                // the run's, as in a flight without faults.
+                if inj.fault.signal().is_some() {
+                    referee.on_fault();
+                }
                 if inj.fault == Fault::Kill {
                     exits_seen.push(inj.process.clone());
                 }
