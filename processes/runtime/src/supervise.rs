@@ -37,7 +37,6 @@ pub enum SupervisionError {
 /// Heartbeats and node deaths of the watched processes, as an [`External`] source. It
 /// has its own iceoryx2 node (`<process>-supervision`), listed alive beside the stage's.
 pub struct Supervision {
-    ipc: Ipc,
     watched: Vec<Watched>,
     poll_ns: u64,
     next_poll_ns: u64,
@@ -45,6 +44,10 @@ pub struct Supervision {
     beats: u64,
     deaths: u64,
     cleaned: u64,
+    /// Last: fields drop in order, and the node must outlive the heartbeat listeners
+    /// made from it. Dropped before them, its `Drop` still saw itself alive and left the
+    /// prefix's node-counter segment behind when the stack stopped.
+    ipc: Ipc,
 }
 
 impl Supervision {
