@@ -18,13 +18,14 @@ use crate::process::Running;
 /// Every stack process, in the order `landing run --processes` starts them (the
 /// simulator last, so the stages' ports exist before its clock starts); the shipped
 /// graph's start order (each [`Stack`] checks the two agree).
-pub const STAGES: [&str; 7] = [
+pub const STAGES: [&str; 8] = [
     "px4-link",
     "camera-ingest",
     "aruco-pnp",
     "depth-map",
     "planner",
     "fsm",
+    "watchdog",
     "sim",
 ];
 

@@ -275,7 +275,10 @@ fn camera_ingest_playing_an_image_directory_exits_0_at_every_stop_under_load() {
 fn sim_flying_the_scenario_exits_0_at_every_stop_under_load() {
     let _turn = TURN.lock().unwrap_or_else(PoisonError::into_inner);
     // The fsm restarts with each simulator, so that every new world takes off again.
-    let (stack, ipc) = stack_without(&["sim", "fsm"]);
+    // Without the watchdog: it would order the vehicle down when the fsm stops in the
+    // air, and its order stands for the rest of its run (one flight), so no new world
+    // would take off.
+    let (stack, ipc) = stack_without(&["sim", "fsm", "watchdog"]);
     let mut load = BusyLoops::start(2);
     let target = Target {
         name: "sim",
