@@ -139,17 +139,21 @@ impl External for Supervision {
             if beat {
                 let _ = self.watched[k].heartbeat.try_wait(|_| {});
                 self.beats += 1;
-                events.push((k, ProcessEventKind::Beat));
+                events.push((k, ProcessEventKind::Beat, at));
             }
         }
         if at >= self.next_poll_ns {
             self.next_poll_ns = at + self.poll_ns;
-            for k in self.poll_nodes() {
+            // Stamped after the look: listing the nodes takes milliseconds, and a death
+            // it finds may be younger than the wake-up.
+            let died = self.poll_nodes();
+            let seen = clock();
+            for k in died {
                 self.deaths += 1;
-                events.push((k, ProcessEventKind::Died));
+                events.push((k, ProcessEventKind::Died, seen));
             }
         }
-        for (k, kind) in events {
+        for (k, kind, at) in events {
             let e = self.event(k, kind, at);
             let input = Input {
                 topic: topics::WATCHDOG_LIVENESS,

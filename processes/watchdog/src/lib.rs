@@ -330,6 +330,11 @@ impl Watchdog {
             self.phase = phase;
             self.phase_since_ns = now_ns;
         }
+        // Down again: an order was for that flight; the next one starts without it (the
+        // view keeps when it was given).
+        if self.airborne && !airborne {
+            self.order = None;
+        }
         self.airborne = airborne;
         self.pad_fresh = pad_fresh;
     }
@@ -458,7 +463,7 @@ impl Watchdog {
         v
     }
 
-    /// True once a safe landing was ordered.
+    /// True while a safe landing ordered in this flight stands.
     pub fn ordered(&self) -> bool {
         self.order == Some(SafetyAction::SafeLand)
     }

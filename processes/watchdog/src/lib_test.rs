@@ -273,3 +273,29 @@ fn a_path_needed_always_stays_silent_across_a_phase_change() {
         vec![(1_190 * MS, Fault::Silent("fsm/setpoint".into()))]
     );
 }
+
+#[test]
+fn an_order_stands_for_its_flight_and_the_next_flight_starts_without_it() {
+    let mut w = watchdog();
+    w.mission(MissionState::Track, true, true, 0);
+    healthy(&mut w, 0, 1_000);
+    w.died("fsm", 1_000 * MS);
+    assert!(w.tick(1_000 * MS).order.is_some());
+    assert!(w.ordered());
+    // Down: the order is over, its time stays in the view.
+    w.mission(MissionState::SafeLand, false, false, 5_000 * MS);
+    assert!(!w.ordered());
+    assert_eq!(w.view().order_ns, 1_000 * MS);
+    // The fsm restarted, the next flight loses it again: a new order.
+    w.beat("fsm", 6_000 * MS);
+    w.mission(MissionState::Track, true, true, 7_000 * MS);
+    for p in ["px4-link", "planner"] {
+        w.beat(p, 7_000 * MS);
+    }
+    w.message("fsm/setpoint", 7_000 * MS, true);
+    w.died("fsm", 7_010 * MS);
+    assert_eq!(
+        w.tick(7_010 * MS).order,
+        Some((SafetyAction::SafeLand, "fsm died".into()))
+    );
+}

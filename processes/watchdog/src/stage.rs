@@ -342,6 +342,10 @@ impl Stage for WatchdogStage {
             });
             send_now = true;
         }
+        // Repeated while in the air (a restarted px4-link still gets it); down, it is over.
+        if !self.airborne {
+            self.order = None;
+        }
         let view_due = now_ns >= self.next_view_ns;
         if (send_now || view_due)
             && let Some(mut c) = self.order

@@ -286,7 +286,8 @@ fn landing_status_shows_a_process_hung_in_flight_and_the_watchdogs_order() {
                 assert_eq!(planner["missed_deadlines"], 1, "{last}");
                 assert_eq!(last["last_fault"], "planner hung", "{last}");
                 assert_eq!(last["decision"], "planner hung in track: land", "{last}");
-                assert_eq!(last["safe_land_ordered"], true, "{last}");
+                // Ordered in this flight (`safe_land_ordered` is over once it is down).
+                assert!(last["order_ns"].as_u64().unwrap() > 0, "{last}");
                 break;
             }
         }
