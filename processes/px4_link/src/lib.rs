@@ -7,6 +7,7 @@
 //! protocol pieces the simulated autopilot shares (codec, NED/FRD frames, PX4 modes,
 //! COMMAND_LONG) are the `px4_protocol` crate's; NED and FRD appear nowhere else.
 
+pub mod clock;
 pub mod config;
 pub mod link;
 pub mod node;

@@ -11,6 +11,8 @@ use mavlink::dialects::common::{
     MavResult, MavState, MavType, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
 use nalgebra::{UnitQuaternion, Vector3};
+
+use crate::clock::AutopilotClock;
 use px4_protocol::frames::{
     enu_from_ned, flu_from_frd, ned_from_enu, world_from_body_enu, yaw_enu_to_ned,
 };
@@ -214,11 +216,24 @@ struct Telemetry {
     last_telemetry_ns: u64,
     last_seq: Option<u8>,
     lost: u64,
+    /// The autopilot's boot clock on ours: telemetry is stamped when it was measured.
+    clock: AutopilotClock,
     /// AMSL altitude of the local frame's origin from HOME_POSITION (home altitude
     /// plus its NED z), m.
     origin_amsl_from_home: Option<f64>,
     /// The latest GLOBAL_POSITION_INT altitude above mean sea level, m.
     global_alt_amsl: Option<f64>,
+}
+
+impl Telemetry {
+    /// Telemetry measured at the autopilot's `time_boot_ms`, arrived at `now_ns`: the
+    /// newest measurement time, on our clock, never going back.
+    fn measured(&mut self, time_boot_ms: u32, now_ns: u64) {
+        let t = self
+            .clock
+            .local_time(u64::from(time_boot_ms) * 1_000_000, now_ns);
+        self.last_telemetry_ns = self.last_telemetry_ns.max(t);
+    }
 }
 
 /// What the link knows of the autopilot.
@@ -388,7 +403,7 @@ impl Px4Link {
                 if pos.iter().chain(vel.iter()).all(|v| v.is_finite()) {
                     self.home.get_or_insert(pos);
                     self.telemetry.position = Some((pos, vel));
-                    self.telemetry.last_telemetry_ns = now_ns;
+                    self.telemetry.measured(p.time_boot_ms, now_ns);
                 }
             }
             MavMessage::ATTITUDE_QUATERNION(a) => {
@@ -396,7 +411,7 @@ impl Px4Link {
                     let rates = flu_from_frd([a.rollspeed, a.pitchspeed, a.yawspeed]);
                     if rates.iter().all(|v| v.is_finite()) {
                         self.telemetry.attitude = Some((q, rates));
-                        self.telemetry.last_telemetry_ns = now_ns;
+                        self.telemetry.measured(a.time_boot_ms, now_ns);
                     }
                 }
             }

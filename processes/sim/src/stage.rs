@@ -26,6 +26,7 @@ use stage::{Counter, Input, Message, Outbox, SliceHeader, SliceMut, Stage, Stage
 use crate::camera::PixelFormat;
 use crate::depth::DEPTH_SCALE_M;
 use crate::lockstep::{PHYSICS_STEP_NS, Simulator, TRUTH_STATE_PERIOD_NS, truth_state};
+use crate::px4::commander::BootClock;
 
 /// What the `sim` process flies, as its flags say.
 #[derive(Debug, Clone, clap::Args)]
@@ -153,6 +154,19 @@ impl Pace {
                 }
                 target
             }
+        }
+    }
+
+    /// The autopilot's boot clock: on the driver's clock, as the camera's stamps are.
+    fn boot_clock(&self) -> BootClock {
+        match self {
+            Self::Lockstep => BootClock::default(),
+            Self::Realtime {
+                speed, skipped_ns, ..
+            } => BootClock {
+                ahead_ns: *skipped_ns,
+                rate: *speed,
+            },
         }
     }
 
@@ -438,6 +452,9 @@ impl Stage for SimStage {
         if self.finished() {
             return Ok(());
         }
+        self.sim
+            .commander_mut()
+            .set_boot_clock(self.pace.boot_clock());
         while self.sim.time_ns() < target {
             let report = self
                 .sim

@@ -64,6 +64,9 @@ struct Row {
     process: String,
     phase: String,
     outcome: String,
+    /// When the fault was injected (s of simulated time); `None`: the flight never
+    /// reached its phase.
+    at_s: Option<f64>,
     touchdown_error_m: Option<f64>,
     detected_after_ms: Option<f64>,
     ordered_after_ms: Option<f64>,
@@ -130,6 +133,7 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
                 process: process.clone(),
                 phase: phase.clone(),
                 outcome: s["outcome"].as_str().unwrap_or("?").to_string(),
+                at_s: f["at_s"].as_f64(),
                 touchdown_error_m: s["touchdown_error_m"].as_f64(),
                 detected_after_ms: f["detected_after_ms"].as_f64(),
                 ordered_after_ms: f["ordered_after_ms"].as_f64(),

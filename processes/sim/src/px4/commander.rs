@@ -382,6 +382,40 @@ pub struct Home {
     pub alt_amsl: f64,
 }
 
+/// The autopilot's boot clock against simulated time. A real autopilot's clock runs
+/// with the world's; the simulator's time pauses when the machine falls behind (it then
+/// skips ahead) and runs `speed` times as fast as the wall clock, so the clock the
+/// telemetry carries is kept on the wall clock that stamps the camera's frames:
+/// `(sim + ahead) / rate`. px4-link maps that clock onto its own, as on a vehicle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BootClock {
+    /// Simulated time skipped so far, ns.
+    pub ahead_ns: u64,
+    /// Simulated seconds per boot-clock second.
+    pub rate: f64,
+}
+
+impl Default for BootClock {
+    fn default() -> Self {
+        Self {
+            ahead_ns: 0,
+            rate: 1.0,
+        }
+    }
+}
+
+impl BootClock {
+    /// The boot clock at simulated time `sim_ns`.
+    pub fn at(&self, sim_ns: u64) -> u64 {
+        let rate = if self.rate.is_finite() && self.rate > 0.0 {
+            self.rate
+        } else {
+            1.0
+        };
+        (sim_ns.saturating_add(self.ahead_ns) as f64 / rate) as u64
+    }
+}
+
 /// The PX4-like commander (see the module docs).
 #[derive(Debug, Clone)]
 pub struct Commander {
@@ -417,6 +451,7 @@ pub struct Commander {
     faults: Faults,
     arm_rejections: u32,
     silent: bool,
+    boot_clock: BootClock,
 }
 
 /// PX4's default rates on an onboard link: HEARTBEAT 1 Hz, ATTITUDE_QUATERNION
@@ -468,7 +503,13 @@ impl Commander {
             faults: Faults::default(),
             arm_rejections: 0,
             silent: false,
+            boot_clock: BootClock::default(),
         })
+    }
+
+    /// How the boot clock the telemetry carries follows simulated time (see [`BootClock`]).
+    pub fn set_boot_clock(&mut self, clock: BootClock) {
+        self.boot_clock = clock;
     }
 
     /// The parameters in use.
@@ -1089,7 +1130,8 @@ impl Commander {
     /// Builds telemetry message `id` for now, as PX4 would report it.
     fn telemetry(&self, id: u32, now_ns: u64, vehicle: &VehicleStatus) -> Option<MavMessage> {
         let est = &vehicle.estimate;
-        let time_boot_ms = (now_ns / 1_000_000) as u32;
+        let boot_ns = self.boot_clock.at(now_ns);
+        let time_boot_ms = (boot_ns / 1_000_000) as u32;
         let deg_e7 = |deg: f64| (deg * 1e7).round() as i32;
         let mm = |m: f64| (m * 1e3).round() as i32;
         Some(match id {
@@ -1143,7 +1185,7 @@ impl Commander {
                     approach_x: 0.0,
                     approach_y: 0.0,
                     approach_z: 0.0,
-                    time_usec: now_ns / 1000,
+                    time_usec: boot_ns / 1000,
                 })
             }
             msg_id::ATTITUDE_QUATERNION => {
@@ -1174,7 +1216,7 @@ impl Commander {
                 let mut unknown = [0.0f32; 21];
                 unknown[0] = f32::NAN;
                 MavMessage::ODOMETRY(ODOMETRY_DATA {
-                    time_usec: now_ns / 1000,
+                    time_usec: boot_ns / 1000,
                     x: p.x as f32,
                     y: p.y as f32,
                     z: p.z as f32,
