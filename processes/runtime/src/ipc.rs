@@ -297,6 +297,17 @@ impl_message_header!(CameraFrameHeader, DepthFrameHeader, OccupancyMapHeader);
 
 type PubSubBuilder<P, H> = iceoryx2::service::builder::publish_subscribe::Builder<P, H, Svc>;
 
+/// One node of the stack, as listed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ListedNode {
+    /// Its name: the process's graph node.
+    pub name: String,
+    /// Its process is alive.
+    pub alive: bool,
+    /// Its system-wide unique id: a process restarted under the same name has another.
+    pub id: u128,
+}
+
 /// A process's connection to iceoryx2: one node, named after the process. Dropped, it
 /// cleans up after dead nodes of its stack and, the last node of its prefix gone, removes
 /// the prefix's node-counter segment, which iceoryx2 otherwise leaves in /dev/shm for
@@ -631,20 +642,23 @@ impl Ipc {
         })
     }
 
-    /// The names of the nodes of this stack, each with whether it is alive (a dead node is
-    /// one whose process is gone without cleaning up); `None` when the list could not be
-    /// read.
-    pub fn nodes(&self) -> Option<Vec<(String, bool)>> {
+    /// The nodes of this stack (a dead node is one whose process is gone without
+    /// cleaning up); `None` when the list could not be read.
+    pub fn nodes(&self) -> Option<Vec<ListedNode>> {
         use iceoryx2::node::NodeView;
         let mut out = Vec::new();
         let listed = Node::<Svc>::list(&self.config, |state| {
-            let (details, alive) = match &state {
-                NodeState::Alive(v) => (v.details(), true),
-                NodeState::Dead(v) => (v.details(), false),
+            let (details, alive, id) = match &state {
+                NodeState::Alive(v) => (v.details(), true, v.id().value()),
+                NodeState::Dead(v) => (v.details(), false, v.id().value()),
                 _ => return CallbackProgression::Continue,
             };
             if let Some(d) = details {
-                out.push((d.name().as_str().to_string(), alive));
+                out.push(ListedNode {
+                    name: d.name().as_str().to_string(),
+                    alive,
+                    id,
+                });
             }
             CallbackProgression::Continue
         });

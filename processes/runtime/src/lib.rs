@@ -26,9 +26,9 @@ pub use iceoryx2;
 pub use clock::{Clock, MonotonicClock, SimClock, monotonic_ns};
 pub use driver::{Beat, DriverError};
 pub use ipc::{
-    Heartbeat, HeartbeatError, Ipc, IpcPrefix, LoanError, LoopExit, MessageHeader, NodeError,
-    PeriodicWait, PrefixError, Publisher, ReceiveError, SendError, ServiceError, SlicePublisher,
-    SliceSubscriber, Subscriber, WaitError, Wake, run_wait_loop,
+    Heartbeat, HeartbeatError, Ipc, IpcPrefix, ListedNode, LoanError, LoopExit, MessageHeader,
+    NodeError, PeriodicWait, PrefixError, Publisher, ReceiveError, SendError, ServiceError,
+    SlicePublisher, SliceSubscriber, Subscriber, WaitError, Wake, run_wait_loop,
 };
 pub use process_main::process_main;
 pub use serve::{ServeError, StageArgs, serve};

@@ -17,8 +17,8 @@ use crate::ipc::{Ipc, IpcPrefix, NodeError, ServiceError, Svc, wait_any_readable
 struct Watched {
     name: String,
     heartbeat: Listener<Svc>,
-    /// Seen alive in the node list.
-    listed: bool,
+    /// Seen alive in the node list, with this node id.
+    listed: Option<u128>,
     /// Reported dead since it was last seen alive.
     reported: bool,
 }
@@ -65,7 +65,7 @@ impl Supervision {
             watched.push(Watched {
                 name: name.clone(),
                 heartbeat: ipc.heartbeat_listener(name, *deadline)?,
-                listed: false,
+                listed: None,
                 reported: false,
             });
         }
@@ -101,17 +101,31 @@ impl Supervision {
         };
         let mut died = Vec::new();
         for (k, w) in self.watched.iter_mut().enumerate() {
-            let alive = nodes.iter().any(|(n, a)| *a && *n == w.name);
-            if alive {
-                w.listed = true;
-                w.reported = false;
-            } else if w.listed && !w.reported {
-                w.listed = false;
-                w.reported = true;
-                died.push(k);
+            let alive = nodes
+                .iter()
+                .find(|n| n.alive && n.name == w.name)
+                .map(|n| n.id);
+            match (w.listed, alive) {
+                // Restarted between two looks (systemd is quick): the node it had is
+                // gone, another of its name is here. A death, and alive again.
+                (Some(before), Some(now)) if before != now => {
+                    w.listed = alive;
+                    w.reported = false;
+                    died.push(k);
+                }
+                (_, Some(_)) => {
+                    w.listed = alive;
+                    w.reported = false;
+                }
+                (Some(_), None) if !w.reported => {
+                    w.listed = None;
+                    w.reported = true;
+                    died.push(k);
+                }
+                _ => {}
             }
         }
-        if nodes.iter().any(|(_, alive)| !alive) {
+        if nodes.iter().any(|n| !n.alive) {
             self.cleaned += self.ipc.cleanup_dead_nodes();
         }
         died

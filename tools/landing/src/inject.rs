@@ -1,7 +1,8 @@
 //! `landing run --processes --inject FAULT:PROCESS@WHEN`: faults done to the stack's
 //! processes in flight, and what became of them.
 //!
-//! A signal does `kill` (SIGKILL, a crash) and `stop` (SIGSTOP, a hang); the runtime's
+//! A signal does `kill` (SIGKILL, a crash), `stop` (SIGSTOP, a hang) and `restart` (SIGKILL,
+//! then the same command again, as systemd restarts a unit); the runtime's
 //! output ports do `delay:MS`, `drop:FRACTION` and `corrupt`, ordered through
 //! `landing/fault/inject` (`runtime::port_faults`), which the stage processes listen to
 //! because `landing run` starts them with `LANDING_FAULT_INJECTION=1`.
@@ -20,6 +21,9 @@ pub enum Fault {
     Kill,
     /// SIGSTOP: the process hangs (never continued during the run).
     Stop,
+    /// SIGKILL, then the same command started again at once: a crash that systemd's
+    /// `Restart=on-failure` answers.
+    Restart,
     /// Each of its outputs waits this many ms before it is sent.
     Delay(f64),
     /// Each of its outputs is dropped with this probability.
@@ -41,6 +45,7 @@ impl Fault {
         match self {
             Self::Kill => "kill".into(),
             Self::Stop => "stop".into(),
+            Self::Restart => "restart".into(),
             Self::Delay(ms) => format!("delay:{ms}"),
             Self::Drop(f) => format!("drop:{f}"),
             Self::Corrupt => "corrupt".into(),
@@ -52,7 +57,7 @@ impl Fault {
     /// The signal that does it, for a fault to the whole process.
     pub fn signal(self) -> Option<libc::c_int> {
         match self {
-            Self::Kill => Some(libc::SIGKILL),
+            Self::Kill | Self::Restart => Some(libc::SIGKILL),
             Self::Stop => Some(libc::SIGSTOP),
             _ => None,
         }
@@ -96,7 +101,7 @@ pub struct Injection {
 /// Why an `--inject` value was refused.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 #[error(
-    "--inject {value}: {why} (FAULT:PROCESS@WHEN, FAULT kill or stop, delay:MS (0-10000), drop:FRACTION (0-1) or corrupt, or a world fault cut:SECONDS:TOPIC (0-600) or garbage:DATAGRAMS:px4-link (1-1000000), WHEN takeoff, track, descend, land or seconds, e.g. kill:fsm@track, stop:planner@12.5, drop:0.5:aruco-pnp@descend, cut:2:sim/camera@track)"
+    "--inject {value}: {why} (FAULT:PROCESS@WHEN, FAULT kill, stop or restart, delay:MS (0-10000), drop:FRACTION (0-1) or corrupt, or a world fault cut:SECONDS:TOPIC (0-600) or garbage:DATAGRAMS:px4-link (1-1000000), WHEN takeoff, track, descend, land or seconds, e.g. kill:fsm@track, stop:planner@12.5, drop:0.5:aruco-pnp@descend, cut:2:sim/camera@track)"
 )]
 pub struct InjectionError {
     value: String,
@@ -124,6 +129,7 @@ impl FromStr for Injection {
         let (fault, process) = match parts[..] {
             ["kill", p] => (Fault::Kill, p),
             ["stop", p] => (Fault::Stop, p),
+            ["restart", p] => (Fault::Restart, p),
             ["corrupt", p] => (Fault::Corrupt, p),
             ["delay", ms, p] => (Fault::Delay(number(ms, 10_000.0)?), p),
             ["drop", f, p] => (Fault::Drop(number(f, 1.0)?), p),

@@ -35,6 +35,18 @@ impl Children {
             })
     }
 
+    /// Puts `child` in the place of the one started as `name` (restarted), reaping the
+    /// old one.
+    pub fn replace(&mut self, name: &str, child: Child) {
+        match self.0.iter_mut().find(|(n, _)| n == name) {
+            Some((_, c)) => {
+                let _ = c.wait();
+                *c = child;
+            }
+            None => self.push(name, child),
+        }
+    }
+
     /// The process id of the child started as `name`.
     pub fn pid_of(&self, name: &str) -> Option<u32> {
         self.0.iter().find(|(n, _)| n == name).map(|(_, c)| c.id())

@@ -179,16 +179,7 @@ pub fn run(
     for node in launch.graph.start_order() {
         let log: PathBuf = launch.log_dir.join(format!("{}.log", node.name));
         let file = File::create(&log).with_context(|| format!("creating {}", log.display()))?;
-        let mut cmd = command(node, &values, &prefix, launch.graph_path)?;
-        if !launch.injections.is_empty() {
-            cmd.env(runtime::port_faults::ENV, "1");
-        }
-        let child = cmd
-            .env("LANDING_LOG", "info")
-            .stdout(Stdio::null())
-            .stderr(file)
-            .spawn()
-            .with_context(|| format!("starting {}", node.binary))?;
+        let child = start(node, &values, &prefix, launch, file)?;
         children.push(&node.name, child);
         if !node.start_last {
             // Let each stage open its ports before the simulator's clock starts.
@@ -305,6 +296,28 @@ pub fn run(
                 if let Some(sig) = inj.fault.signal() {
                     // SAFETY: signalling our own child.
                     unsafe { libc::kill(pid as i32, sig) };
+                    if inj.fault == Fault::Restart {
+                        // As systemd restarts a unit: the same command, its log
+                        // appended to.
+                        let again = launch
+                            .graph
+                            .nodes
+                            .iter()
+                            .find(|n| n.name == inj.process)
+                            .context("the restarted process left the graph")
+                            .and_then(|node| {
+                                let log = launch.log_dir.join(format!("{}.log", node.name));
+                                let file = File::options().append(true).open(&log)?;
+                                start(node, &values, &prefix, launch, file)
+                            });
+                        match again {
+                            Ok(child) => children.replace(&inj.process, child),
+                            Err(e) => {
+                                failure = Some(e);
+                                return false;
+                            }
+                        }
+                    }
                 } else if let Fault::Garbage(n) = inj.fault {
                     if let Err(e) = garbage(&values.link_addr, n) {
                         failure = Some(e);
@@ -373,6 +386,25 @@ pub fn run(
     })
 }
 
+/// Starts graph node `node` of the run, its stderr to `log`.
+fn start(
+    node: &graph::Node,
+    values: &RunValues,
+    prefix: &IpcPrefix,
+    launch: &Launch<'_>,
+    log: File,
+) -> Result<std::process::Child> {
+    let mut cmd = command(node, values, prefix, launch.graph_path)?;
+    if !launch.injections.is_empty() {
+        cmd.env(runtime::port_faults::ENV, "1");
+    }
+    cmd.env("LANDING_LOG", "info")
+        .stdout(Stdio::null())
+        .stderr(log)
+        .spawn()
+        .with_context(|| format!("starting {}", node.binary))
+}
+
 /// `n` datagrams of random bytes (1 to 280 bytes, the MAVLink frame sizes) at `to`, from
 /// a port of their own, as fast as they go: a radio's noise, a peer gone mad.
 fn garbage(to: &str, n: u32) -> Result<()> {
@@ -415,7 +447,7 @@ fn fault_record(fault: &str, process: &str, at_s: f64) -> FaultRecord {
 fn note_detection(f: &mut FaultRecord, view: &WatchdogView) {
     let after_ms = |t: u64| (t >= f.at_ns).then(|| (t - f.at_ns) as f64 * 1e-6);
     let n = (view.count as usize).min(view.processes.len());
-    let whole_process = f.fault == "kill" || f.fault == "stop" || f.fault == "exited";
+    let whole_process = ["kill", "stop", "restart", "exited"].contains(&f.fault.as_str());
     if f.fault.starts_with("garbage") {
         // Noise on the link is px4-link's to drop (its stop line counts it), not a fault
         // of the stack's.

@@ -179,6 +179,29 @@ fn an_fsm_killed_while_tracking_is_found_by_the_watchdog_which_orders_a_landing(
     assert_nothing_left(&p);
 }
 
+#[test]
+fn a_planner_restarted_while_tracking_is_found_dead_under_its_new_node_and_the_vehicle_lands() {
+    // SIGKILL and the same command again at once, as systemd's Restart=on-failure: the
+    // node list never shows the name missing, only under another node id.
+    let p = prefix("restart");
+    let landing = start(
+        &["--processes", "--json", "--inject", "restart:planner@track"],
+        &p,
+    );
+    let (_, s, log) = summary(landing);
+    assert!(
+        ["landed", "safe_landed"].contains(&s["outcome"].as_str().unwrap()),
+        "{s}\n{log}"
+    );
+    let f = &s["faults"][0];
+    assert_eq!(f["fault"], "restart", "{s}");
+    assert_eq!(f["action"], "planner died in track: land", "{s}");
+    assert!(f["detected_after_ms"].as_f64().is_some(), "{s}");
+    assert!(f["ordered_after_ms"].as_f64().is_some(), "{s}");
+    // The second planner stopped with the stack, and cleaned up.
+    assert_nothing_left(&p);
+}
+
 /// `landing run --processes --inject VALUE` refused: exit code 2, one line on stderr.
 fn refused_injection(value: &str) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_landing"))
@@ -195,7 +218,7 @@ fn refused_injection(value: &str) -> String {
 fn a_malformed_injection_is_one_line_naming_what_is_allowed() {
     let err = refused_injection("explode:fsm@track");
     assert!(
-        err.contains("unknown fault") && err.contains("kill or stop"),
+        err.contains("unknown fault") && err.contains("kill, stop or restart"),
         "{err}"
     );
 }
