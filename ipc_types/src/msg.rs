@@ -1068,6 +1068,9 @@ pub enum PortFault {
     /// Each output's payload is overwritten with all-ones bytes after its header: NaN in
     /// every float, the largest value in every integer.
     Corrupt = 3,
+    /// Each image's pixels are one mid-grey: the frames flow and show nothing (the pad
+    /// hidden, the view blocked). Images only; other messages pass.
+    Blank = 4,
 }
 
 impl PortFault {
@@ -1078,6 +1081,7 @@ impl PortFault {
             1 => Self::Delay,
             2 => Self::Drop,
             3 => Self::Corrupt,
+            4 => Self::Blank,
             _ => return None,
         })
     }

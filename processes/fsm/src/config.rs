@@ -83,6 +83,9 @@ pub struct FsmConfig {
     pub lost_climb_max_m: f64,
     /// Lost: give up and land in place after this long, s.
     pub lost_timeout_s: f64,
+    /// Lost: keep going with the pad's last estimated horizontal velocity this long, s:
+    /// a pad on a moving vehicle is not where it was lost (0: hold where it was lost).
+    pub lost_follow_s: f64,
     /// Vehicle state older than this (or a link reported down) means telemetry is lost, s.
     pub telemetry_timeout_s: f64,
     /// The watchdog's view older than this (once one came) means the stack is no longer
@@ -149,6 +152,7 @@ impl Default for FsmConfig {
             lost_climb_m_s: 0.5,
             lost_climb_max_m: 2.0,
             lost_timeout_s: 10.0,
+            lost_follow_s: 5.0,
             telemetry_timeout_s: 0.5,
             watchdog_timeout_s: 1.0,
             request_attempts: 3,
@@ -287,6 +291,7 @@ impl Validate for FsmConfig {
             ("lost_climb_m_s", self.lost_climb_m_s, 0.0, 5.0),
             ("lost_climb_max_m", self.lost_climb_max_m, 0.0, 50.0),
             ("lost_timeout_s", self.lost_timeout_s, 0.1, 600.0),
+            ("lost_follow_s", self.lost_follow_s, 0.0, 60.0),
             ("telemetry_timeout_s", self.telemetry_timeout_s, 0.05, 10.0),
             ("watchdog_timeout_s", self.watchdog_timeout_s, 0.1, 60.0),
             ("request_retry_s", self.request_retry_s, 0.0, 60.0),

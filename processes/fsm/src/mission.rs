@@ -122,6 +122,8 @@ pub struct Fsm {
     /// The gear is on the pad: the motors are being switched off.
     touched: bool,
     lost_z0: f64,
+    /// The pad's horizontal velocity when it was lost (zero without an estimate).
+    lost_velocity: Vector3<f64>,
     lost_since_update: u64,
     mode_lost_since: Option<u64>,
     last_tick_ns: Option<u64>,
@@ -164,6 +166,7 @@ impl Fsm {
             drop_moving: false,
             touched: false,
             lost_z0: 0.0,
+            lost_velocity: Vector3::zeros(),
             lost_since_update: 0,
             mode_lost_since: None,
             last_tick_ns: None,
@@ -964,7 +967,13 @@ impl Fsm {
 
     fn enter_lost(&mut self, now_ns: u64) {
         let z0 = self.position().map(|p| p.z).unwrap_or(self.hold.z);
-        let why = match self.pad_estimate(now_ns) {
+        let estimate = self.pad_estimate(now_ns);
+        self.lost_velocity = estimate
+            .as_ref()
+            .map(|e| Vector3::new(e.velocity.x, e.velocity.y, 0.0))
+            .filter(|v| v.iter().all(|c| c.is_finite()))
+            .unwrap_or_else(Vector3::zeros);
+        let why = match estimate {
             Some(e) => format!("no pad for {:.1} s", e.age_s),
             None => "pad estimate restarted (observations jumped)".to_string(),
         };
@@ -997,8 +1006,19 @@ impl Fsm {
         let climb = ((t - self.cfg.lost_hold_s).max(0.0) * self.cfg.lost_climb_m_s)
             .min(self.cfg.lost_climb_max_m);
         let climbing = t > self.cfg.lost_hold_s && climb < self.cfg.lost_climb_max_m;
-        let target = Vector3::new(self.hold.x, self.hold.y, self.lost_z0 + climb);
+        // Where the pad would be had it kept its velocity (for `lost_follow_s`), above it.
+        let follow = t.min(self.cfg.lost_follow_s);
+        let drift = self.lost_velocity * follow;
+        let target = Vector3::new(
+            self.hold.x + drift.x,
+            self.hold.y + drift.y,
+            self.lost_z0 + climb,
+        );
         let mut sp = self.hold_setpoint(now_ns, target);
+        if t < self.cfg.lost_follow_s {
+            sp.velocity[0] = self.lost_velocity.x;
+            sp.velocity[1] = self.lost_velocity.y;
+        }
         if climbing {
             sp.velocity[2] = self.cfg.lost_climb_m_s;
         }

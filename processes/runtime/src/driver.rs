@@ -439,6 +439,7 @@ impl Outbox for Ports<'_, '_> {
                     return Ok(false);
                 };
                 self.faults.corrupt(topic, &mut h);
+                self.faults.blank(topic, sample.payload_mut());
                 h.msg.close_stage(monotonic_ns());
                 *sample.user_header_mut() = h;
                 p.send(sample).map_err(transport)?;
@@ -579,8 +580,8 @@ impl Node<'_> {
         if self.fault_orders.is_some() {
             let f = &self.faults;
             line.push_str(&format!(
-                " injected_dropped={} injected_corrupted={} injected_delayed={}",
-                f.dropped, f.corrupted, f.delayed
+                " injected_dropped={} injected_corrupted={} injected_delayed={} injected_blanked={}",
+                f.dropped, f.corrupted, f.delayed, f.blanked
             ));
         }
         line

@@ -23,6 +23,7 @@ struct Rule {
     delay_ns: u64,
     drop: f64,
     corrupt: bool,
+    blank: bool,
     /// When it ends (monotonic ns); `None`: until cleared.
     until_ns: Option<u64>,
 }
@@ -38,6 +39,8 @@ pub struct PortFaults {
     pub corrupted: u64,
     /// Messages delayed.
     pub delayed: u64,
+    /// Images blanked.
+    pub blanked: u64,
 }
 
 impl PortFaults {
@@ -78,6 +81,7 @@ impl PortFaults {
             PortFault::Delay => r.delay_ns = (v.clamp(0.0, 10_000.0) * 1e6) as u64,
             PortFault::Drop => r.drop = v.clamp(0.0, 1.0),
             PortFault::Corrupt => r.corrupt = true,
+            PortFault::Blank => r.blank = true,
             PortFault::Clear => {}
         }
         tracing::warn!(
@@ -129,6 +133,24 @@ impl PortFaults {
             std::thread::sleep(std::time::Duration::from_nanos(delay_ns));
         }
         true
+    }
+
+    /// Paints `pixels` (an image on `topic`) one mid-grey, when blanking `topic`.
+    pub fn blank(&mut self, topic: &str, pixels: &mut [u8]) {
+        if self.rules.is_empty() {
+            return;
+        }
+        let now = crate::monotonic_ns();
+        self.rules
+            .retain(|r| r.until_ns.is_none_or(|end| now < end));
+        let blanked = self
+            .rules
+            .iter()
+            .any(|r| r.blank && r.topic.as_deref().is_none_or(|t| t == topic));
+        if blanked {
+            self.blanked += 1;
+            pixels.fill(0x80);
+        }
     }
 
     /// Overwrites what follows the [`Header`] at the start of `v` with all-ones bytes,

@@ -37,12 +37,13 @@ pub struct FaultsArgs {
     faults: Vec<String>,
     /// Faults in data paths and of the world, each FAULT:TARGET as `--inject` writes
     /// them: a process's outputs (camera-ingest's camera frames, aruco-pnp's pad
-    /// observations), the camera unplugged for 2 s, the autopilot's telemetry lost for
-    /// 1 s, 5000 datagrams of noise at px4-link's port.
+    /// observations), the camera unplugged for 2 s, the pad hidden for 2 s (the camera's
+    /// images blank), the autopilot's telemetry lost for 1 s, 5000 datagrams of noise at
+    /// px4-link's port.
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "delay:100:camera-ingest,drop:0.5:camera-ingest,corrupt:camera-ingest,delay:100:aruco-pnp,drop:0.5:aruco-pnp,corrupt:aruco-pnp,cut:2:sim/camera,cut:1:mavlink/from-px4,garbage:5000:px4-link"
+        default_value = "delay:100:camera-ingest,drop:0.5:camera-ingest,corrupt:camera-ingest,delay:100:aruco-pnp,drop:0.5:aruco-pnp,corrupt:aruco-pnp,cut:2:sim/camera,blank:2:sim/camera,cut:1:mavlink/from-px4,garbage:5000:px4-link"
     )]
     data_faults: Vec<String>,
     /// When, each a mission phase (`takeoff`, `track`, `descend`, `land`).

@@ -11,6 +11,7 @@ use std::fmt;
 use std::str::FromStr;
 
 use ipc_types::msg::{MissionState, PortFault};
+use ipc_types::topics::{self, Payload};
 use serde::Serialize;
 use thiserror::Error;
 
@@ -34,6 +35,10 @@ pub enum Fault {
     /// simulator's camera unplugged and plugged in again, the autopilot's telemetry
     /// lost). The injection names the topic; its publisher does it.
     Cut(f64),
+    /// A world fault: the images of one topic show nothing for this many seconds while
+    /// they keep coming (`sim/camera`: the pad hidden, the view blocked). Its publisher
+    /// paints them one grey.
+    Blank(f64),
     /// A world fault: this many datagrams of random bytes at the process's MAVLink UDP
     /// port, from another port, as fast as they go.
     Garbage(u32),
@@ -50,6 +55,7 @@ impl Fault {
             Self::Drop(f) => format!("drop:{f}"),
             Self::Corrupt => "corrupt".into(),
             Self::Cut(s) => format!("cut:{s}"),
+            Self::Blank(s) => format!("blank:{s}"),
             Self::Garbage(n) => format!("garbage:{n}"),
         }
     }
@@ -70,6 +76,7 @@ impl Fault {
             Self::Drop(f) => Some((PortFault::Drop, f)),
             Self::Corrupt => Some((PortFault::Corrupt, 0.0)),
             Self::Cut(_) => Some((PortFault::Drop, 1.0)),
+            Self::Blank(_) => Some((PortFault::Blank, 0.0)),
             _ => None,
         }
     }
@@ -101,7 +108,7 @@ pub struct Injection {
 /// Why an `--inject` value was refused.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 #[error(
-    "--inject {value}: {why} (FAULT:PROCESS@WHEN, FAULT kill, stop or restart, delay:MS (0-10000), drop:FRACTION (0-1) or corrupt, or a world fault cut:SECONDS:TOPIC (0-600) or garbage:DATAGRAMS:px4-link (1-1000000), WHEN takeoff, track, descend, land or seconds, e.g. kill:fsm@track, stop:planner@12.5, drop:0.5:aruco-pnp@descend, cut:2:sim/camera@track)"
+    "--inject {value}: {why} (FAULT:PROCESS@WHEN, FAULT kill, stop or restart, delay:MS (0-10000), drop:FRACTION (0-1) or corrupt, or a world fault cut:SECONDS:TOPIC (0-600), blank:SECONDS:TOPIC (0-600, images) or garbage:DATAGRAMS:px4-link (1-1000000), WHEN takeoff, track, descend, land or seconds, e.g. kill:fsm@track, stop:planner@12.5, drop:0.5:aruco-pnp@descend, cut:2:sim/camera@track)"
 )]
 pub struct InjectionError {
     value: String,
@@ -136,6 +143,10 @@ impl FromStr for Injection {
             ["cut", secs, t] if t.contains('/') => {
                 topic = Some(t.to_string());
                 (Fault::Cut(number(secs, 600.0)?), "")
+            }
+            ["blank", secs, t] if t.contains('/') => {
+                topic = Some(t.to_string());
+                (Fault::Blank(number(secs, 600.0)?), "")
             }
             ["garbage", n, p] => {
                 let n = number(n, 1_000_000.0)?;
@@ -199,6 +210,13 @@ impl Injection {
                 "--inject {self}: no process {} in the graph (its processes: {})",
                 self.process,
                 names.join(", ")
+            ));
+        }
+        if let (Fault::Blank(_), Some(t)) = (self.fault, &self.topic)
+            && !topics::find(t).is_some_and(|t| t.payload == Payload::CameraFrame)
+        {
+            return Err(format!(
+                "--inject {self}: blank paints images; {t} carries none (allowed: sim/camera, camera/frame)"
             ));
         }
         if matches!(self.fault, Fault::Garbage(_)) && self.process != "px4-link" {

@@ -83,11 +83,17 @@ pub fn run(args: &InjectArgs, prefix: Option<&str>) -> Result<()> {
                 let graph = graph::Graph::load(&graph::default_path(&deploy))?;
                 i.resolve(&graph).map_err(anyhow::Error::msg)?;
             }
+            if i.fault == Fault::Restart {
+                bail!(
+                    "`{}`: restart needs the process's command line, which only `landing run --inject` has (a deployed stack: `kill`, and systemd restarts it)",
+                    args.fault
+                );
+            }
             if let Some(sig) = i.fault.signal() {
                 return signal(&i.process, prefix.as_str(), sig);
             }
             let for_s = match i.fault {
-                Fault::Cut(s) => s,
+                Fault::Cut(s) | Fault::Blank(s) => s,
                 _ => 0.0,
             };
             match i.fault.order() {

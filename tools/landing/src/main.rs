@@ -64,7 +64,7 @@ enum Command {
     /// Once, or live with --watch; exit code 2 when no watchdog answers.
     Status(status_cmd::StatusArgs),
     /// Do a fault to a running stack now: kill or stop (SIGSTOP) one of its processes,
-    /// cont to resume it, or delay, drop or corrupt its outputs (processes started with
+    /// cont to resume it, or delay, drop, corrupt or blank its outputs (processes started with
     /// LANDING_FAULT_INJECTION=1 only), clear to undo. For fault tests by hand; `landing
     /// run --processes --inject` does the same on a schedule.
     Inject(inject_cmd::InjectArgs),

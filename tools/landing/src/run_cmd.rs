@@ -60,10 +60,12 @@ pub struct RunArgs {
     #[arg(long, value_name = "DIR")]
     log_dir: Option<PathBuf>,
     /// --processes: a fault to do in flight, FAULT:PROCESS@WHEN (repeatable): FAULT kill
-    /// (SIGKILL), stop (SIGSTOP, a hang), delay:MS, drop:FRACTION or corrupt (the
-    /// process's outputs), or a world fault: cut:SECONDS:TOPIC (the topic stops, then
-    /// comes back: cut:2:sim/camera, cut:1:mavlink/from-px4) or garbage:N:px4-link
-    /// (random datagrams at its MAVLink port); PROCESS a node of the graph; WHEN a mission state (takeoff,
+    /// (SIGKILL), stop (SIGSTOP, a hang), restart (SIGKILL, then started again, as
+    /// systemd would), delay:MS, drop:FRACTION or corrupt (the process's outputs), or a
+    /// world fault: cut:SECONDS:TOPIC (the topic stops, then comes back: cut:2:sim/camera,
+    /// cut:1:mavlink/from-px4), blank:SECONDS:sim/camera (the images show nothing: the pad
+    /// hidden) or garbage:N:px4-link (random datagrams at its MAVLink port); PROCESS a
+    /// node of the graph; WHEN a mission state (takeoff,
     /// track, descend, land) or seconds after the start. The summary lists the faults,
     /// when the watchdog found each and what it decided (docs/faults.md).
     #[arg(long, value_name = "FAULT:PROCESS@WHEN")]

@@ -330,7 +330,7 @@ pub fn run(
                         value,
                         topic: Text::new(inj.topic.as_deref().unwrap_or("")),
                         for_s: match inj.fault {
-                            Fault::Cut(s) => s,
+                            Fault::Cut(s) | Fault::Blank(s) => s,
                             _ => 0.0,
                         },
                         ..FaultOrder::default()
