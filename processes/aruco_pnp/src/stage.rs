@@ -4,7 +4,7 @@
 use ipc_types::msg::{CameraFrameHeader, Header, PixelEncoding, Stage as StageId};
 use ipc_types::topics;
 use stage::{Counter, Input, Message, Outbox, Stage, StageError};
-use state_history::{StateHistory, timed_pose_of};
+use state_history::{HistoryError, StateHistory, timed_pose_of};
 
 use crate::{Frame, PadEstimator};
 
@@ -16,6 +16,12 @@ pub struct ArucoStage {
     estimator: PadEstimator,
     history: StateHistory,
     counts: Counts,
+    /// A frame newer than every state by more than the allowance (the autopilot's
+    /// telemetry late on a loaded machine): held until a state at or after its capture
+    /// comes, or the next frame does. Placed by a pose from before it, it would carry
+    /// the vehicle's motion since; placed by none, it is no use to the fsm.
+    held: Option<CameraFrameHeader>,
+    held_pixels: Vec<u8>,
 }
 
 #[derive(Debug, Default, Clone, Copy)]
@@ -25,6 +31,7 @@ struct Counts {
     no_state: u64,
     bad_states: u64,
     non_finite: u64,
+    held: u64,
 }
 
 impl ArucoStage {
@@ -35,7 +42,20 @@ impl ArucoStage {
             estimator,
             history: StateHistory::new(STATE_HISTORY, max_state_age_ns),
             counts: Counts::default(),
+            held: None,
+            held_pixels: Vec::new(),
         }
+    }
+
+    /// The held frame, processed now (with whatever the history can say of it).
+    fn release(&mut self, now_ns: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
+        let Some(header) = self.held.take() else {
+            return Ok(());
+        };
+        let pixels = std::mem::take(&mut self.held_pixels);
+        let r = self.frame(now_ns, &header, &pixels, out, false);
+        self.held_pixels = pixels;
+        r
     }
 
     fn frame(
@@ -44,12 +64,21 @@ impl ArucoStage {
         header: &CameraFrameHeader,
         pixels: &[u8],
         out: &mut dyn Outbox,
+        may_hold: bool,
     ) -> Result<(), StageError> {
         let Some(frame) = frame_of(header, pixels) else {
             self.counts.bad_frames += 1;
             return Ok(());
         };
-        let body = self.history.at(header.msg.capture_ns).ok();
+        let body = self.history.at(header.msg.capture_ns);
+        if may_hold && matches!(body, Err(HistoryError::Stale(_))) {
+            self.held = Some(*header);
+            self.held_pixels.clear();
+            self.held_pixels.extend_from_slice(pixels);
+            self.counts.held += 1;
+            return Ok(());
+        }
+        let body = body.ok();
         if body.is_none() {
             self.counts.no_state += 1;
         }
@@ -89,10 +118,30 @@ impl Stage for ArucoStage {
         out: &mut dyn Outbox,
     ) -> Result<(), StageError> {
         match input.msg {
-            Message::VehicleState(v) if !timed_pose_of(v).is_some_and(|p| self.history.push(p)) => {
-                self.counts.bad_states += 1;
+            Message::VehicleState(v) => {
+                let Some(p) = timed_pose_of(v) else {
+                    self.counts.bad_states += 1;
+                    return Ok(());
+                };
+                // px4-link repeats its last state while the telemetry is silent: the
+                // same stamp, nothing new.
+                let repeat = self
+                    .history
+                    .latest()
+                    .is_some_and(|l| l.time_ns == p.time_ns);
+                if !repeat && !self.history.push(p) {
+                    self.counts.bad_states += 1;
+                }
+                let newest = self.history.latest().map_or(0, |l| l.time_ns);
+                if self.held.is_some_and(|h| newest >= h.msg.capture_ns) {
+                    self.release(now_ns, out)?;
+                }
             }
-            Message::CameraFrame(h, pixels) => self.frame(now_ns, h, pixels, out)?,
+            Message::CameraFrame(h, pixels) => {
+                // The next frame: the held one goes first, placed as well as it can be.
+                self.release(now_ns, out)?;
+                self.frame(now_ns, h, pixels, out, true)?;
+            }
             _ => {}
         }
         Ok(())
@@ -111,6 +160,7 @@ impl Stage for ArucoStage {
             ("no_state", c.no_state),
             ("bad_states", c.bad_states),
             ("non_finite", c.non_finite),
+            ("held", c.held),
         ]
     }
 }

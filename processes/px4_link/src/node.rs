@@ -20,7 +20,7 @@
 use std::collections::VecDeque;
 
 use ipc_types::msg::{
-    Header, LinkOutcome, LinkOutcomeKind, LinkRequest, LinkRequestKind, SafetyAction,
+    FlightMode, Header, LinkOutcome, LinkOutcomeKind, LinkRequest, LinkRequestKind, SafetyAction,
     SafetyCommand, Setpoint, Stage, VehicleState,
 };
 use mavlink::MavHeader;
@@ -110,6 +110,16 @@ impl LinkNode {
         self.collect();
         let key = (SAFETY_REQUEST_ID, kind as u32);
         if self.ids.len() == 1 && self.ids.front() == Some(&key) {
+            return;
+        }
+        // Done already: the autopilot is in the mode the order wants and nothing else is
+        // asked. A watchdog repeats its order every 200 ms; each used to send LAND again
+        // and log it.
+        let wanted = match request {
+            Request::Hold => FlightMode::Hold,
+            _ => FlightMode::Land,
+        };
+        if self.ids.is_empty() && self.link.status(now_ns).mode == wanted {
             return;
         }
         tracing::warn!(

@@ -426,3 +426,33 @@ fn no_setpoint_beyond_the_bounds_is_ever_sent_whatever_the_mission_asks() {
         "the test must exercise both sides"
     );
 }
+
+#[test]
+fn a_safety_order_the_autopilot_already_follows_sends_nothing() {
+    let mut node = LinkNode::new(LinkSettings::default());
+    // PX4 in AUTO.LAND (main mode 4, sub mode 6), armed.
+    let landing = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: (6 << 24) | (4 << 16),
+        base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+            | MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED,
+        ..match heartbeat() {
+            MavMessage::HEARTBEAT(h) => h,
+            _ => unreachable!(),
+        }
+    });
+    node.on_message(0, &PX4, &landing);
+    // The watchdog repeats its order every 200 ms: not one LAND goes out for it.
+    for k in 1..5u64 {
+        node.on_safety(k * 200_000_000, &safety(SafetyAction::SafeLand));
+        assert!(
+            commands(node.poll(k * 200_000_000 + 1)).is_empty(),
+            "order {k}"
+        );
+    }
+    // Hold is another mode: that one goes out.
+    node.on_safety(1_000_000_000, &safety(SafetyAction::Hold));
+    assert_eq!(
+        commands(node.poll(1_000_000_001)),
+        vec![MavCmd::MAV_CMD_DO_SET_MODE]
+    );
+}
