@@ -1,9 +1,10 @@
 //! Helpers for the workspace-level tests: a toy stage added through the graph (`toy`),
 //! stack binaries as child processes (`process`),
 //! the whole stack started as `landing run --processes` starts it (`stack`), stop tests
-//! under load (`stop`), and where a pointer lives in this process's memory map, so a test
+//! under load (`stop`), misbehaving stages for fault tests (`misbehaving`), and where a pointer lives in this process's memory map, so a test
 //! can prove that a payload is read in place from shared memory.
 
+pub mod misbehaving;
 pub mod process;
 pub mod stack;
 pub mod stop;
