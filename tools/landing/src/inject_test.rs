@@ -28,7 +28,10 @@ fn a_bad_injection_names_what_is_wrong_and_what_is_allowed() {
     ] {
         let e = bad.parse::<Injection>().err().map(|e| e.to_string());
         let e = e.unwrap_or_default();
-        assert!(e.contains(why) && e.contains("kill or stop"), "{bad}: {e}");
+        assert!(
+            e.contains(why) && e.contains("kill, stop or restart"),
+            "{bad}: {e}"
+        );
     }
     for (bad, why) in [
         ("delay:fsm@track", "unknown fault"),
@@ -88,4 +91,16 @@ fn world_faults_parse_with_their_topic_or_count() {
     ] {
         assert!(bad.parse::<Injection>().is_err(), "{bad}");
     }
+}
+
+#[test]
+fn restart_and_blank_parse_with_their_targets() {
+    let i: Injection = "restart:planner@track".parse().unwrap();
+    assert_eq!((i.fault, i.process.as_str()), (Fault::Restart, "planner"));
+    assert_eq!(i.fault.signal(), Some(libc::SIGKILL));
+    let i: Injection = "blank:2.5:sim/camera@descend".parse().unwrap();
+    assert_eq!(i.fault, Fault::Blank(2.5));
+    assert_eq!(i.topic.as_deref(), Some("sim/camera"));
+    assert_eq!(i.fault.order(), Some((PortFault::Blank, 0.0)));
+    assert!("blank:0:sim/camera@track".parse::<Injection>().is_err());
 }

@@ -233,6 +233,15 @@ fn an_injection_into_a_process_the_graph_does_not_have_is_refused_before_the_fli
 }
 
 #[test]
+fn blanking_a_topic_that_carries_no_images_is_refused_before_the_flight() {
+    let err = refused_injection("blank:2:vehicle/state@track");
+    assert!(
+        err.contains("vehicle/state carries none") && err.contains("sim/camera"),
+        "{err}"
+    );
+}
+
+#[test]
 fn ctrl_c_ends_a_lockstep_run_as_interrupted_with_its_summary() {
     // Stopped at its first progress line (the flight takes a few seconds here).
     let mut landing = start(&["--scenario", "obstacle-demo", "--json"], &prefix("lock"));
