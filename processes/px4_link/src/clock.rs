@@ -6,10 +6,10 @@
 //!
 //! The offset (local minus boot time) is the smallest seen, the message that came
 //! quickest: later ones were late, not sent later. It rises toward later arrivals by
-//! [`DRIFT`] at most (crystals drift by tens of ppm) and starts over on a jump of more than
-//! [`RESTART_NS`] (the autopilot rebooted). MAVROS does the same with TIMESYNC's round
-//! trips; one-way, the path's fixed delay stays in the offset (microseconds on a serial
-//! line or loopback UDP).
+//! [`DRIFT`] at most (crystals drift by tens of ppm) and starts over when the boot time
+//! goes back (the autopilot restarted) or the offset jumps by more than [`RESTART_NS`].
+//! MAVROS does the same with TIMESYNC's round trips; one-way, the path's fixed delay
+//! stays in the offset (microseconds on a serial line or loopback UDP).
 
 /// How fast the offset may rise, s per s: ten times a poor crystal's drift.
 pub const DRIFT: f64 = 1e-3;
@@ -17,11 +17,16 @@ pub const DRIFT: f64 = 1e-3;
 /// An offset this far from the estimate is a new clock (the autopilot restarted), ns.
 pub const RESTART_NS: i64 = 1_000_000_000;
 
+/// Messages may come this much out of their order of measurement, ns; a boot time
+/// further back is a new clock.
+pub const REORDER_NS: u64 = 100_000_000;
+
 /// The mapping; see the module docs.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct AutopilotClock {
     offset_ns: Option<i64>,
     last_local_ns: u64,
+    last_boot_ns: u64,
 }
 
 impl AutopilotClock {
@@ -37,8 +42,16 @@ impl AutopilotClock {
             .saturating_sub(i64::try_from(boot_ns).unwrap_or(i64::MAX));
         let elapsed = local_ns.saturating_sub(self.last_local_ns);
         self.last_local_ns = self.last_local_ns.max(local_ns);
+        // Its clock went back: the autopilot started again (however short its last run,
+        // so however close the new offset is to the old).
+        let rebooted = boot_ns.saturating_add(REORDER_NS) < self.last_boot_ns;
+        self.last_boot_ns = if rebooted {
+            boot_ns
+        } else {
+            self.last_boot_ns.max(boot_ns)
+        };
         let offset = match self.offset_ns {
-            Some(o) if sample.abs_diff(o) <= RESTART_NS.unsigned_abs() => {
+            Some(o) if !rebooted && sample.abs_diff(o) <= RESTART_NS.unsigned_abs() => {
                 let risen = o.saturating_add((elapsed as f64 * DRIFT) as i64);
                 sample.min(risen)
             }

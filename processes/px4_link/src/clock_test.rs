@@ -58,3 +58,17 @@ fn no_stamp_is_its_arrival_and_none_is_after_it() {
     assert_eq!(c.local_time(u64::MAX, 9 * MS), 9 * MS);
     assert_eq!(c.local_time(5 * MS, 0), 0);
 }
+
+#[test]
+fn an_autopilot_restarted_after_a_short_run_is_a_new_clock() {
+    // Ran 0.4 s, restarted 0.2 s later: the new offset is only 0.6 s above the old one,
+    // but its clock went back.
+    let mut c = AutopilotClock::default();
+    for k in 1..=40u64 {
+        let boot = k * 10 * MS;
+        assert_eq!(c.local_time(boot, 1_000 * MS + boot), 1_000 * MS + boot);
+    }
+    let local = 1_000 * MS + 600 * MS + 10 * MS;
+    assert_eq!(c.local_time(10 * MS, local), local);
+    assert_eq!(c.local_time(20 * MS, local + 10 * MS), local + 10 * MS);
+}
