@@ -94,15 +94,19 @@ impl PortFaults {
         true
     }
 
-    /// The rules standing for `topic` at `now_ns` (ended ones removed).
-    fn standing(&mut self, topic: &str, now_ns: u64) -> (u64, f64, bool) {
+    /// The rules standing for `topic` at `now_ns` (ended ones removed), folded into one.
+    fn standing(&mut self, topic: &str, now_ns: u64) -> Rule {
         self.rules
             .retain(|r| r.until_ns.is_none_or(|end| now_ns < end));
         self.rules
             .iter()
             .filter(|r| r.topic.as_deref().is_none_or(|t| t == topic))
-            .fold((0, 0.0f64, false), |(d, p, c), r| {
-                (d.max(r.delay_ns), p.max(r.drop), c || r.corrupt)
+            .fold(Rule::default(), |a, r| Rule {
+                delay_ns: a.delay_ns.max(r.delay_ns),
+                drop: a.drop.max(r.drop),
+                corrupt: a.corrupt || r.corrupt,
+                blank: a.blank || r.blank,
+                ..Rule::default()
             })
     }
 
@@ -112,7 +116,7 @@ impl PortFaults {
         if self.rules.is_empty() {
             return true;
         }
-        let (delay_ns, drop, _) = self.standing(topic, crate::monotonic_ns());
+        let Rule { delay_ns, drop, .. } = self.standing(topic, crate::monotonic_ns());
         if drop > 0.0 {
             // xorshift64*: no dependency, and a drop pattern that does not repeat.
             if self.rng == 0 {
@@ -140,13 +144,7 @@ impl PortFaults {
         if self.rules.is_empty() {
             return;
         }
-        let now = crate::monotonic_ns();
-        self.rules
-            .retain(|r| r.until_ns.is_none_or(|end| now < end));
-        let blanked = self
-            .rules
-            .iter()
-            .any(|r| r.blank && r.topic.as_deref().is_none_or(|t| t == topic));
+        let blanked = self.standing(topic, crate::monotonic_ns()).blank;
         if blanked {
             self.blanked += 1;
             pixels.fill(0x80);
@@ -156,7 +154,7 @@ impl PortFaults {
     /// Overwrites what follows the [`Header`] at the start of `v` with all-ones bytes,
     /// when corrupting `topic`.
     pub fn corrupt<T: Copy>(&mut self, topic: &str, v: &mut T) {
-        if self.rules.is_empty() || !self.standing(topic, crate::monotonic_ns()).2 {
+        if self.rules.is_empty() || !self.standing(topic, crate::monotonic_ns()).corrupt {
             return;
         }
         let start = std::mem::size_of::<Header>();
