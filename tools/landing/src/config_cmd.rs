@@ -35,6 +35,9 @@ pub struct StackConfig {
     /// The supervisor: its deadlines, the data paths' limits, its policy.
     #[serde(default)]
     pub watchdog: watchdog::WatchdogStageConfig,
+    /// The recorder: images as JPEG or raw, chunk compression, flush period.
+    #[serde(default)]
+    pub recorder: recorder::RecorderConfig,
 }
 
 impl Validate for StackConfig {
@@ -50,6 +53,7 @@ impl Validate for StackConfig {
         self.planner.validate().map_err(|e| e.under("planner"))?;
         self.fsm.validate().map_err(|e| e.under("fsm"))?;
         self.watchdog.validate().map_err(|e| e.under("watchdog"))?;
+        self.recorder.validate().map_err(|e| e.under("recorder"))?;
         if let Some(c) = &self.camera_ingest {
             c.validate().map_err(|e| e.under("camera_ingest"))?;
         }

@@ -2,7 +2,7 @@
 
 use landing::{
     bench_aruco, bench_depth, bench_faults, bench_ipc, bench_perception, bench_planner, bench_sim,
-    config_cmd, graph_cmd, inject_cmd, map_cmd, pad_detect, pad_print, plan_cmd, record, run_cmd,
+    config_cmd, graph_cmd, inject_cmd, map_cmd, pad_detect, pad_print, plan_cmd, run_cmd,
     status_cmd,
 };
 use std::path::PathBuf;
@@ -164,13 +164,17 @@ fn clean(prefix: Option<&str>) -> anyhow::Result<()> {
 
 /// `landing mcap info`.
 fn mcap_info(file: &std::path::Path, json: bool) -> anyhow::Result<()> {
-    let info = record::info(file)?;
+    let info = recorder::info(file)?;
     if json {
         println!("{}", serde_json::to_string_pretty(&info)?);
     } else {
         println!("{info}");
     }
-    Ok(())
+    // What was readable is reported above; the damage is the error.
+    match &info.broken {
+        Some(b) => anyhow::bail!("{}: {b}", file.display()),
+        None => Ok(()),
+    }
 }
 
 fn main() -> ExitCode {

@@ -14,10 +14,20 @@ use crate::flight_log::{
     FlightLog, FlightSample, Outcome, RunSummary, Touchdown, TouchdownContact,
 };
 use crate::plot;
-use crate::record::Recorder;
 use crate::run_eval::{self, Evaluator, Referee, Rules};
 use crate::run_lockstep::{self, Recording};
 use crate::run_processes;
+use recorder::Recorder;
+
+/// Where the evaluator's ground truth of a run recorded in `pipeline` goes: `run.mcap`
+/// -> `run.truth.mcap`.
+pub fn truth_path(pipeline: &std::path::Path) -> PathBuf {
+    let stem = pipeline
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "recording".into());
+    pipeline.with_file_name(format!("{stem}.truth.mcap"))
+}
 
 /// Arguments of `landing run`.
 #[derive(Debug, Args)]
@@ -47,10 +57,18 @@ pub struct RunArgs {
     /// instead of the one-process lockstep.
     #[arg(long)]
     processes: bool,
-    /// Record every message the stages exchange into an MCAP file (JSON, open it in
-    /// Foxglove Studio; `landing mcap info FILE` lists it).
+    /// Record every topic of the pipeline into an MCAP file for Foxglove: the camera
+    /// (JPEG), depth, the transform tree, the 3-D scene (map, trajectory, pad), the
+    /// mission's log and every message as plottable JSON, with the config, the graph and
+    /// the git revision as metadata (`landing mcap info FILE` lists it; docs/recording.md).
+    /// --processes runs the `recorder` process for it. The simulator's ground truth goes
+    /// to FILE.truth.mcap beside it.
     #[arg(long, value_name = "FILE.mcap")]
     record: Option<PathBuf>,
+    /// --record: camera frames raw (foxglove.RawImage) instead of JPEG, bit-exact: what
+    /// `landing replay --stage aruco-pnp` needs.
+    #[arg(long, requires = "record")]
+    raw_images: bool,
     /// Write a top view and a 3-D view of the UAV and UGV trajectories (top.png, 3d.png)
     /// and a histogram of the planning times into this directory.
     #[arg(long, value_name = "DIR")]
@@ -148,17 +166,48 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
     let seed = args.seed.unwrap_or(scn.scenario.seed);
     let fsm_cfg = run_lockstep::mission(&cfg, &scn)?;
     let rules = Rules::of(&scn)?;
-    let mut recorder = match &args.record {
-        Some(p) => {
-            // As --plot does: a new directory for the outputs is made, not refused.
-            if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir)
-                    .with_context(|| format!("--record: cannot create {}", dir.display()))?;
-            }
-            Some(Recorder::create(p)?)
-        }
-        None => None,
+    let mut rec = Recording {
+        skip: cfg.recorder.skip.clone(),
+        ..Recording::default()
     };
+    if let Some(p) = &args.record {
+        // As --plot does: a new directory for the outputs is made, not refused.
+        if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("--record: cannot create {}", dir.display()))?;
+        }
+        let mut meta = recorder::metadata::stack(Some(&cfg_path), &graph_path)?;
+        meta.insert("scenario".into(), scn.scenario.name.clone());
+        meta.insert("seed".into(), seed.to_string());
+        meta.insert(
+            "mode".into(),
+            if args.processes {
+                "processes"
+            } else {
+                "lockstep"
+            }
+            .into(),
+        );
+        let mut truth = Recorder::create(&truth_path(p))?;
+        truth.write_metadata("landing", meta.clone())?;
+        rec.truth = Some(truth);
+        if !args.processes {
+            let mut options = cfg
+                .recorder
+                .options()
+                .map_err(|e| anyhow::anyhow!("[recorder] {}: {}", e.key, e.message))?;
+            if args.raw_images {
+                options.images = recorder::ImageFormat::Raw;
+            }
+            options.body_from_camera = Some(recorder::metadata::pose_of(
+                &aruco_pnp::down_camera_from_body(cfg.aruco_pnp.camera_position_in_body_m)
+                    .inverse(),
+            ));
+            let mut pipeline = Recorder::with_options(p, options)?;
+            pipeline.write_metadata("landing", meta)?;
+            rec.pipeline = Some(pipeline);
+        }
+    }
     let tty = std::io::stderr().is_terminal();
     eprintln!(
         "run: {} (seed {seed}, {}): {}",
@@ -198,8 +247,9 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             graph: &graph,
             graph_path: &graph_path,
             injections: &injections,
+            record: args.record.as_deref().map(|p| (p, args.raw_images)),
         };
-        let r = run_processes::run(&launch, &mut recorder, progress)?;
+        let r = run_processes::run(&launch, &mut rec.truth, progress)?;
         if tty {
             eprintln!();
         }
@@ -216,7 +266,6 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         };
         let mut driver = run_lockstep::driver(&graph, &setup, |_| None)?;
         let mut referee = Referee::new(0);
-        let mut rec = Recording(recorder.take());
         let end = run_lockstep::run(
             &mut driver,
             scn.scenario.duration_s,
@@ -224,7 +273,6 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             &mut rec,
             progress,
         )?;
-        recorder = rec.0;
         if tty {
             eprintln!();
         }
@@ -296,10 +344,18 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             eprintln!("  plot: {}", p.display());
         }
     }
-    if let Some(r) = recorder.take() {
+    for r in [rec.pipeline.take(), rec.truth.take()]
+        .into_iter()
+        .flatten()
+    {
         let path = r.path().to_path_buf();
         let n = r.finish()?;
         eprintln!("  recording: {} ({n} messages)", path.display());
+    }
+    if args.processes
+        && let Some(p) = &args.record
+    {
+        eprintln!("  recording: {} (the recorder process)", p.display());
     }
     if args.json {
         println!("{}", serde_json::to_string(&summary)?);

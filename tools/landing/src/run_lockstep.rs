@@ -25,8 +25,8 @@ use stage::lockstep::{Lockstep, Published};
 use stage::{Message, Stage};
 
 use crate::config_cmd::StackConfig;
-use crate::record::{Recordable, Recorder};
 use crate::run_eval::{End, Referee};
+use recorder::Recorder;
 
 /// What the lockstep run needs to build its stages.
 pub struct Setup<'a> {
@@ -166,53 +166,43 @@ pub fn run(
 
 /// One published message: to the recording and, for the topics it reads, the referee.
 fn observe(p: &Published<'_>, referee: &mut Referee, rec: &mut Recording) -> Result<()> {
-    let name = topics::find(p.topic).map(|t| t.recording_name());
-    let name = name.as_deref().unwrap_or(p.topic);
     match p.msg {
-        Message::FsmStatus(s) => {
-            referee.on_status(s);
-            rec.write(name, p.now_ns, s)?;
-        }
-        Message::PlannerStats(s) => {
-            // The compute time this machine took, not the modelled latency.
-            referee.on_planner_stats(s, p.wall_ns as f64 * 1e-6);
-            rec.write(name, p.now_ns, s)?;
-        }
-        Message::TruthEvent(t) => {
-            referee.on_truth(t);
-            rec.write(name, p.now_ns, t)?;
-        }
-        Message::TruthState(s) => {
-            referee.on_truth_state(s);
-            rec.write(name, p.now_ns, s)?;
-        }
-        Message::VehicleState(m) => rec.write(name, p.now_ns, m)?,
-        Message::PadObservation(m) => rec.write(name, p.now_ns, m)?,
-        Message::PlannerGoal(m) => rec.write(name, p.now_ns, m)?,
-        Message::Trajectory(m) => rec.write(name, p.now_ns, m)?,
-        Message::Setpoint(m) => rec.write(name, p.now_ns, m)?,
-        Message::LinkRequest(m) => rec.write(name, p.now_ns, m)?,
-        Message::LinkOutcome(m) => rec.write(name, p.now_ns, m)?,
-        Message::SafetyCommand(m) => rec.write(name, p.now_ns, m)?,
-        Message::WatchdogView(m) => rec.write(name, p.now_ns, m)?,
-        // Frames, maps and MAVLink bytes are not recorded (yet: issue 18).
-        Message::CameraFrame(..)
-        | Message::DepthFrame(..)
-        | Message::OccupancyMap(..)
-        | Message::Mavlink(_)
-        | Message::ProcessEvent(_) => {}
+        Message::FsmStatus(s) => referee.on_status(s),
+        // The compute time this machine took, not the modelled latency.
+        Message::PlannerStats(s) => referee.on_planner_stats(s, p.wall_ns as f64 * 1e-6),
+        Message::TruthEvent(t) => referee.on_truth(t),
+        Message::TruthState(s) => referee.on_truth_state(s),
+        _ => {}
     }
-    Ok(())
+    rec.record(p.topic, p.now_ns, &p.msg)
 }
 
-/// An optional MCAP recording of every message the stages exchange (simulated time).
-pub struct Recording(pub Option<Recorder>);
+/// The recordings of a run (simulated time): the pipeline's, as the `recorder` process
+/// writes it (every topic but ground truth and `[recorder] skip`, with the same code),
+/// and the evaluator's truth in a file of its own.
+#[derive(Default)]
+pub struct Recording {
+    /// The pipeline's recording.
+    pub pipeline: Option<Recorder>,
+    /// Ground truth (the simulator's evaluator-only topics).
+    pub truth: Option<Recorder>,
+    /// Topics the pipeline's recording leaves out.
+    pub skip: Vec<String>,
+}
 
 impl Recording {
-    /// Records `msg` on `topic` when recording.
-    pub fn write<T: Recordable>(&mut self, topic: &str, now_ns: u64, msg: &T) -> Result<()> {
-        if let Some(r) = &mut self.0 {
-            r.write_message(topic, now_ns, msg)?;
+    /// Records `msg` (published on `topic`) in the recording it belongs to.
+    pub fn record(&mut self, topic: &str, now_ns: u64, msg: &Message<'_>) -> Result<()> {
+        let evaluator = topics::find(topic).is_some_and(|t| t.evaluator_only);
+        let to = if evaluator {
+            self.truth.as_mut()
+        } else if self.skip.iter().any(|s| s == topic) {
+            None
+        } else {
+            self.pipeline.as_mut()
+        };
+        if let Some(r) = to {
+            r.record(topic, now_ns, msg)?;
         }
         Ok(())
     }

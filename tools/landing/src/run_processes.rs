@@ -12,22 +12,20 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use graph::{Graph, Node, RunValues};
-use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::msg::{
-    FaultOrder, FsmStatus, Header, LinkOutcome, LinkRequest, MissionState, PadObservation,
-    PlannerGoal, PlannerStats, Setpoint, Stage, Text, Trajectory, TruthEvent, TruthState,
-    VehicleState, WatchdogView,
+    FaultOrder, FsmStatus, Header, MissionState, PlannerStats, Stage, Text, TruthEvent, TruthState,
+    WatchdogView,
 };
 use ipc_types::{services, topics};
-use runtime::ipc::Subscriber;
 use runtime::ipc::{LoopExit, Wake, run_wait_loop};
 use runtime::{Ipc, IpcPrefix, monotonic_ns};
 use sim::scenario::LoadedScenario;
 
 use crate::inject::{Fault, FaultRecord, Injection};
 use crate::procs::{Children, binary, free_udp_port};
-use crate::record::{Recordable, Recorder};
 use crate::run_eval::{End, Referee, stage_ms};
+use recorder::Recorder;
+use stage::Message;
 
 /// What `--processes` needs to start the stack.
 pub struct Launch<'a> {
@@ -50,6 +48,9 @@ pub struct Launch<'a> {
     pub graph_path: &'a Path,
     /// Faults to do to the processes in flight (`--inject`).
     pub injections: &'a [Injection],
+    /// `--record`: the recording the `recorder` process writes, and whether its camera
+    /// frames are raw.
+    pub record: Option<(&'a Path, bool)>,
 }
 
 /// How a `--processes` run ended.
@@ -141,7 +142,7 @@ fn stop_with_parent(cmd: &mut Command) {
 /// The simulator's death ends it at once.
 pub fn run(
     launch: &Launch<'_>,
-    recorder: &mut Option<Recorder>,
+    truth_recorder: &mut Option<Recorder>,
     mut progress: impl FnMut(f64, MissionState, Option<f64>),
 ) -> Result<ProcessesRun> {
     let prefix = match launch.ipc_prefix {
@@ -157,10 +158,6 @@ pub fn run(
     let views = ipc.subscriber::<WatchdogView>(services::WATCHDOG_VIEW)?;
     // Faults in the data paths go to the stages' output ports through this.
     let mut fault_orders = ipc.publisher::<FaultOrder>(services::FAULT_INJECT)?;
-    let taps = match recorder {
-        Some(_) => Some(Taps::open(&ipc)?),
-        None => None,
-    };
 
     let scn = launch.scenario;
     let values = run_values(
@@ -174,6 +171,33 @@ pub fn run(
     std::fs::create_dir_all(launch.log_dir)
         .with_context(|| format!("creating {}", launch.log_dir.display()))?;
     let mut children = Children::default();
+    if let Some((out, raw)) = launch.record {
+        // First: it subscribes before anything is published.
+        let log: PathBuf = launch.log_dir.join("recorder.log");
+        let file = File::create(&log).with_context(|| format!("creating {}", log.display()))?;
+        let mut cmd = Command::new(binary("recorder")?);
+        cmd.arg("--config")
+            .arg(launch.config)
+            .arg("--deploy-dir")
+            .arg(launch.deploy)
+            .arg("--graph")
+            .arg(launch.graph_path)
+            .args(["--ipc-prefix", prefix.as_str()])
+            .arg("--out")
+            .arg(out);
+        if raw {
+            cmd.arg("--raw-images");
+        }
+        stop_with_parent(&mut cmd);
+        let child = cmd
+            .env("LANDING_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(file)
+            .spawn()
+            .context("starting recorder")?;
+        children.push("recorder", child);
+        std::thread::sleep(Duration::from_millis(150));
+    }
     // The graph's start order: the nodes marked start_last (the simulator, whose clock
     // starts the world) after the others.
     for node in launch.graph.start_order() {
@@ -197,25 +221,12 @@ pub fn run(
     let mut next_progress = 0.0f64;
     let wall_limit = Instant::now() + Duration::from_secs_f64(scn.scenario.duration_s + 15.0);
     // A recording wakes on every recorded topic: subscriber queues are short.
-    let mut listeners = vec![
+    let listeners = vec![
         truth_state.listener(),
         status.listener(),
         truth.listener(),
         views.listener(),
     ];
-    if let Some(t) = &taps {
-        listeners.extend([
-            t.states.listener(),
-            t.observations.listener(),
-            t.trajectories.listener(),
-            t.setpoints.listener(),
-            t.goals.listener(),
-            t.requests.listener(),
-            t.outcomes.listener(),
-        ]);
-    }
-    let name =
-        |topic: &str| topics::find(topic).map_or_else(|| topic.to_string(), |t| t.recording_name());
     let exit = run_wait_loop(
         &listeners,
         &[],
@@ -223,42 +234,29 @@ pub fn run(
         |_wake: Wake| {
             let step = (|| -> Result<()> {
                 while let Some(s) = status.receive()? {
-                    let st = *s.payload();
-                    if let Some(r) = recorder.as_mut() {
-                        r.write_message(&name(topics::FSM_STATUS), monotonic_ns(), &st)?;
-                    }
-                    referee.on_status(&st);
-                }
-                if let (Some(t), Some(r)) = (&taps, recorder.as_mut()) {
-                    t.record(r, monotonic_ns())?;
+                    referee.on_status(s.payload());
                 }
                 while let Some(p) = planner_stats.receive()? {
-                    if let Some(r) = recorder.as_mut() {
-                        r.write_message(&name(topics::PLANNER_STATS), monotonic_ns(), p.payload())?;
-                    }
                     // The planner's stamp: from the call to the statistics leaving.
                     let ms = stage_ms(&p.payload().msg, Stage::Planner).unwrap_or(0.0);
                     referee.on_planner_stats(p.payload(), ms);
                 }
                 while let Some(t) = truth.receive()? {
                     let t = *t.payload();
-                    if let Some(r) = recorder.as_mut() {
-                        r.write_message(&name(topics::SIM_TRUTH), monotonic_ns(), &t)?;
+                    if let Some(r) = truth_recorder.as_mut() {
+                        r.record(topics::SIM_TRUTH, monotonic_ns(), &Message::TruthEvent(&t))?;
                     }
                     referee.on_truth(&t);
                 }
                 while let Some(v) = views.receive()? {
-                    if let Some(r) = recorder.as_mut() {
-                        r.write_message(&name(topics::WATCHDOG_VIEW), monotonic_ns(), v.payload())?;
-                    }
                     for f in faults.iter_mut() {
                         note_detection(f, v.payload());
                     }
                 }
                 while let Some(s) = truth_state.receive()? {
-                    if let Some(r) = recorder.as_mut() {
-                        let at = monotonic_ns();
-                        r.write_message(&name(topics::SIM_TRUTH_STATE), at, s.payload())?;
+                    if let Some(r) = truth_recorder.as_mut() {
+                        let m = Message::TruthState(s.payload());
+                        r.record(topics::SIM_TRUTH_STATE, monotonic_ns(), &m)?;
                     }
                     referee.on_truth_state(s.payload());
                 }
@@ -472,64 +470,5 @@ fn note_detection(f: &mut FaultRecord, view: &WatchdogView) {
         if f.ordered_after_ms.is_none() && view.order_ns > 0 {
             f.ordered_after_ms = after_ms(view.order_ns);
         }
-    }
-}
-
-/// Subscribers to the pipeline topics a recording keeps (besides those the run watches).
-struct Taps {
-    states: Subscriber<VehicleState>,
-    observations: Subscriber<PadObservation>,
-    trajectories: Subscriber<Trajectory>,
-    setpoints: Subscriber<Setpoint>,
-    goals: Subscriber<PlannerGoal>,
-    requests: Subscriber<LinkRequest>,
-    outcomes: Subscriber<LinkOutcome>,
-}
-
-impl Taps {
-    fn open(ipc: &Ipc) -> Result<Self> {
-        Ok(Self {
-            states: ipc.subscriber(services::VEHICLE_STATE)?,
-            observations: ipc.subscriber(services::PAD_OBSERVATION)?,
-            trajectories: ipc.subscriber(services::PLANNER_TRAJECTORY)?,
-            setpoints: ipc.subscriber(services::FSM_SETPOINT)?,
-            goals: ipc.subscriber(services::PLANNER_GOAL)?,
-            requests: ipc.subscriber(services::PX4_REQUEST)?,
-            outcomes: ipc.subscriber(services::PX4_OUTCOME)?,
-        })
-    }
-
-    /// Everything that arrived since the last call, stamped `now_ns`.
-    fn record(&self, r: &mut Recorder, now_ns: u64) -> Result<()> {
-        fn drain<T: Recordable + std::fmt::Debug + Copy + ZeroCopySend>(
-            sub: &Subscriber<T>,
-            r: &mut Recorder,
-            topic: &str,
-            now_ns: u64,
-        ) -> Result<()> {
-            while let Some(s) = sub.receive()? {
-                r.write_message(topic, now_ns, s.payload())?;
-            }
-            Ok(())
-        }
-        let name = |t: &str| format!("/{t}");
-        drain(&self.states, r, &name(topics::VEHICLE_STATE), now_ns)?;
-        drain(
-            &self.observations,
-            r,
-            &name(topics::PAD_OBSERVATION),
-            now_ns,
-        )?;
-        drain(
-            &self.trajectories,
-            r,
-            &name(topics::PLANNER_TRAJECTORY),
-            now_ns,
-        )?;
-        drain(&self.setpoints, r, &name(topics::FSM_SETPOINT), now_ns)?;
-        drain(&self.goals, r, &name(topics::PLANNER_GOAL), now_ns)?;
-        drain(&self.requests, r, &name(topics::PX4_REQUEST), now_ns)?;
-        drain(&self.outcomes, r, &name(topics::PX4_OUTCOME), now_ns)?;
-        Ok(())
     }
 }

@@ -1,10 +1,19 @@
-//! Tests of `record`.
+//! Tests of the writer: JSON channels, their schemas, and reading them back.
+
+use std::collections::{BTreeMap, HashMap};
 
 use iceoryx2::prelude::ZeroCopySend;
-use ipc_types::msg::{Header, Pose, Text};
+use ipc_types::msg::{
+    CameraFrameHeader, DepthFrameHeader, FsmStatus, Header, LinkOutcome, LinkRequest,
+    OccupancyMapHeader, PadObservation, PlannerGoal, PlannerStats, Pose, SafetyCommand, Setpoint,
+    Text, Trajectory, TruthEvent, VehicleState, WatchdogView,
+};
 use mcap::MessageStream;
+use serde_json::Value;
 
 use super::*;
+use crate::read::info;
+use crate::schema::schema_for;
 
 fn temp(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("landing-record-{}", std::process::id()));

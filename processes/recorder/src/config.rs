@@ -1,0 +1,88 @@
+//! `[recorder]` of landing.toml: what a recording keeps and how.
+
+use serde::Deserialize;
+use stack_config::{Invalid, Validate, check_range};
+
+use crate::writer::{ChunkCompression, ImageFormat, RecordOptions};
+
+/// `[recorder]`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RecorderConfig {
+    /// Camera frames as "jpeg" (foxglove.CompressedImage) or "raw" (foxglove.RawImage,
+    /// what an exact replay of aruco-pnp needs).
+    pub images: String,
+    /// JPEG quality, 1-100.
+    pub jpeg_quality: u8,
+    /// Chunk compression: "zstd", "lz4" or "none".
+    pub compression: String,
+    /// The file is flushed at least this often, ms (what a killed recorder can lose).
+    pub flush_period_ms: u64,
+    /// The occupancy map's 3-D scene at most this often, ms.
+    pub map_period_ms: u64,
+    /// Topics left out: the simulator's camera, which camera-ingest republishes as
+    /// camera/frame (recording both would encode every frame twice).
+    pub skip: Vec<String>,
+}
+
+impl Default for RecorderConfig {
+    fn default() -> Self {
+        Self {
+            images: "jpeg".into(),
+            jpeg_quality: 80,
+            compression: "zstd".into(),
+            flush_period_ms: 1000,
+            map_period_ms: 500,
+            skip: vec!["sim/camera".into()],
+        }
+    }
+}
+
+impl Validate for RecorderConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        self.image_format()?;
+        self.chunk_compression()?;
+        check_range("jpeg_quality", self.jpeg_quality, 1, 100)?;
+        check_range("flush_period_ms", self.flush_period_ms, 10, 1000)?;
+        check_range("map_period_ms", self.map_period_ms, 0, 60_000)?;
+        Ok(())
+    }
+}
+
+impl RecorderConfig {
+    fn image_format(&self) -> Result<ImageFormat, Invalid> {
+        match self.images.as_str() {
+            "jpeg" => Ok(ImageFormat::Jpeg {
+                quality: self.jpeg_quality,
+            }),
+            "raw" => Ok(ImageFormat::Raw),
+            other => Err(Invalid::new(
+                "images",
+                format!("`{other}` (allowed: \"jpeg\", \"raw\")"),
+            )),
+        }
+    }
+
+    fn chunk_compression(&self) -> Result<ChunkCompression, Invalid> {
+        match self.compression.as_str() {
+            "zstd" => Ok(ChunkCompression::Zstd),
+            "lz4" => Ok(ChunkCompression::Lz4),
+            "none" => Ok(ChunkCompression::None),
+            other => Err(Invalid::new(
+                "compression",
+                format!("`{other}` (allowed: \"zstd\", \"lz4\", \"none\")"),
+            )),
+        }
+    }
+
+    /// The writer's options (the camera mount is the caller's to add).
+    pub fn options(&self) -> Result<RecordOptions, Invalid> {
+        Ok(RecordOptions {
+            images: self.image_format()?,
+            compression: self.chunk_compression()?,
+            flush_period_ns: self.flush_period_ms * 1_000_000,
+            map_period_ns: self.map_period_ms * 1_000_000,
+            body_from_camera: None,
+        })
+    }
+}

@@ -1,0 +1,106 @@
+//! `recorder`: every topic of the graph into one MCAP file (Foxglove schemas, JSON for
+//! everything plottable), flushed every second so that it reads back if killed, finished
+//! on SIGTERM. Everything it computes is `recorder::RecorderStage`; this file builds the
+//! node (all iceoryx2 topics of the graph as queued inputs), the recording and its
+//! metadata, and hands them to the iceoryx2 driver.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::{Context as _, Result};
+use clap::Parser;
+use graph::{Graph, Transport};
+use recorder::{Recorder, RecorderConfig, RecorderStage, metadata};
+use runtime::StageArgs;
+use runtime::driver::{self, Beat};
+use runtime::ipc::{Ipc, IpcPrefix};
+use stage::lockstep::{InputSpec, NodeSpec};
+
+/// Records every topic of the landing pipeline into one MCAP file for Foxglove.
+#[derive(Debug, Parser)]
+#[command(name = "recorder", version, about)]
+struct Args {
+    #[command(flatten)]
+    stage: StageArgs,
+    /// The recording to write (created or truncated).
+    #[arg(long)]
+    out: PathBuf,
+    /// Camera frames as foxglove.RawImage (exact; what `landing replay --stage
+    /// aruco-pnp` needs) instead of [recorder] images.
+    #[arg(long)]
+    raw_images: bool,
+}
+
+fn main() -> ExitCode {
+    runtime::process_main("info", run)
+}
+
+fn run(args: &Args) -> Result<()> {
+    let (ipc_cfg, mut cfg): (_, RecorderConfig) = args.stage.load("recorder")?;
+    if args.raw_images {
+        cfg.images = "raw".into();
+    }
+    let (_, aruco): (_, aruco_pnp::ArucoConfig) = args.stage.load("aruco_pnp")?;
+    let graph_path = args
+        .stage
+        .graph
+        .clone()
+        .unwrap_or_else(|| graph::default_path(&args.stage.deploy()));
+    let graph = Graph::load(&graph_path)?;
+    let spec = node_spec(&graph, &cfg.skip);
+    let mut options = cfg
+        .options()
+        .map_err(|e| anyhow::anyhow!("[recorder] {}: {}", e.key, e.message))?;
+    options.body_from_camera = Some(metadata::pose_of(
+        &aruco_pnp::down_camera_from_body(aruco.camera_position_in_body_m).inverse(),
+    ));
+    let mut rec = Recorder::with_options(&args.out, options)?;
+    let mut meta = metadata::stack(args.stage.config.as_deref(), &graph_path)?;
+    meta.insert("topics".into(), spec_topics(&spec));
+    rec.write_metadata("landing", meta)?;
+    let prefix = IpcPrefix::resolve(args.stage.ipc_prefix.as_deref(), &ipc_cfg.prefix)?;
+    let ipc = Ipc::open("recorder", &prefix)?;
+    let beat = Beat {
+        period: Duration::from_millis(ipc_cfg.heartbeat_period_ms),
+        deadline: Duration::from_millis(500),
+    };
+    let mut stage = RecorderStage::new(rec);
+    tracing::info!(out = %args.out.display(), topics = spec.inputs.len(), "recording");
+    let served = driver::run(&ipc, &spec, &mut stage, None, beat);
+    // The file is finished whatever ended the run.
+    let n = stage
+        .finish()
+        .with_context(|| format!("finishing {}", args.out.display()))?;
+    served?;
+    tracing::info!(messages = n, out = %args.out.display(), "recording finished");
+    Ok(())
+}
+
+/// Every iceoryx2 topic of the graph that is not ground truth or skipped, taken in
+/// full (queued) in the order of the graph.
+fn node_spec(graph: &Graph, skip: &[String]) -> NodeSpec {
+    let inputs = graph
+        .topics
+        .iter()
+        .filter(|t| t.transport == Transport::Iceoryx2 && !t.evaluator_only)
+        .filter(|t| !skip.contains(&t.name))
+        .map(|t| InputSpec {
+            topic: t.name.clone(),
+            newest: false,
+            delay: false,
+        })
+        .collect();
+    NodeSpec {
+        name: "recorder".into(),
+        inputs,
+        outputs: vec![],
+        latency_ns: 0,
+        periodic: None,
+    }
+}
+
+fn spec_topics(spec: &NodeSpec) -> String {
+    let names: Vec<&str> = spec.inputs.iter().map(|i| i.topic.as_str()).collect();
+    names.join(",")
+}

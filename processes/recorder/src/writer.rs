@@ -1,0 +1,495 @@
+//! The recording being written: one MCAP file per run through the Foxglove SDK's MCAP
+//! writer, on a [`foxglove::Context`] of its own (no global state, so two recorders can
+//! run in one process).
+//!
+//! Every stack message goes in twice over: as JSON on its own topic (`/vehicle/state`,
+//! every field, plottable, what `landing latency` and `landing replay` read back), and,
+//! where Foxglove has a panel for it, as the Foxglove schema (images, transforms, the
+//! 3-D scene, logs; [`crate::visual`]). Chunks are compressed (zstd or lz4) in the
+//! caller's thread and the file is flushed (the open chunk closed and written) at least
+//! every [`RecordOptions::flush_period_ns`] of log time, so a recorder killed mid-run
+//! leaves a file that reads up to its last second.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fmt;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use foxglove::schemas::{CompressedImage, FrameTransforms, Log, RawImage, SceneUpdate};
+use foxglove::{
+    Channel, Context, McapCompression, McapWriteOptions, McapWriter, McapWriterHandle,
+    PartialMetadata, RawChannel, Schema,
+};
+use stage::Message;
+
+use crate::schema::{MESSAGE_ENCODING, Recordable, SCHEMA_ENCODING, SchemaError, schema_for};
+use crate::visual::{self, Visuals};
+
+/// Why a recording could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// The file cannot be created (missing directory, permissions).
+    #[error("cannot create the recording {}: {error}", path.display())]
+    Create {
+        /// The recording.
+        path: PathBuf,
+        /// What the OS said.
+        error: std::io::Error,
+    },
+    /// The MCAP writer failed (disk full, I/O error, writing after `finish`).
+    #[error("writing the recording {}: {error}", path.display())]
+    Write {
+        /// The recording.
+        path: PathBuf,
+        /// What the writer said.
+        error: foxglove::FoxgloveError,
+    },
+    /// A message could not be turned into JSON.
+    #[error(transparent)]
+    Encode(#[from] SchemaError),
+    /// A topic was given a second message type.
+    #[error("topic {topic} carries {has}, not {got}")]
+    TopicType {
+        /// The topic.
+        topic: String,
+        /// The type it was made with.
+        has: &'static str,
+        /// The type given now.
+        got: &'static str,
+    },
+}
+
+/// How camera frames are stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImageFormat {
+    /// `foxglove.CompressedImage`, JPEG at this quality (1-100) through OpenCV: about a
+    /// tenth of the raw size; lossy, so a replay of aruco-pnp cannot be exact.
+    Jpeg {
+        /// libjpeg quality, 1-100.
+        quality: u8,
+    },
+    /// `foxglove.RawImage`, the pixels as published: what an exact replay needs.
+    Raw,
+}
+
+/// How chunks are compressed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChunkCompression {
+    /// zstd: smaller files, more CPU.
+    Zstd,
+    /// lz4: the cheap one, for raw images.
+    Lz4,
+    /// None.
+    None,
+}
+
+/// What a recording keeps and how.
+#[derive(Debug, Clone, Copy)]
+pub struct RecordOptions {
+    /// Camera frames as JPEG or raw.
+    pub images: ImageFormat,
+    /// Chunk compression.
+    pub compression: ChunkCompression,
+    /// The file is flushed (the open chunk written) at least this often in log time.
+    pub flush_period_ns: u64,
+    /// The occupancy map's 3-D scene at most this often (its header and counts go in
+    /// with every map).
+    pub map_period_ns: u64,
+    /// Where the down camera sits on the body (FLU), for the transform tree; `None`
+    /// leaves the camera frame out of the tree.
+    pub body_from_camera: Option<ipc_types::msg::Pose>,
+}
+
+impl Default for RecordOptions {
+    fn default() -> Self {
+        Self {
+            images: ImageFormat::Jpeg { quality: 80 },
+            compression: ChunkCompression::Zstd,
+            flush_period_ns: 1_000_000_000,
+            map_period_ns: 500_000_000,
+            body_from_camera: None,
+        }
+    }
+}
+
+/// A JSON channel and the type it carries.
+struct JsonChannel {
+    channel: Arc<RawChannel>,
+    schema: &'static str,
+}
+
+/// Writes one MCAP recording.
+///
+/// Dropping it finishes the file too, but silently: call [`Recorder::finish`] to learn
+/// whether the end of the file was written.
+pub struct Recorder {
+    path: PathBuf,
+    ctx: Arc<Context>,
+    handle: Option<McapWriterHandle<BufWriter<File>>>,
+    options: RecordOptions,
+    json: HashMap<String, JsonChannel>,
+    compressed: HashMap<String, Channel<CompressedImage>>,
+    raw: HashMap<String, Channel<RawImage>>,
+    tf: Channel<FrameTransforms>,
+    scene: HashMap<&'static str, Channel<SceneUpdate>>,
+    log: Channel<Log>,
+    visuals: Visuals,
+    messages: u64,
+    last_flush_ns: Option<u64>,
+    last_map_ns: Option<u64>,
+}
+
+impl fmt::Debug for Recorder {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Recorder")
+            .field("path", &self.path)
+            .field("channels", &self.json.len())
+            .field("messages", &self.messages)
+            .finish()
+    }
+}
+
+/// The transform tree's topic.
+pub const TF_TOPIC: &str = "/tf";
+/// The mission's log (transitions, watchdog actions).
+pub const LOG_TOPIC: &str = "/log";
+
+impl Recorder {
+    /// Creates (or truncates) the recording at `path` with the default options.
+    pub fn create(path: &Path) -> Result<Self, RecordError> {
+        Self::with_options(path, RecordOptions::default())
+    }
+
+    /// Creates (or truncates) the recording at `path`.
+    pub fn with_options(path: &Path, options: RecordOptions) -> Result<Self, RecordError> {
+        let write_err = |error| RecordError::Write {
+            path: path.to_path_buf(),
+            error,
+        };
+        let file = File::create(path).map_err(|error| RecordError::Create {
+            path: path.to_path_buf(),
+            error,
+        })?;
+        let compression = match options.compression {
+            ChunkCompression::Zstd => Some(McapCompression::Zstd),
+            ChunkCompression::Lz4 => Some(McapCompression::Lz4),
+            ChunkCompression::None => None,
+        };
+        // Compression in the caller's thread: no hidden worker threads next to the stack.
+        let mcap = McapWriteOptions::new()
+            .compression(compression)
+            .compression_threads(0)
+            .library(concat!("landing ", env!("CARGO_PKG_VERSION")));
+        let ctx = Context::new();
+        let handle = McapWriter::with_options(mcap)
+            .context(&ctx)
+            .create(BufWriter::new(file))
+            .map_err(write_err)?;
+        let tf = ctx.channel_builder(TF_TOPIC).build::<FrameTransforms>();
+        let log = ctx.channel_builder(LOG_TOPIC).build::<Log>();
+        let mut scene = HashMap::new();
+        for topic in visual::SCENE_TOPICS {
+            scene.insert(topic, ctx.channel_builder(topic).build::<SceneUpdate>());
+        }
+        Ok(Self {
+            path: path.to_path_buf(),
+            ctx,
+            handle: Some(handle),
+            options,
+            json: HashMap::new(),
+            compressed: HashMap::new(),
+            raw: HashMap::new(),
+            tf,
+            scene,
+            log,
+            visuals: Visuals::new(options.body_from_camera),
+            messages: 0,
+            last_flush_ns: None,
+            last_map_ns: None,
+        })
+    }
+
+    /// The file being written.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Messages written so far (JSON and Foxglove ones).
+    pub fn message_count(&self) -> u64 {
+        self.messages
+    }
+
+    fn write_error(&self, error: foxglove::FoxgloveError) -> RecordError {
+        RecordError::Write {
+            path: self.path.clone(),
+            error,
+        }
+    }
+
+    /// Stores `entries` as the MCAP metadata record `name` (the effective config, the
+    /// graph, the git revision).
+    pub fn write_metadata(
+        &mut self,
+        name: &str,
+        entries: BTreeMap<String, String>,
+    ) -> Result<(), RecordError> {
+        let Some(h) = &self.handle else {
+            return Ok(());
+        };
+        h.write_metadata(name, entries)
+            .map_err(|e| self.write_error(e))
+    }
+
+    /// The JSON channel of `topic`, made on first use with `T`'s schema. A topic keeps the
+    /// type it was made with: one topic, one message type, as on the bus.
+    fn json_channel<T: Recordable>(&mut self, topic: &str) -> Result<&JsonChannel, RecordError> {
+        if !self.json.contains_key(topic) {
+            let doc = schema_for::<T>()?;
+            let bytes = serde_json::to_vec(&doc).map_err(|error| SchemaError {
+                schema: T::SCHEMA_NAME,
+                error,
+            })?;
+            let channel = self
+                .ctx
+                .channel_builder(topic)
+                .message_encoding(MESSAGE_ENCODING)
+                .schema(Schema::new(T::SCHEMA_NAME, SCHEMA_ENCODING, bytes))
+                .build_raw()
+                .map_err(|e| self.write_error(e))?;
+            self.json.insert(
+                topic.to_string(),
+                JsonChannel {
+                    channel,
+                    schema: T::SCHEMA_NAME,
+                },
+            );
+        }
+        let ch = self.json.get(topic).ok_or_else(|| RecordError::TopicType {
+            topic: topic.to_string(),
+            has: "nothing",
+            got: T::SCHEMA_NAME,
+        })?;
+        if ch.schema != T::SCHEMA_NAME {
+            return Err(RecordError::TopicType {
+                topic: topic.to_string(),
+                has: ch.schema,
+                got: T::SCHEMA_NAME,
+            });
+        }
+        Ok(ch)
+    }
+
+    /// Records `msg` as JSON on `topic` at `log_time_ns` (the time axis viewers play back
+    /// on; one clock for the whole recording: monotonic ns in flight, simulated ns in
+    /// lockstep).
+    pub fn write_message<T: Recordable>(
+        &mut self,
+        topic: &str,
+        log_time_ns: u64,
+        msg: &T,
+    ) -> Result<(), RecordError> {
+        let data = serde_json::to_vec(msg).map_err(|error| SchemaError {
+            schema: T::SCHEMA_NAME,
+            error,
+        })?;
+        let ch = self.json_channel::<T>(topic)?;
+        ch.channel
+            .log_with_meta(&data, PartialMetadata::with_log_time(log_time_ns));
+        self.messages += 1;
+        self.after_write(log_time_ns)
+    }
+
+    /// Records one message of the bus on `topic` (its short name, `vehicle/state`): the
+    /// JSON of it (for images and maps, their header) on `/<topic>`, and what Foxglove
+    /// draws of it. MAVLink bytes and process events are not recorded.
+    pub fn record(
+        &mut self,
+        topic: &str,
+        log_time_ns: u64,
+        msg: &Message<'_>,
+    ) -> Result<(), RecordError> {
+        let name = format!("/{topic}");
+        let t = log_time_ns;
+        match *msg {
+            Message::CameraFrame(h, pixels) => {
+                self.write_message(&format!("{name}/header"), t, h)?;
+                self.image(&name, t, h, pixels)?;
+            }
+            Message::DepthFrame(h, depths) => {
+                self.write_message(&format!("{name}/header"), t, h)?;
+                let img = visual::depth_image(h, depths);
+                self.raw_channel(&name)
+                    .log_with_meta(&img, PartialMetadata::with_log_time(t));
+                self.messages += 1;
+            }
+            Message::OccupancyMap(h, cells) => {
+                self.write_message(&format!("{name}/header"), t, h)?;
+                let due = self
+                    .last_map_ns
+                    .is_none_or(|l| t.saturating_sub(l) >= self.options.map_period_ns);
+                if due {
+                    self.last_map_ns = Some(t);
+                    let scene = visual::map_scene(h, cells);
+                    self.scene_update(visual::MAP_TOPIC, t, &scene);
+                }
+            }
+            Message::VehicleState(m) => {
+                self.write_message(&name, t, m)?;
+                let tf = self.visuals.vehicle(m);
+                self.transforms(t, &tf);
+            }
+            Message::PadObservation(m) => {
+                self.write_message(&name, t, m)?;
+                let tf = self.visuals.observation(m);
+                self.transforms(t, &tf);
+            }
+            Message::Trajectory(m) => {
+                self.write_message(&name, t, m)?;
+                let scene = visual::trajectory_scene(m);
+                self.scene_update(visual::TRAJECTORY_TOPIC, t, &scene);
+            }
+            Message::FsmStatus(m) => {
+                self.write_message(&name, t, m)?;
+                if let Some(log) = self.visuals.status_log(m) {
+                    self.log(t, &log);
+                }
+                let (tf, scene) = self.visuals.pad_estimate(m);
+                self.transforms(t, &tf);
+                self.scene_update(visual::PAD_TOPIC, t, &scene);
+            }
+            Message::WatchdogView(m) => {
+                self.write_message(&name, t, m)?;
+                if let Some(log) = self.visuals.watchdog_log(m) {
+                    self.log(t, &log);
+                }
+            }
+            Message::SafetyCommand(m) => {
+                self.write_message(&name, t, m)?;
+                self.log(t, &visual::safety_log(m));
+            }
+            Message::PlannerGoal(m) => self.write_message(&name, t, m)?,
+            Message::PlannerStats(m) => self.write_message(&name, t, m)?,
+            Message::Setpoint(m) => self.write_message(&name, t, m)?,
+            Message::LinkRequest(m) => self.write_message(&name, t, m)?,
+            Message::LinkOutcome(m) => self.write_message(&name, t, m)?,
+            Message::TruthEvent(m) => self.write_message(&name, t, m)?,
+            Message::TruthState(m) => {
+                self.write_message(&name, t, m)?;
+                let scene = visual::truth_scene(m);
+                self.scene_update(visual::TRUTH_TOPIC, t, &scene);
+            }
+            Message::Mavlink(_) | Message::ProcessEvent(_) => {}
+        }
+        Ok(())
+    }
+
+    fn raw_channel(&mut self, topic: &str) -> &Channel<RawImage> {
+        let ctx = &self.ctx;
+        self.raw
+            .entry(topic.to_string())
+            .or_insert_with(|| ctx.channel_builder(topic).build::<RawImage>())
+    }
+
+    /// A camera frame as JPEG or raw, per the options; a frame whose pixels do not fit
+    /// its header is left out (its header is recorded).
+    fn image(
+        &mut self,
+        topic: &str,
+        t: u64,
+        h: &ipc_types::msg::CameraFrameHeader,
+        pixels: &[u8],
+    ) -> Result<(), RecordError> {
+        let meta = PartialMetadata::with_log_time(t);
+        match self.options.images {
+            ImageFormat::Raw => {
+                if let Some(img) = visual::raw_image(h, pixels) {
+                    self.raw_channel(topic).log_with_meta(&img, meta);
+                    self.messages += 1;
+                }
+            }
+            ImageFormat::Jpeg { quality } => {
+                if let Some(img) = self.visuals.jpeg(h, pixels, quality) {
+                    let ctx = &self.ctx;
+                    self.compressed
+                        .entry(topic.to_string())
+                        .or_insert_with(|| ctx.channel_builder(topic).build::<CompressedImage>())
+                        .log_with_meta(&img, meta);
+                    self.messages += 1;
+                }
+            }
+        }
+        self.after_write(t)
+    }
+
+    fn transforms(&mut self, t: u64, tf: &Option<FrameTransforms>) {
+        if let Some(tf) = tf {
+            self.tf.log_with_meta(tf, PartialMetadata::with_log_time(t));
+            self.messages += 1;
+        }
+    }
+
+    fn scene_update(&mut self, topic: &'static str, t: u64, scene: &Option<SceneUpdate>) {
+        if let (Some(scene), Some(ch)) = (scene, self.scene.get(topic)) {
+            ch.log_with_meta(scene, PartialMetadata::with_log_time(t));
+            self.messages += 1;
+        }
+    }
+
+    fn log(&mut self, t: u64, log: &Log) {
+        self.log
+            .log_with_meta(log, PartialMetadata::with_log_time(t));
+        self.messages += 1;
+    }
+
+    /// The clock: flushes when a flush period has passed since the last flush (inputs
+    /// may have stopped).
+    pub fn tick(&mut self, now_ns: u64) -> Result<(), RecordError> {
+        self.after_write(now_ns)
+    }
+
+    /// Flushes when a flush period of log time has passed since the last one.
+    fn after_write(&mut self, log_time_ns: u64) -> Result<(), RecordError> {
+        match self.last_flush_ns {
+            None => self.last_flush_ns = Some(log_time_ns),
+            Some(l) if log_time_ns.saturating_sub(l) >= self.options.flush_period_ns => {
+                self.flush()?;
+                self.last_flush_ns = Some(log_time_ns);
+            }
+            Some(_) => {}
+        }
+        Ok(())
+    }
+
+    /// Closes the open chunk and writes it out: everything recorded so far reads back
+    /// even if the process dies next.
+    pub fn flush(&mut self) -> Result<(), RecordError> {
+        match &self.handle {
+            Some(h) => h.flush().map_err(|e| self.write_error(e)),
+            None => Ok(()),
+        }
+    }
+
+    /// Writes the index and summary that make the file complete; returns the number of
+    /// messages recorded.
+    pub fn finish(mut self) -> Result<u64, RecordError> {
+        if let Some(h) = self.handle.take() {
+            h.close().map_err(|e| self.write_error(e))?;
+        }
+        Ok(self.messages)
+    }
+}
+
+impl Drop for Recorder {
+    fn drop(&mut self) {
+        if let Some(h) = self.handle.take() {
+            // Dropping finishes the file as well as it can; `finish` reports errors.
+            let _ = h.close();
+        }
+    }
+}
+
+#[cfg(test)]
+#[path = "writer_test.rs"]
+mod tests;
