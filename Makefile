@@ -45,13 +45,24 @@ test: lint
 	$(MAKE) --no-print-directory peers
 
 # Independent MAVLink peers fly the simulator as they fly PX4 SITL: pymavlink, and
-# MAVSDK (PyPI `mavsdk` 4.x, the native library, no server to download).
+# MAVSDK (PyPI `mavsdk` 4.x, the native library, no server to download). An independent
+# reader (PyPI `mcap` and `foxglove-schemas-protobuf`) decodes every channel of a
+# recording of each mode, against the schemas Foxglove ships.
 peers:
 	@python3 -c 'import pymavlink' 2>/dev/null || python3 -m pip install --quiet --disable-pip-version-check pymavlink
 	@python3 -c 'import mavsdk, sys; sys.exit(not mavsdk.__version__.startswith("4."))' 2>/dev/null || python3 -m pip install --quiet --disable-pip-version-check 'mavsdk>=4,<5'
 	$(CARGO) build --release -p sim
 	python3 tests/peers/pymavlink_flight.py target/release/sim
 	python3 tests/peers/mavsdk_flight.py target/release/sim
+	@python3 -c 'import mcap, foxglove_schemas_protobuf' 2>/dev/null || python3 -m pip install --quiet --disable-pip-version-check mcap foxglove-schemas-protobuf
+	$(CARGO) build --release -p landing -p recorder
+	@rm -rf target/peers && mkdir -p target/peers
+	./target/release/landing run --scenario paper-sim --record target/peers/lockstep.mcap --raw-images >/dev/null
+	python3 tests/peers/foxglove_reader.py target/peers/lockstep.mcap --expect-raw-images
+	python3 tests/peers/foxglove_reader.py target/peers/lockstep.truth.mcap
+	./target/release/landing run --scenario paper-sim --processes --record target/peers/processes.mcap >/dev/null
+	python3 tests/peers/foxglove_reader.py target/peers/processes.mcap
+	@rm -rf target/peers
 
 bench: build
 	./target/release/landing bench ipc

@@ -83,6 +83,7 @@ impl RecorderConfig {
             flush_period_ns: self.flush_period_ms * 1_000_000,
             map_period_ns: self.map_period_ms * 1_000_000,
             body_from_camera: None,
+            body_from_depth: None,
         })
     }
 }

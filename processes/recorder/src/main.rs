@@ -30,6 +30,20 @@ struct Args {
     /// aruco-pnp` needs) instead of [recorder] images.
     #[arg(long)]
     raw_images: bool,
+    /// Chunk compression instead of [recorder] compression: zstd, lz4 or none.
+    #[arg(long, value_name = "zstd|lz4|none")]
+    compression: Option<String>,
+    /// Adds KEY=VALUE to the recording's `landing` metadata (repeatable): what the
+    /// starter knows (`landing run` adds scenario, seed and mode).
+    #[arg(long, value_name = "KEY=VALUE", value_parser = parse_meta)]
+    meta: Vec<(String, String)>,
+}
+
+fn parse_meta(s: &str) -> Result<(String, String), String> {
+    match s.split_once('=') {
+        Some((k, v)) if !k.is_empty() => Ok((k.to_string(), v.to_string())),
+        _ => Err(format!("`{s}` is not KEY=VALUE")),
+    }
 }
 
 fn main() -> ExitCode {
@@ -41,7 +55,11 @@ fn run(args: &Args) -> Result<()> {
     if args.raw_images {
         cfg.images = "raw".into();
     }
+    if let Some(c) = &args.compression {
+        cfg.compression = c.clone();
+    }
     let (_, aruco): (_, aruco_pnp::ArucoConfig) = args.stage.load("aruco_pnp")?;
+    let (_, depth): (_, depth_map::DepthMapConfig) = args.stage.load("depth_map")?;
     let graph_path = args
         .stage
         .graph
@@ -55,9 +73,11 @@ fn run(args: &Args) -> Result<()> {
     options.body_from_camera = Some(metadata::pose_of(
         &aruco_pnp::down_camera_from_body(aruco.camera_position_in_body_m).inverse(),
     ));
+    options.body_from_depth = Some(metadata::pose_of(&depth.body_from_camera()));
     let mut rec = Recorder::with_options(&args.out, options)?;
     let mut meta = metadata::stack(args.stage.config.as_deref(), &graph_path)?;
     meta.insert("topics".into(), spec_topics(&spec));
+    meta.extend(args.meta.iter().cloned());
     rec.write_metadata("landing", meta)?;
     let prefix = IpcPrefix::resolve(args.stage.ipc_prefix.as_deref(), &ipc_cfg.prefix)?;
     let ipc = Ipc::open("recorder", &prefix)?;

@@ -1,7 +1,8 @@
 //! What Foxglove draws of the stack's messages, in the schemas Foxglove ships: camera
 //! frames as `foxglove.CompressedImage` or `foxglove.RawImage`, depth as `RawImage`
 //! (16UC1, millimetres as published), one transform tree on `/tf` (world -> body ->
-//! camera -> pad_observed, world -> pad for the mission's estimate), the occupancy map,
+//! camera -> pad_observed, body -> depth_camera, world -> pad for the mission's
+//! estimate), the occupancy map,
 //! the B-spline with its control points, the pad estimate and the simulator's truth as
 //! `foxglove.SceneUpdate`, mission transitions and safety orders as `foxglove.Log`.
 //!
@@ -38,6 +39,8 @@ pub const WORLD: &str = "world";
 pub const BODY: &str = "body";
 /// The down camera (optical).
 pub const CAMERA: &str = "camera";
+/// The forward depth camera (optical).
+pub const DEPTH_CAMERA: &str = "depth_camera";
 /// The pad where the mission estimates it (world-aligned).
 pub const PAD: &str = "pad";
 /// The pad where the last observation saw it (from the camera).
@@ -137,6 +140,7 @@ fn log_entry(ns: u64, level: log::Level, name: &str, message: String) -> Log {
 /// mission state and watchdog action (a log line on change), and the JPEG buffers.
 pub struct Visuals {
     body_from_camera: Option<Pose>,
+    body_from_depth: Option<Pose>,
     last_state: Option<(u32, String)>,
     last_watchdog: String,
     jpeg: Vector<u8>,
@@ -144,10 +148,12 @@ pub struct Visuals {
 }
 
 impl Visuals {
-    /// With the camera mounted at `body_from_camera` (`None`: no camera frame).
-    pub fn new(body_from_camera: Option<Pose>) -> Self {
+    /// With the cameras mounted at `body_from_camera` and `body_from_depth` (`None`: that
+    /// camera's frame is left out of the tree).
+    pub fn new(body_from_camera: Option<Pose>, body_from_depth: Option<Pose>) -> Self {
         Self {
             body_from_camera,
+            body_from_depth,
             last_state: None,
             last_watchdog: String::new(),
             jpeg: Vector::new(),
@@ -155,12 +161,15 @@ impl Visuals {
         }
     }
 
-    /// world -> body at the state's measurement, and the camera's mount under it.
+    /// world -> body at the state's measurement, and the cameras' mounts under it.
     pub fn vehicle(&self, m: &VehicleState) -> Option<FrameTransforms> {
         let ns = m.msg.capture_ns;
         let mut transforms = vec![transform(WORLD, BODY, &m.world_from_body, ns)?];
         if let Some(mount) = &self.body_from_camera {
             transforms.extend(transform(BODY, CAMERA, mount, ns));
+        }
+        if let Some(mount) = &self.body_from_depth {
+            transforms.extend(transform(BODY, DEPTH_CAMERA, mount, ns));
         }
         Some(FrameTransforms { transforms })
     }
@@ -336,7 +345,7 @@ pub fn depth_image(h: &DepthFrameHeader, depths: &[u16]) -> RawImage {
     }
     RawImage {
         timestamp: Some(stamp(h.msg.capture_ns)),
-        frame_id: "depth_camera".into(),
+        frame_id: DEPTH_CAMERA.into(),
         width: h.width,
         height: if h.width == 0 {
             0

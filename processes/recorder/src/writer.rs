@@ -100,6 +100,8 @@ pub struct RecordOptions {
     /// Where the down camera sits on the body (FLU), for the transform tree; `None`
     /// leaves the camera frame out of the tree.
     pub body_from_camera: Option<ipc_types::msg::Pose>,
+    /// Where the depth camera sits on the body, likewise.
+    pub body_from_depth: Option<ipc_types::msg::Pose>,
 }
 
 impl Default for RecordOptions {
@@ -110,6 +112,7 @@ impl Default for RecordOptions {
             flush_period_ns: 1_000_000_000,
             map_period_ns: 500_000_000,
             body_from_camera: None,
+            body_from_depth: None,
         }
     }
 }
@@ -204,7 +207,7 @@ impl Recorder {
             tf,
             scene,
             log,
-            visuals: Visuals::new(options.body_from_camera),
+            visuals: Visuals::new(options.body_from_camera, options.body_from_depth),
             messages: 0,
             last_flush_ns: None,
             last_map_ns: None,

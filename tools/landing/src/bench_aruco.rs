@@ -52,16 +52,21 @@ struct Run {
 }
 
 /// A rendered descent: frames and the true camera_from_pad of each.
-struct Sequence {
+pub(crate) struct Sequence {
     calibration: CameraCalibration,
     camera_from_body: Isometry3<f64>,
-    frames: Vec<(Vec<u8>, Isometry3<f64>, Isometry3<f64>)>,
+    pub(crate) frames: Vec<(Vec<u8>, Isometry3<f64>, Isometry3<f64>)>,
 }
 
 /// Frame period of the descent, s (30 Hz).
 const FRAME_S: f64 = 1.0 / 30.0;
 
-fn render(file: &str, n: usize, deploy: &std::path::Path, pad: &PadModel) -> Result<Sequence> {
+pub(crate) fn render(
+    file: &str,
+    n: usize,
+    deploy: &std::path::Path,
+    pad: &PadModel,
+) -> Result<Sequence> {
     let calibration = CameraCalibration::load(deploy.join("config").join(file))?;
     let mut cam = DownCamera::new(DownCameraParams::default(), calibration, pad)?;
     let state = PadState {

@@ -9,6 +9,7 @@ pub mod bench_faults;
 pub mod bench_ipc;
 pub mod bench_perception;
 pub mod bench_planner;
+pub mod bench_recorder;
 pub mod bench_sim;
 pub mod config_cmd;
 pub mod flight_log;

@@ -1,9 +1,9 @@
 //! `landing`: the one user-facing command of the landing stack.
 
 use landing::{
-    bench_aruco, bench_depth, bench_faults, bench_ipc, bench_perception, bench_planner, bench_sim,
-    config_cmd, graph_cmd, inject_cmd, map_cmd, pad_detect, pad_print, plan_cmd, run_cmd,
-    status_cmd,
+    bench_aruco, bench_depth, bench_faults, bench_ipc, bench_perception, bench_planner,
+    bench_recorder, bench_sim, config_cmd, graph_cmd, inject_cmd, map_cmd, pad_detect, pad_print,
+    plan_cmd, run_cmd, status_cmd,
 };
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -134,6 +134,9 @@ enum BenchCommand {
     /// The fault matrix: every watched process killed and hung while tracking and while
     /// descending; how each flight ends and how fast the watchdog orders.
     Faults(bench_faults::FaultsArgs),
+    /// The recorder process under a flight's load (1280x720 camera at 30 Hz and every
+    /// other topic): drops and its CPU, JPEG + zstd and raw + lz4.
+    Recorder(bench_recorder::RecorderArgs),
     /// Internal: the publishing side of `bench ipc`, started by it in a second process.
     #[command(hide = true)]
     IpcPeer(bench_ipc::PeerArgs),
@@ -201,6 +204,7 @@ fn main() -> ExitCode {
         }
         Command::Bench(BenchCommand::Planner(args)) => bench_planner::run(&args),
         Command::Bench(BenchCommand::Faults(args)) => bench_faults::run(&args),
+        Command::Bench(BenchCommand::Recorder(args)) => bench_recorder::run(&args),
         Command::Plan(args) => match plan_cmd::run(&args) {
             Ok(false) => return ExitCode::from(plan_cmd::NO_PLAN),
             other => other.map(|_| ()),

@@ -203,6 +203,9 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
                 &aruco_pnp::down_camera_from_body(cfg.aruco_pnp.camera_position_in_body_m)
                     .inverse(),
             ));
+            options.body_from_depth = Some(recorder::metadata::pose_of(
+                &cfg.depth_map.body_from_camera(),
+            ));
             let mut pipeline = Recorder::with_options(p, options)?;
             pipeline.write_metadata("landing", meta)?;
             rec.pipeline = Some(pipeline);

@@ -188,6 +188,9 @@ pub fn run(
         if raw {
             cmd.arg("--raw-images");
         }
+        cmd.arg(format!("--meta=scenario={}", launch.scenario.scenario.name))
+            .arg(format!("--meta=seed={}", launch.seed))
+            .arg("--meta=mode=processes");
         stop_with_parent(&mut cmd);
         let child = cmd
             .env("LANDING_LOG", "info")
