@@ -42,7 +42,7 @@ except ImportError as e:  # pragma: no cover - what CI prints on a machine witho
     sys.exit(1)
 
 # The transform tree the recorder writes (processes/recorder/src/visual.rs).
-TF_FRAMES = {"world", "body", "camera", "pad_observed", "pad"}
+TF_FRAMES = {"world", "body", "camera", "depth_camera", "pad_observed", "pad"}
 # The Foxglove type each known topic must carry; other foxglove.* topics get the
 # generic checks of their type.
 EXPECTED_TYPES = {
