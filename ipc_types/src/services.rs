@@ -36,6 +36,8 @@ pub const PX4_REQUEST: &str = "landing/px4/request";
 pub const PX4_OUTCOME: &str = "landing/px4/outcome";
 /// Setpoints for the autopilot (fsm).
 pub const FSM_SETPOINT: &str = "landing/fsm/setpoint";
+/// Each setpoint as it went on the MAVLink wire, stamped by px4-link (latency profiling).
+pub const PX4_SETPOINT_SENT: &str = "landing/px4/setpoint_sent";
 /// Mission status (fsm).
 pub const FSM_STATUS: &str = "landing/fsm/status";
 /// Safety orders (watchdog, operator).
@@ -71,6 +73,7 @@ pub const PIPELINE_TOPICS: &[&str] = &[
     PX4_REQUEST,
     PX4_OUTCOME,
     FSM_SETPOINT,
+    PX4_SETPOINT_SENT,
     FSM_STATUS,
     SAFETY_COMMAND,
     WATCHDOG_VIEW,

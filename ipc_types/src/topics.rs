@@ -139,6 +139,9 @@ pub const PX4_REQUEST: &str = "px4/request";
 pub const PX4_OUTCOME: &str = "px4/outcome";
 /// Setpoints.
 pub const FSM_SETPOINT: &str = "fsm/setpoint";
+/// Each new setpoint as px4-link put it on the MAVLink wire: its header carries the
+/// camera capture it derives from and every stage's stamp up to the wire.
+pub const PX4_SETPOINT_SENT: &str = "px4/setpoint_sent";
 /// Mission status.
 pub const FSM_STATUS: &str = "fsm/status";
 /// Safety orders.
@@ -223,6 +226,11 @@ pub const TABLE: &[TopicInfo] = &[
     row(PX4_REQUEST, services::PX4_REQUEST, Payload::LinkRequest),
     row(PX4_OUTCOME, services::PX4_OUTCOME, Payload::LinkOutcome),
     row(FSM_SETPOINT, services::FSM_SETPOINT, Payload::Setpoint),
+    row(
+        PX4_SETPOINT_SENT,
+        services::PX4_SETPOINT_SENT,
+        Payload::Setpoint,
+    ),
     row(FSM_STATUS, services::FSM_STATUS, Payload::FsmStatus),
     row(
         SAFETY_COMMAND,

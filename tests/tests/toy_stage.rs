@@ -64,7 +64,7 @@ fn a_stage_added_through_the_graph_runs_in_lockstep() {
         &mut driver,
         scn.scenario.duration_s,
         &mut referee,
-        &mut Recording(None),
+        &mut Recording::default(),
         |_, _, _| {},
     )
     .unwrap();

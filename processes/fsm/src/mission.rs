@@ -99,6 +99,10 @@ pub struct Fsm {
     filter: PadFilter,
     /// The frame the filter runs in (the integrated velocity).
     odometry: Odometry,
+    /// The header of the newest observation the pad filter took: the setpoints that
+    /// follow the pad carry its capture time and stage stamps on, so that a recording
+    /// shows camera capture -> setpoint on the wire.
+    pad_header: Option<Header>,
     vehicle: Option<(u64, VehicleState)>,
     /// When the watchdog's view last came.
     watchdog_seen_ns: Option<u64>,
@@ -150,6 +154,7 @@ impl Fsm {
             started,
             filter,
             odometry: Odometry::default(),
+            pad_header: None,
             vehicle: None,
             trajectory: None,
             takeoff: TakeoffStep::EnteringOffboard,
@@ -247,6 +252,9 @@ impl Fsm {
         let t = Vector3::from(obs.world_from_pad.translation) - d;
         in_odometry.world_from_pad.translation = t.into();
         let u = self.filter.update(now_ns, &in_odometry);
+        if matches!(u, Update::Accepted | Update::Started | Update::Restarted) {
+            self.pad_header = Some(obs.msg);
+        }
         match u {
             Update::Restarted => tracing::warn!("pad observations jumped: pad filter restarted"),
             Update::Rejected => tracing::debug!("pad observation outside the gate"),
@@ -1096,7 +1104,14 @@ impl Fsm {
     }
 
     fn setpoint(&self, now_ns: u64, p: Vector3<f64>, v: Vector3<f64>, a: Vector3<f64>) -> Setpoint {
-        let mut msg = Header::captured_at(now_ns);
+        let follows_pad = matches!(
+            self.state,
+            MissionState::Track | MissionState::Descend | MissionState::Land
+        );
+        let mut msg = match (&self.pad_header, follows_pad) {
+            (Some(h), true) => Header::derived_from(h),
+            _ => Header::captured_at(now_ns),
+        };
         msg.push_stage(Stage::Fsm, now_ns, now_ns);
         Setpoint {
             msg,

@@ -1,15 +1,19 @@
 //! The mission as a pipeline stage: every message in, the mission stepped on its own
 //! clock (`[fsm] rate_hz`) and at once on a safety order.
 
+use ipc_types::msg::MissionState;
 use ipc_types::topics;
 use stage::{Counter, Input, Message, Outbox, Stage, StageError};
 
+use crate::pad_filter::Update;
 use crate::{Fsm, FsmConfig};
 
 /// The `fsm` node.
 pub struct FsmStage {
     fsm: Fsm,
     counts: Counts,
+    /// An observation the pad filter took came in this batch of inputs.
+    pad_news: bool,
 }
 
 /// Messages taken in and published.
@@ -32,6 +36,7 @@ impl FsmStage {
         Self {
             fsm: Fsm::new(cfg),
             counts: Counts::default(),
+            pad_news: false,
         }
     }
 
@@ -85,7 +90,9 @@ impl Stage for FsmStage {
             }
             Message::PadObservation(o) => {
                 self.counts.observations += 1;
-                self.fsm.on_observation(now_ns, o);
+                let u = self.fsm.on_observation(now_ns, o);
+                self.pad_news |=
+                    matches!(u, Update::Accepted | Update::Started | Update::Restarted);
             }
             Message::Trajectory(t) => {
                 self.counts.trajectories += 1;
@@ -103,6 +110,19 @@ impl Stage for FsmStage {
                 self.step(now_ns, out)?;
             }
             _ => {}
+        }
+        Ok(())
+    }
+
+    /// Following the pad, a new observation is answered at once, not at the next tick:
+    /// the setpoint that follows it is the end of the camera's latency chain.
+    fn on_inputs_done(&mut self, now_ns: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
+        let following = matches!(
+            self.fsm.state(),
+            MissionState::Track | MissionState::Descend | MissionState::Land
+        );
+        if std::mem::take(&mut self.pad_news) && following {
+            self.step(now_ns, out)?;
         }
         Ok(())
     }

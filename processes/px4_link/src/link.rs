@@ -260,6 +260,11 @@ pub struct Px4Link {
     queue: VecDeque<Request>,
     outcomes: Vec<(Request, Outcome)>,
     setpoint: Option<(u64, Setpoint)>,
+    /// The setpoint held has not gone out yet: it goes at once, not at the stream's
+    /// next period (the mission's latency ends on the wire).
+    setpoint_new: bool,
+    /// The last new setpoint sent, with when it was taken in, until taken.
+    sent: Option<(u64, Setpoint)>,
     home: Option<Vector3<f64>>,
     refused: u64,
     last_refusal: Option<Refusal>,
@@ -282,6 +287,8 @@ impl Px4Link {
             queue: VecDeque::new(),
             outcomes: Vec::new(),
             setpoint: None,
+            setpoint_new: false,
+            sent: None,
             home: None,
             refused: 0,
             last_refusal: None,
@@ -352,6 +359,13 @@ impl Px4Link {
             return;
         }
         self.setpoint = Some((now_ns, sp));
+        self.setpoint_new = true;
+    }
+
+    /// The last new setpoint that went out since the last call, and when it was taken
+    /// in (ns): what the latency profile ends on.
+    pub fn take_sent_setpoint(&mut self) -> Option<(u64, Setpoint)> {
+        self.sent.take()
     }
 
     /// Setpoints refused by the bounds so far, and why the last one was.
@@ -555,15 +569,20 @@ impl Px4Link {
         let fresh = self
             .setpoint
             .filter(|(t, _)| now_ns.saturating_sub(*t) <= s.setpoint_max_age_ns);
-        let Some((_, sp)) = fresh else {
+        let Some((taken_ns, sp)) = fresh else {
             self.stream_since_ns = None;
             return;
         };
-        if self
-            .last_setpoint_sent_ns
-            .is_some_and(|t| now_ns.saturating_sub(t) < s.setpoint_period_ns)
+        // A new setpoint goes at once; the newest is repeated every period.
+        if !self.setpoint_new
+            && self
+                .last_setpoint_sent_ns
+                .is_some_and(|t| now_ns.saturating_sub(t) < s.setpoint_period_ns)
         {
             return;
+        }
+        if std::mem::take(&mut self.setpoint_new) {
+            self.sent = Some((taken_ns, sp));
         }
         self.stream_since_ns.get_or_insert(now_ns);
         self.last_setpoint_sent_ns = Some(now_ns);

@@ -149,6 +149,11 @@ impl LinkNode {
         self.link.set_setpoint(now_ns, setpoint);
     }
 
+    /// The last new setpoint that went out since the last call, and when it was taken in.
+    pub fn take_sent_setpoint(&mut self) -> Option<(u64, Setpoint)> {
+        self.link.take_sent_setpoint()
+    }
+
     /// Setpoints the bounds refused so far, and why the last one was.
     pub fn refused_setpoints(&self) -> (u64, Option<crate::link::Refusal>) {
         self.link.refused_setpoints()

@@ -456,3 +456,58 @@ fn a_safety_order_the_autopilot_already_follows_sends_nothing() {
         vec![MavCmd::MAV_CMD_DO_SET_MODE]
     );
 }
+
+fn setpoints_sent(msgs: &[MavMessage]) -> usize {
+    msgs.iter()
+        .filter(|m| matches!(m, MavMessage::SET_POSITION_TARGET_LOCAL_NED(_)))
+        .count()
+}
+
+fn hold_at(x: f64, seq: u64) -> Setpoint {
+    Setpoint {
+        msg: Header {
+            seq,
+            capture_ns: 5_000,
+            ..Header::default()
+        },
+        position: [x, 0.0, 2.0],
+        valid: Setpoint::POSITION,
+        ..Setpoint::default()
+    }
+}
+
+#[test]
+fn a_new_setpoint_goes_on_the_wire_at_once_and_the_newest_is_repeated_every_period() {
+    let settings = LinkSettings::default();
+    let mut node = LinkNode::new(settings);
+    node.on_message(0, &PX4, &heartbeat());
+    node.on_setpoint(1_000_000, &hold_at(1.0, 1));
+    assert_eq!(setpoints_sent(node.poll(1_000_000)), 1);
+    // Well inside the stream's period: a new setpoint still goes at once.
+    node.on_setpoint(3_000_000, &hold_at(2.0, 2));
+    assert_eq!(setpoints_sent(node.poll(3_000_000)), 1);
+    // Nothing new: nothing until the period has passed since the last one sent.
+    let period = settings.setpoint_period_ns;
+    assert_eq!(setpoints_sent(node.poll(3_000_000 + period / 2)), 0);
+    assert_eq!(setpoints_sent(node.poll(3_000_000 + period)), 1);
+}
+
+#[test]
+fn each_new_setpoint_is_reported_sent_once_with_when_it_was_taken_in() {
+    let mut node = LinkNode::new(LinkSettings::default());
+    node.on_message(0, &PX4, &heartbeat());
+    assert!(node.take_sent_setpoint().is_none());
+    node.on_setpoint(2_000_000, &hold_at(1.0, 7));
+    node.poll(2_500_000);
+    let (taken, sp) = node.take_sent_setpoint().unwrap();
+    assert_eq!(taken, 2_000_000);
+    assert_eq!(
+        (sp.msg.seq, sp.msg.capture_ns),
+        (7, 5_000),
+        "its header goes on"
+    );
+    assert!(node.take_sent_setpoint().is_none(), "once");
+    // A repeat of the same setpoint is not a new one.
+    node.poll(2_500_000 + LinkSettings::default().setpoint_period_ns);
+    assert!(node.take_sent_setpoint().is_none());
+}

@@ -4,6 +4,7 @@
 //! socket or serial port is the binary's; the bytes go through their wire encoding in
 //! both drivers.
 
+use ipc_types::msg::Stage as StageId;
 use ipc_types::topics;
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
@@ -75,6 +76,12 @@ impl LinkStage {
             counts.sent += 1;
             out.publish(topics::MAVLINK_TO_PX4, Message::Mavlink(frame))
         })?;
+        if let Some((taken_ns, mut sp)) = self.node.take_sent_setpoint() {
+            // From taken in to on the wire: the driver closes the stamp when this leaves,
+            // after the bytes above.
+            sp.msg.push_stage(StageId::Px4Link, taken_ns, now_ns);
+            out.publish(topics::PX4_SETPOINT_SENT, Message::Setpoint(&sp))?;
+        }
         for o in self.node.take_outcomes() {
             out.publish(topics::PX4_OUTCOME, Message::LinkOutcome(&o))?;
             self.counts.outcomes += 1;

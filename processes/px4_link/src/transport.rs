@@ -103,6 +103,12 @@ impl External for Transport {
         }
     }
 
+    fn wake_on(&mut self, fds: &[i32]) {
+        if let Self::Udp(link) = self {
+            link.wake_on(fds);
+        }
+    }
+
     fn wait(
         &mut self,
         timeout_ns: u64,

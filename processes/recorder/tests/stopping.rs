@@ -62,7 +62,7 @@ fn publish(prefix: &IpcPrefix, seconds: f64) -> Vec<u64> {
         };
         states.send(s.msg, &s).unwrap();
         sent.push(monotonic_ns());
-        if k % 2 == 0 {
+        if k.is_multiple_of(2) {
             let mut sample = camera.loan_uninit(len).unwrap();
             *sample.user_header_mut() = CameraFrameHeader {
                 msg: Header::captured_at(monotonic_ns()),

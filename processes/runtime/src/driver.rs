@@ -781,6 +781,16 @@ fn run_external(
     node: &mut Node<'_>,
     stage: &mut dyn Stage,
 ) -> Result<(), DriverError> {
+    use iceoryx2::prelude::FileDescriptorBased;
+    // SAFETY: the descriptors are only polled while the listeners, which own them, live
+    // (the inputs outlive this loop); they are not stored past it or closed.
+    let fds: Vec<i32> = inputs
+        .iter()
+        .map(|i| unsafe { i.port.listener().file_descriptor().native_handle() })
+        .collect();
+    if let Some(ext) = node.external.as_deref_mut() {
+        ext.wake_on(&fds);
+    }
     let mut deferred: Vec<(&'static str, OwnedMessage)> = Vec::new();
     while !ipc.shutdown_requested() && !stage.finished() {
         let timeout = node.until_due();
@@ -804,6 +814,11 @@ fn run_external(
             for (topic, msg) in deferred.drain(..) {
                 ext.send(topic, msg.as_message())?;
             }
+        }
+        // Their events consumed before the samples are taken: a sample that comes after
+        // this signals the next wait.
+        for i in inputs {
+            let _ = i.port.listener().try_wait(|_| {});
         }
         node.round(inputs, stage, delivered)?;
         if flow == Flow::Ended {

@@ -1027,12 +1027,22 @@ impl PeriodicWait {
 /// events are not drained).
 pub(crate) fn wait_any_readable(listeners: &[&Listener<Svc>], timeout_ns: u64) -> Vec<bool> {
     use iceoryx2::prelude::FileDescriptorBased;
-    let mut pfds: Vec<libc::pollfd> = listeners
+    // SAFETY: the descriptors are only passed to ppoll while the listeners, which own
+    // them, are borrowed; they are not stored or closed.
+    let fds: Vec<i32> = listeners
         .iter()
-        .map(|l| libc::pollfd {
-            // SAFETY: the descriptor is only passed to ppoll while the listener, which
-            // owns it, is borrowed; it is not stored or closed.
-            fd: unsafe { l.file_descriptor().native_handle() },
+        .map(|l| unsafe { l.file_descriptor().native_handle() })
+        .collect();
+    wait_fds(&fds, timeout_ns)
+}
+
+/// Sleeps until one of `fds` is readable or `timeout_ns` passes, with the kernel timer's
+/// precision; which are (nothing is read).
+pub(crate) fn wait_fds(fds: &[i32], timeout_ns: u64) -> Vec<bool> {
+    let mut pfds: Vec<libc::pollfd> = fds
+        .iter()
+        .map(|fd| libc::pollfd {
+            fd: *fd,
             events: libc::POLLIN,
             revents: 0,
         })

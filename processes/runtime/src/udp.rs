@@ -61,6 +61,8 @@ pub struct UdpLink {
     topics: [&'static str; 2],
     buf: Vec<u8>,
     stats: UdpStats,
+    /// Descriptors that end a wait early (the stage's iceoryx2 inputs).
+    wake: Vec<i32>,
 }
 
 impl UdpLink {
@@ -87,6 +89,7 @@ impl UdpLink {
             topics: [input, output],
             buf: vec![0; DATAGRAM_MAX],
             stats: UdpStats::default(),
+            wake: Vec::new(),
         })
     }
 
@@ -130,6 +133,18 @@ impl External for UdpLink {
         // The first read may wait (a zero timeout would mean forever); the rest only
         // drain what is already there.
         let mut wait = Duration::from_nanos(timeout_ns).max(Duration::from_micros(1));
+        if !self.wake.is_empty() {
+            // Datagrams or another input, whichever comes first.
+            use std::os::fd::AsRawFd;
+            let mut fds = Vec::with_capacity(self.wake.len() + 1);
+            fds.push(self.socket.as_raw_fd());
+            fds.extend_from_slice(&self.wake);
+            let ready = crate::ipc::wait_fds(&fds, timeout_ns);
+            if !ready.first().copied().unwrap_or(false) {
+                return Ok(Flow::Open);
+            }
+            wait = Duration::from_micros(1);
+        }
         loop {
             if let Err(e) = self.socket.set_read_timeout(Some(wait)) {
                 return Err(StageError::Transport(format!("UDP {}: {e}", self.local)));
@@ -166,6 +181,10 @@ impl External for UdpLink {
                 }
             }
         }
+    }
+
+    fn wake_on(&mut self, fds: &[i32]) {
+        self.wake = fds.to_vec();
     }
 
     fn send(&mut self, _topic: &str, msg: Message<'_>) -> Result<(), StageError> {

@@ -339,12 +339,11 @@ impl SimStage {
                 PixelFormat::Mono8 => (PixelEncoding::Mono8, 1),
                 PixelFormat::Bgr8 => (PixelEncoding::Bgr8, 3),
             };
-            let (capture, publish) = (
-                self.pace.driver_time_of(f.capture_ns),
-                self.pace.driver_time_of(f.publish_ns),
-            );
+            let capture = self.pace.driver_time_of(f.capture_ns);
             let mut msg = Header::captured_at(capture);
-            msg.push_stage(StageId::Sensor, capture, publish);
+            // Left open: the driver closes it when the frame really leaves (a simulator
+            // behind the wall clock delivers late, as a slow camera driver would).
+            msg.push_stage(StageId::Sensor, capture, capture);
             let header = CameraFrameHeader {
                 msg,
                 width,
@@ -380,12 +379,11 @@ impl SimStage {
             let p = cam.params();
             let (fx, fy) = p.focal_px();
             let (cx, cy) = p.principal_point_px();
-            let (capture, publish) = (
-                self.pace.driver_time_of(f.capture_ns),
-                self.pace.driver_time_of(f.publish_ns),
-            );
+            let capture = self.pace.driver_time_of(f.capture_ns);
             let mut msg = Header::captured_at(capture);
-            msg.push_stage(StageId::Sensor, capture, publish);
+            // Left open: the driver closes it when the frame really leaves (a simulator
+            // behind the wall clock delivers late, as a slow camera driver would).
+            msg.push_stage(StageId::Sensor, capture, capture);
             let header = DepthFrameHeader {
                 msg,
                 width: p.width,

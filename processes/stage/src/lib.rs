@@ -162,6 +162,12 @@ pub trait External {
     /// Sends an output on one of its topics.
     fn send(&mut self, topic: &str, msg: Message<'_>) -> Result<(), StageError>;
 
+    /// File descriptors that signal the stage's other inputs (the iceoryx2 listeners),
+    /// given once by the driver: a source that can ends its [`External::wait`] as soon as
+    /// one is readable, so that a setpoint does not wait out a receive timeout. The
+    /// default ignores them (the wait runs to its timeout, as before).
+    fn wake_on(&mut self, _fds: &[i32]) {}
+
     /// What the source itself counts (frames a camera thread overwrote, unreadable
     /// files, reconnects), for the process's counter lines after the stage's own.
     fn counters(&self) -> Vec<Counter> {

@@ -16,6 +16,7 @@ pub mod flight_log;
 pub mod graph_cmd;
 pub mod inject;
 pub mod inject_cmd;
+pub mod latency_cmd;
 pub mod map_cmd;
 pub mod map_pilot;
 pub mod pad_detect;

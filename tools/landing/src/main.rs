@@ -2,8 +2,8 @@
 
 use landing::{
     bench_aruco, bench_depth, bench_faults, bench_ipc, bench_perception, bench_planner,
-    bench_recorder, bench_sim, config_cmd, graph_cmd, inject_cmd, map_cmd, pad_detect, pad_print,
-    plan_cmd, run_cmd, status_cmd,
+    bench_recorder, bench_sim, config_cmd, graph_cmd, inject_cmd, latency_cmd, map_cmd, pad_detect,
+    pad_print, plan_cmd, run_cmd, status_cmd,
 };
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -47,6 +47,10 @@ enum Command {
     /// Look into MCAP recordings (`landing run --record`).
     #[command(subcommand)]
     Mcap(McapCommand),
+    /// Per-stage and end-to-end latency of a recording (camera frame -> pad observation
+    /// -> setpoint on the MAVLink wire), p50/p90/p99/max, message rates and drops by
+    /// sequence gaps; --plot draws the end-to-end histogram (docs/recording.md).
+    Latency(latency_cmd::LatencyArgs),
     /// Print the pipeline's dataflow graph (deploy/graph.toml): every process with the
     /// topics it reads and publishes, rates, drop policies, heartbeat deadlines; as text,
     /// JSON or Graphviz DOT. A graph that breaks a rule (an undeclared topic, a cycle
@@ -221,6 +225,7 @@ fn main() -> ExitCode {
             other => other.map(|_| ()),
         },
         Command::Mcap(McapCommand::Info { file, json }) => mcap_info(&file, json),
+        Command::Latency(args) => latency_cmd::run(&args),
         Command::Graph(args) => graph_cmd::run(&args),
         Command::Clean => clean(cli.ipc_prefix.as_deref()),
         Command::Status(args) => status_cmd::run(&args, cli.ipc_prefix.as_deref()),

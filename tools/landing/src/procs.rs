@@ -94,6 +94,43 @@ pub fn binary(name: &str) -> Result<PathBuf> {
     Ok(p)
 }
 
+/// The real-time scheduling the deployment gives `binary`: `CPUSchedulingPolicy=fifo`
+/// and `CPUSchedulingPriority` of its systemd drop-ins in `deploy/systemd` (the camera ->
+/// fsm -> px4-link path), so that a run on this machine schedules the path as the
+/// vehicle does. CPU affinity is the Jetson's and is not applied here.
+pub fn deploy_fifo_priority(deploy: &Path, binary: &str) -> Option<i32> {
+    let dir = deploy
+        .join("systemd")
+        .join(format!("landing@{binary}.service.d"));
+    let mut fifo = false;
+    let mut priority = None;
+    for entry in std::fs::read_dir(dir).ok()?.flatten() {
+        let text = std::fs::read_to_string(entry.path()).unwrap_or_default();
+        for line in text.lines().map(str::trim) {
+            match line.split_once('=') {
+                Some(("CPUSchedulingPolicy", v)) => fifo = v.trim() == "fifo",
+                Some(("CPUSchedulingPriority", v)) => priority = v.trim().parse().ok(),
+                _ => {}
+            }
+        }
+    }
+    priority.filter(|p| fifo && (1..=99).contains(p))
+}
+
+/// Puts process `pid` under SCHED_FIFO at `priority`; the OS's error when refused.
+pub fn set_fifo(pid: u32, priority: i32) -> std::io::Result<()> {
+    let param = libc::sched_param {
+        sched_priority: priority,
+    };
+    // SAFETY: `param` is valid for the call; `pid` is our child.
+    let rc = unsafe { libc::sched_setscheduler(pid as i32, libc::SCHED_FIFO, &param) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
 /// A free local UDP port (bound and released).
 pub fn free_udp_port() -> Result<u16> {
     Ok(UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port())

@@ -65,6 +65,11 @@ pub struct RunArgs {
     /// to FILE.truth.mcap beside it.
     #[arg(long, value_name = "FILE.mcap")]
     record: Option<PathBuf>,
+    /// --processes: give the camera -> fsm -> px4-link path the real-time priorities the
+    /// vehicle's systemd units give it (SCHED_FIFO, deploy/systemd/*.d; needs root or
+    /// CAP_SYS_NICE), as the latency table in docs/recording.md is measured.
+    #[arg(long, requires = "processes")]
+    realtime: bool,
     /// --record: camera frames raw (foxglove.RawImage) instead of JPEG, bit-exact: what
     /// `landing replay --stage aruco-pnp` needs.
     #[arg(long, requires = "record")]
@@ -251,6 +256,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             graph_path: &graph_path,
             injections: &injections,
             record: args.record.as_deref().map(|p| (p, args.raw_images)),
+            realtime: args.realtime,
         };
         let r = run_processes::run(&launch, &mut rec.truth, progress)?;
         if tty {

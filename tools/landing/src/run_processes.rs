@@ -51,6 +51,9 @@ pub struct Launch<'a> {
     /// `--record`: the recording the `recorder` process writes, and whether its camera
     /// frames are raw.
     pub record: Option<(&'a Path, bool)>,
+    /// `--realtime`: the deployment's SCHED_FIFO priorities on the processes that have
+    /// them (deploy/systemd drop-ins).
+    pub realtime: bool,
 }
 
 /// How a `--processes` run ended.
@@ -399,11 +402,23 @@ fn start(
     if !launch.injections.is_empty() {
         cmd.env(runtime::port_faults::ENV, "1");
     }
-    cmd.env("LANDING_LOG", "info")
+    let child = cmd
+        .env("LANDING_LOG", "info")
         .stdout(Stdio::null())
         .stderr(log)
         .spawn()
-        .with_context(|| format!("starting {}", node.binary))
+        .with_context(|| format!("starting {}", node.binary))?;
+    if launch.realtime
+        && let Some(priority) = crate::procs::deploy_fifo_priority(launch.deploy, &node.binary)
+    {
+        crate::procs::set_fifo(child.id(), priority).with_context(|| {
+            format!(
+                "--realtime: SCHED_FIFO {priority} for {} refused (needs root or CAP_SYS_NICE)",
+                node.binary
+            )
+        })?;
+    }
+    Ok(child)
 }
 
 /// `n` datagrams of random bytes (1 to 280 bytes, the MAVLink frame sizes) at `to`, from

@@ -1,0 +1,315 @@
+//! `landing latency run.mcap`: per-stage and end-to-end latency from a recording's stage
+//! stamps, message rates, and drops by sequence gaps.
+//!
+//! Every message header carries the capture time of the sensor data it derives from and
+//! one stamp per stage it went through (`Header::stages`: enter and exit, exit closed by
+//! the driver when the message left). px4-link publishes each new setpoint once more on
+//! `px4/setpoint_sent` when its bytes went out, with its own stamp: the whole chain
+//! camera -> camera-ingest -> aruco-pnp -> fsm -> px4-link (the wire) in one header.
+//!
+//! - end to end: for each camera frame (one capture time), the first setpoint on the
+//!   wire that derives from it: wire time minus the time the camera delivered the frame
+//!   (the sensor stamp's exit). The camera's own exposure, readout and transfer (the
+//!   simulator models 30 ms) are the camera's, not the stack's; they are in
+//!   `capture_to_wire_ms`, from the capture timestamp.
+//! - stages: on that same chain, each stage's exit minus the previous stage's exit
+//!   (transport, waiting for the stage's turn, and its work); and for every other topic,
+//!   its publisher's exit minus the previous exit (or the capture time).
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+
+use anyhow::{Result, bail};
+use clap::Args;
+use ipc_types::msg::Stage;
+use ipc_types::topics;
+use serde::Serialize;
+use serde_json::Value;
+
+use crate::plot;
+use crate::stats::percentile;
+
+/// Arguments of `landing latency`.
+#[derive(Debug, Args)]
+pub struct LatencyArgs {
+    /// The recording (`landing run --record`, or the `recorder` process).
+    #[arg(value_name = "FILE.mcap")]
+    file: PathBuf,
+    /// Print the result as one JSON object on stdout.
+    #[arg(long)]
+    json: bool,
+    /// Write a histogram of the end-to-end latency (end_to_end_ms.png) here.
+    #[arg(long, value_name = "DIR")]
+    plot: Option<PathBuf>,
+}
+
+/// Percentiles of a set of latencies, ms.
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct Percentiles {
+    /// Samples.
+    pub count: usize,
+    /// Median.
+    pub p50: f64,
+    /// 90th percentile.
+    pub p90: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// Largest.
+    pub max: f64,
+}
+
+impl Percentiles {
+    /// Of `v` (ms); `None` when empty.
+    pub fn of(v: &[f64]) -> Option<Self> {
+        if v.is_empty() {
+            return None;
+        }
+        Some(Self {
+            count: v.len(),
+            p50: percentile(v, 50.0),
+            p90: percentile(v, 90.0),
+            p99: percentile(v, 99.0),
+            max: v.iter().copied().fold(f64::MIN, f64::max),
+        })
+    }
+}
+
+/// What `landing latency` reports.
+#[derive(Debug, Clone, Serialize)]
+pub struct LatencyReport {
+    /// Camera frame delivered -> first setpoint from it on the MAVLink wire, ms.
+    pub end_to_end_ms: Option<Percentiles>,
+    /// Capture timestamp -> the same setpoint on the wire (the camera's own latency
+    /// included), ms.
+    pub capture_to_wire_ms: Option<Percentiles>,
+    /// Each stage's share of the end-to-end chain, ms, by stage.
+    pub stages: BTreeMap<String, Percentiles>,
+    /// Each publisher's latency on each topic (exit minus the previous stage's exit, or
+    /// the capture time), ms, by `stage -> topic`.
+    pub topics: BTreeMap<String, Percentiles>,
+    /// Messages missing by sequence gaps, by topic.
+    pub drops: BTreeMap<String, u64>,
+    /// Messages per second, by topic.
+    pub rates_hz: BTreeMap<String, f64>,
+    /// Where the recording broke, when it did (what came before is in the report).
+    pub broken: Option<String>,
+}
+
+/// One stamp of a header, from JSON.
+#[derive(Debug, Clone, Copy)]
+struct Stamp {
+    stage: u32,
+    exit_ns: u64,
+}
+
+/// Capture time and stamps of a recorded message's header.
+fn header(v: &Value) -> Option<(u64, u64, Vec<Stamp>)> {
+    let h = &v["msg"];
+    let capture = h["capture_ns"].as_u64()?;
+    let seq = h["seq"].as_u64()?;
+    let n = h["stage_count"].as_u64()? as usize;
+    let stamps = h["stages"]
+        .as_array()?
+        .iter()
+        .take(n)
+        .filter_map(|s| {
+            Some(Stamp {
+                stage: u32::try_from(s["stage"].as_u64()?).ok()?,
+                exit_ns: s["exit_ns"].as_u64()?,
+            })
+        })
+        .collect();
+    Some((seq, capture, stamps))
+}
+
+fn stage_name(raw: u32) -> String {
+    Stage::from_raw(raw).map_or_else(|| format!("stage-{raw}"), |s| s.name().to_string())
+}
+
+fn ms(a: u64, b: u64) -> f64 {
+    (b as f64 - a as f64) * 1e-6
+}
+
+/// Reads `file` and computes the report.
+pub fn analyse(file: &Path) -> Result<LatencyReport> {
+    let sent_topic = format!("/{}", topics::PX4_SETPOINT_SENT);
+    // First wire time per capture: (delivered, wire, chain of (stage, exit)).
+    let mut chains: HashMap<u64, (u64, Vec<Stamp>)> = HashMap::new();
+    let mut per_topic: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    let mut last_seq: HashMap<String, u64> = HashMap::new();
+    let mut drops: BTreeMap<String, u64> = BTreeMap::new();
+    let mut counts: BTreeMap<String, u64> = BTreeMap::new();
+    let mut span: HashMap<String, (u64, u64)> = HashMap::new();
+    let summary = recorder::read_messages(file, &mut |m| {
+        if m.encoding != "json" {
+            return;
+        }
+        let Ok(v) = serde_json::from_slice::<Value>(m.data) else {
+            return;
+        };
+        let Some((seq, capture, stamps)) = header(&v) else {
+            return;
+        };
+        let topic = m.topic.to_string();
+        *counts.entry(topic.clone()).or_insert(0) += 1;
+        let s = span
+            .entry(topic.clone())
+            .or_insert((m.log_time, m.log_time));
+        s.1 = m.log_time;
+        // Drops: a sequence that jumps (repeats, as the fsm's periodic status, are not).
+        if let Some(prev) = last_seq.insert(topic.clone(), seq)
+            && seq > prev + 1
+        {
+            *drops.entry(topic.clone()).or_insert(0) += seq - prev - 1;
+        } else {
+            drops.entry(topic.clone()).or_insert(0);
+        }
+        if let Some(last) = stamps.last() {
+            let from = match stamps.len() {
+                1 => capture,
+                n => stamps[n - 2].exit_ns,
+            };
+            if capture > 0 && last.exit_ns >= from {
+                per_topic
+                    .entry(format!("{} -> {}", stage_name(last.stage), &topic[1..]))
+                    .or_default()
+                    .push(ms(from, last.exit_ns));
+            }
+        }
+        if m.topic == sent_topic
+            && capture > 0
+            && stamps
+                .first()
+                .is_some_and(|s| s.stage == Stage::Sensor as u32)
+            && stamps
+                .last()
+                .is_some_and(|s| s.stage == Stage::Px4Link as u32)
+        {
+            let wire = stamps.last().map_or(0, |s| s.exit_ns);
+            match chains.get(&capture) {
+                Some((w, _)) if *w <= wire => {}
+                _ => {
+                    chains.insert(capture, (wire, stamps));
+                }
+            }
+        }
+    })?;
+    let mut e2e = vec![];
+    let mut c2w = vec![];
+    let mut by_stage: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    for (capture, (wire, stamps)) in &chains {
+        let delivered = stamps[0].exit_ns;
+        e2e.push(ms(delivered, *wire));
+        c2w.push(ms(*capture, *wire));
+        for w in stamps.windows(2) {
+            by_stage
+                .entry(stage_name(w[1].stage))
+                .or_default()
+                .push(ms(w[0].exit_ns, w[1].exit_ns));
+        }
+    }
+    let rates_hz = counts
+        .iter()
+        .map(|(t, n)| {
+            let (a, b) = span.get(t).copied().unwrap_or((0, 0));
+            let secs = (b.saturating_sub(a)) as f64 * 1e-9;
+            let rate = if secs > 0.0 && *n > 1 {
+                (*n - 1) as f64 / secs
+            } else {
+                0.0
+            };
+            (t[1..].to_string(), rate)
+        })
+        .collect();
+    Ok(LatencyReport {
+        end_to_end_ms: Percentiles::of(&e2e),
+        capture_to_wire_ms: Percentiles::of(&c2w),
+        stages: by_stage
+            .iter()
+            .filter_map(|(k, v)| Some((k.clone(), Percentiles::of(v)?)))
+            .collect(),
+        topics: per_topic
+            .iter()
+            .filter_map(|(k, v)| Some((k.clone(), Percentiles::of(v)?)))
+            .collect(),
+        drops: drops
+            .into_iter()
+            .map(|(t, n)| (t[1..].to_string(), n))
+            .collect(),
+        rates_hz,
+        broken: summary.broken.map(|b| b.to_string()),
+    })
+}
+
+fn row(name: &str, p: &Percentiles) -> String {
+    format!(
+        "{name:<34} {:>7.2} {:>7.2} {:>7.2} {:>7.2} {:>7}",
+        p.p50, p.p90, p.p99, p.max, p.count
+    )
+}
+
+/// Runs `landing latency`.
+pub fn run(args: &LatencyArgs) -> Result<()> {
+    let report = analyse(&args.file)?;
+    if let Some(dir) = &args.plot {
+        let mut e2e = vec![];
+        // The histogram's samples: read once more (the report keeps percentiles only).
+        let sent = format!("/{}", topics::PX4_SETPOINT_SENT);
+        let mut first: HashMap<u64, f64> = HashMap::new();
+        recorder::read_messages(&args.file, &mut |m| {
+            if m.topic != sent {
+                return;
+            }
+            if let Ok(v) = serde_json::from_slice::<Value>(m.data)
+                && let Some((_, capture, stamps)) = header(&v)
+                && capture > 0
+                && stamps
+                    .first()
+                    .is_some_and(|s| s.stage == Stage::Sensor as u32)
+                && let (Some(a), Some(b)) = (stamps.first(), stamps.last())
+            {
+                first.entry(capture).or_insert(ms(a.exit_ns, b.exit_ns));
+            }
+        })?;
+        e2e.extend(first.values());
+        std::fs::create_dir_all(dir)?;
+        let p = dir.join("end_to_end_ms.png");
+        plot::write_histogram(&p, "camera frame -> setpoint on the wire (ms)", &e2e)?;
+        eprintln!("  plot: {}", p.display());
+    }
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!(
+            "{:<34} {:>7} {:>7} {:>7} {:>7} {:>7}",
+            "latency, ms", "p50", "p90", "p99", "max", "n"
+        );
+        if let Some(p) = &report.end_to_end_ms {
+            println!("{}", row("end to end (frame -> wire)", p));
+        }
+        if let Some(p) = &report.capture_to_wire_ms {
+            println!("{}", row("capture -> wire (camera's own too)", p));
+        }
+        for (k, p) in &report.stages {
+            println!("{}", row(&format!("  {k}"), p));
+        }
+        println!("by publisher and topic:");
+        for (k, p) in &report.topics {
+            println!("{}", row(&format!("  {k}"), p));
+        }
+        println!("{:<34} {:>8} {:>7}", "topic", "rate Hz", "drops");
+        for (t, r) in &report.rates_hz {
+            let d = report.drops.get(t).copied().unwrap_or(0);
+            println!("  {t:<32} {r:>8.1} {d:>7}");
+        }
+    }
+    if report.end_to_end_ms.is_none() {
+        eprintln!(
+            "  no setpoint on the wire derives from a camera frame: was the pad tracked, and was px4/setpoint_sent recorded?"
+        );
+    }
+    if let Some(b) = &report.broken {
+        bail!("{}: {b}", args.file.display());
+    }
+    Ok(())
+}

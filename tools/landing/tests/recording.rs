@@ -1,0 +1,120 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a panic is a failed test
+//! A recorded mission read back: `landing latency` on a lockstep recording, where every
+//! stage's latency is the graph's model, and the readers on damaged files.
+
+mod common;
+use common::landing;
+use std::path::PathBuf;
+
+fn temp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("landing-recording-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+/// One lockstep paper-sim mission recorded (shared by the tests of this file).
+fn recording() -> PathBuf {
+    static ONCE: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    ONCE.get_or_init(|| {
+        let path = temp("paper-sim.mcap");
+        let o = landing(&[
+            "run",
+            "--scenario",
+            "paper-sim",
+            "--record",
+            path.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        path
+    })
+    .clone()
+}
+
+#[test]
+fn in_lockstep_a_frame_reaches_the_wire_after_exactly_its_stages_modelled_latency() {
+    let path = recording();
+    let o = landing(&["latency", "--json", path.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    // camera-ingest 0.3 + aruco-pnp 1.5 + fsm 0.1 + px4-link 0.1 ms (deploy/graph.toml):
+    // the fsm answers the observation at once and px4-link sends a new setpoint at once.
+    // Waiting for the fsm's 50 Hz tick or the 25 Hz stream would add up to 20 or 40 ms.
+    let e2e = &v["end_to_end_ms"];
+    assert!(e2e["count"].as_u64().unwrap() > 200, "{e2e}");
+    for p in ["p50", "p99"] {
+        let ms = e2e[p].as_f64().unwrap();
+        assert!((ms - 2.0).abs() < 0.05, "{p} {ms} ms: {e2e}");
+    }
+    assert!(e2e["max"].as_f64().unwrap() < 2.5, "{e2e}");
+    for (stage, ms) in [
+        ("camera-ingest", 0.3),
+        ("aruco-pnp", 1.5),
+        ("px4-link", 0.1),
+    ] {
+        let p50 = v["stages"][stage]["p50"].as_f64().unwrap();
+        assert!((p50 - ms).abs() < 0.01, "{stage}: {p50} ms");
+    }
+    for (topic, n) in v["drops"].as_object().unwrap() {
+        assert_eq!(n, 0, "{topic}");
+    }
+    let hz = v["rates_hz"]["camera/frame/header"].as_f64().unwrap();
+    assert!((hz - 30.0).abs() < 1.0, "{hz}");
+}
+
+#[test]
+fn latency_draws_the_end_to_end_histogram() {
+    let path = recording();
+    let dir = temp("plots");
+    let o = landing(&[
+        "latency",
+        path.to_str().unwrap(),
+        "--plot",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let png = std::fs::read(dir.join("end_to_end_ms.png")).unwrap();
+    assert!(png.starts_with(b"\x89PNG"), "a PNG");
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("end to end (frame -> wire)"), "{out}");
+}
+
+#[test]
+fn a_cut_recording_is_reported_to_the_cut_and_the_cut_is_named_by_its_offset() {
+    let path = recording();
+    let bytes = std::fs::read(&path).unwrap();
+    let cut = temp("cut.mcap");
+    let at = bytes.len() / 2;
+    std::fs::write(&cut, &bytes[..at]).unwrap();
+    let o = landing(&["mcap", "info", cut.to_str().unwrap()]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{out}");
+    assert!(
+        out.contains("/vehicle/state"),
+        "what was read is reported: {out}"
+    );
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("truncated") && err.contains(&format!("of {at}")),
+        "{err}"
+    );
+    let o = landing(&["latency", cut.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("truncated"), "{err}");
+}
+
+#[test]
+fn a_file_that_is_not_mcap_is_one_line_saying_so() {
+    let path = temp("random.mcap");
+    std::fs::write(&path, b"not a recording at all, just words").unwrap();
+    for cmd in [&["mcap", "info"][..], &["latency"][..]] {
+        let mut args = cmd.to_vec();
+        args.push(path.to_str().unwrap());
+        let o = landing(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{cmd:?}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{cmd:?}: {err}");
+        assert!(err.contains("is not an MCAP file"), "{cmd:?}: {err}");
+    }
+}
