@@ -37,6 +37,10 @@ pub const STACK_BINARIES: &[&str] = &[
     "watchdog",
 ];
 
+/// Stack binaries that watch the graph rather than being one of its nodes: they read
+/// every topic and publish none, and nothing waits for them (the recorder).
+pub const OBSERVER_BINARIES: &[&str] = &["recorder"];
+
 /// The placeholders a node's `args` may use, filled in per run from [`RunValues`].
 pub const PLACEHOLDERS: &[&str] = &[
     "config",

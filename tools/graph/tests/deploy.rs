@@ -8,7 +8,7 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-use graph::{Graph, RunValues, STACK_BINARIES};
+use graph::{Graph, OBSERVER_BINARIES, RunValues, STACK_BINARIES};
 use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::msg;
 use ipc_types::services;
@@ -98,7 +98,11 @@ fn every_stack_binary_is_a_binary_of_the_workspace() {
             bins.insert(name.trim_matches('"').to_string());
         }
     }
-    let declared: BTreeSet<String> = STACK_BINARIES.iter().map(|b| b.to_string()).collect();
+    let declared: BTreeSet<String> = STACK_BINARIES
+        .iter()
+        .chain(OBSERVER_BINARIES)
+        .map(|b| b.to_string())
+        .collect();
     assert_eq!(declared, bins);
 }
 
@@ -166,6 +170,11 @@ fn every_topic_names_the_type_its_service_carries() {
         (services::PX4_REQUEST, type_name::<msg::LinkRequest>(), None),
         (services::PX4_OUTCOME, type_name::<msg::LinkOutcome>(), None),
         (services::FSM_SETPOINT, type_name::<msg::Setpoint>(), None),
+        (
+            services::PX4_SETPOINT_SENT,
+            type_name::<msg::Setpoint>(),
+            None,
+        ),
         (services::FSM_STATUS, type_name::<msg::FsmStatus>(), None),
         (
             services::SAFETY_COMMAND,

@@ -24,6 +24,7 @@ pub mod pad_print;
 pub mod plan_cmd;
 pub mod plot;
 pub mod procs;
+pub mod replay_cmd;
 pub mod run_cmd;
 pub mod run_eval;
 pub mod run_lockstep;

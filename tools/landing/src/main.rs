@@ -3,7 +3,7 @@
 use landing::{
     bench_aruco, bench_depth, bench_faults, bench_ipc, bench_perception, bench_planner,
     bench_recorder, bench_sim, config_cmd, graph_cmd, inject_cmd, latency_cmd, map_cmd, pad_detect,
-    pad_print, plan_cmd, run_cmd, status_cmd,
+    pad_print, plan_cmd, replay_cmd, run_cmd, status_cmd,
 };
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -51,6 +51,10 @@ enum Command {
     /// -> setpoint on the MAVLink wire), p50/p90/p99/max, message rates and drops by
     /// sequence gaps; --plot draws the end-to-end histogram (docs/recording.md).
     Latency(latency_cmd::LatencyArgs),
+    /// Run one stage again on a recording's inputs through its own library and compare
+    /// its outputs, bit for bit, with what it published in flight (aruco-pnp; record with
+    /// --raw-images). Exit code 1 when they differ.
+    Replay(replay_cmd::ReplayArgs),
     /// Print the pipeline's dataflow graph (deploy/graph.toml): every process with the
     /// topics it reads and publishes, rates, drop policies, heartbeat deadlines; as text,
     /// JSON or Graphviz DOT. A graph that breaks a rule (an undeclared topic, a cycle
@@ -226,6 +230,10 @@ fn main() -> ExitCode {
         },
         Command::Mcap(McapCommand::Info { file, json }) => mcap_info(&file, json),
         Command::Latency(args) => latency_cmd::run(&args),
+        Command::Replay(args) => match replay_cmd::run(&args) {
+            Ok(false) => return ExitCode::from(1),
+            other => other.map(|_| ()),
+        },
         Command::Graph(args) => graph_cmd::run(&args),
         Command::Clean => clean(cli.ipc_prefix.as_deref()),
         Command::Status(args) => status_cmd::run(&args, cli.ipc_prefix.as_deref()),

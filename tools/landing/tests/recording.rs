@@ -118,3 +118,39 @@ fn a_file_that_is_not_mcap_is_one_line_saying_so() {
         assert!(err.contains("is not an MCAP file"), "{cmd:?}: {err}");
     }
 }
+
+#[test]
+fn replaying_aruco_pnp_on_a_raw_recording_reproduces_every_observation_bit_for_bit() {
+    let path = temp("indoor-static-raw.mcap");
+    let p = path.to_str().unwrap();
+    let o = landing(&[
+        "run",
+        "--scenario",
+        "indoor-static",
+        "--record",
+        p,
+        "--raw-images",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = landing(&["replay", p, "--stage", "aruco-pnp", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(o.status.success(), "{v}");
+    assert!(v["recorded"].as_u64().unwrap() > 50, "{v}");
+    assert_eq!(v["identical"], v["recorded"], "{v}");
+    assert_eq!(v["replayed"], v["recorded"], "{v}");
+    assert_eq!(v["different"], 0, "{v}");
+    let _ = std::fs::remove_file(&path);
+}
+
+#[test]
+fn replaying_aruco_pnp_on_jpeg_frames_is_refused_in_one_line() {
+    let path = recording();
+    let o = landing(&["replay", path.to_str().unwrap(), "--stage", "aruco-pnp"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.contains("--raw-images"), "{err}");
+    let o = landing(&["replay", path.to_str().unwrap(), "--stage", "planner"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("allowed: aruco-pnp"), "{err}");
+}
