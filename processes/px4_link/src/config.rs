@@ -64,6 +64,10 @@ pub struct Px4LinkConfig {
     pub remote: String,
     /// Setpoint stream rate, Hz (PX4 needs more than 2 Hz).
     pub setpoint_rate_hz: f64,
+    /// A new setpoint from the fsm goes out at once rather than at the stream's next
+    /// period (up to 1 / setpoint_rate_hz later); the newest is repeated every period.
+    /// Off by default: docs/recording.md.
+    pub new_setpoints_at_once: bool,
     /// Wait this long for a COMMAND_ACK before resending, ms.
     pub command_timeout_ms: u64,
     /// Sends of one command before it counts as timed out.
@@ -88,6 +92,7 @@ impl Default for Px4LinkConfig {
             link: "udp:127.0.0.1:14540".into(),
             remote: "127.0.0.1:14580".into(),
             setpoint_rate_hz: 25.0,
+            new_setpoints_at_once: false,
             command_timeout_ms: 500,
             command_attempts: 4,
             heartbeat_timeout_ms: 1500,
@@ -164,6 +169,7 @@ impl Px4LinkConfig {
     pub fn settings(&self) -> LinkSettings {
         LinkSettings {
             setpoint_period_ns: (1e9 / self.setpoint_rate_hz.max(1.0)) as u64,
+            new_setpoints_at_once: self.new_setpoints_at_once,
             command_timeout_ns: self.command_timeout_ms * 1_000_000,
             command_attempts: self.command_attempts,
             heartbeat_timeout_ns: self.heartbeat_timeout_ms * 1_000_000,

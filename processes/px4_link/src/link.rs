@@ -71,6 +71,9 @@ pub struct LinkSettings {
     pub heartbeat_period_ns: u64,
     /// Setpoint stream period, ns (PX4 needs > 2 Hz; we send 20 Hz or more).
     pub setpoint_period_ns: u64,
+    /// A new setpoint goes out at once instead of at the stream's next period (the
+    /// newest is still repeated every period): `[px4_link] new_setpoints_at_once`.
+    pub new_setpoints_at_once: bool,
     /// A setpoint older than this is not streamed (the mission stopped): PX4's
     /// offboard-loss failsafe must then act, not a stale setpoint, ns.
     pub setpoint_max_age_ns: u64,
@@ -184,6 +187,7 @@ impl Default for LinkSettings {
             target: (1, 1),
             heartbeat_period_ns: 1_000_000_000,
             setpoint_period_ns: 40_000_000,
+            new_setpoints_at_once: false,
             setpoint_max_age_ns: 300_000_000,
             offboard_stream_ns: 300_000_000,
             command_timeout_ns: 500_000_000,
@@ -260,8 +264,8 @@ pub struct Px4Link {
     queue: VecDeque<Request>,
     outcomes: Vec<(Request, Outcome)>,
     setpoint: Option<(u64, Setpoint)>,
-    /// The setpoint held has not gone out yet: it goes at once, not at the stream's
-    /// next period (the mission's latency ends on the wire).
+    /// The setpoint held has not gone out yet (with `new_setpoints_at_once` it goes at
+    /// once, not at the stream's next period: the mission's latency ends on the wire).
     setpoint_new: bool,
     /// The last new setpoint sent, with when it was taken in, until taken.
     sent: Option<(u64, Setpoint)>,
@@ -573,8 +577,8 @@ impl Px4Link {
             self.stream_since_ns = None;
             return;
         };
-        // A new setpoint goes at once; the newest is repeated every period.
-        if !self.setpoint_new
+        // A new setpoint goes at once when so configured; the newest every period.
+        if !(self.setpoint_new && s.new_setpoints_at_once)
             && self
                 .last_setpoint_sent_ns
                 .is_some_and(|t| now_ns.saturating_sub(t) < s.setpoint_period_ns)

@@ -478,7 +478,10 @@ fn hold_at(x: f64, seq: u64) -> Setpoint {
 
 #[test]
 fn a_new_setpoint_goes_on_the_wire_at_once_and_the_newest_is_repeated_every_period() {
-    let settings = LinkSettings::default();
+    let settings = LinkSettings {
+        new_setpoints_at_once: true,
+        ..LinkSettings::default()
+    };
     let mut node = LinkNode::new(settings);
     node.on_message(0, &PX4, &heartbeat());
     node.on_setpoint(1_000_000, &hold_at(1.0, 1));
@@ -490,6 +493,24 @@ fn a_new_setpoint_goes_on_the_wire_at_once_and_the_newest_is_repeated_every_peri
     let period = settings.setpoint_period_ns;
     assert_eq!(setpoints_sent(node.poll(3_000_000 + period / 2)), 0);
     assert_eq!(setpoints_sent(node.poll(3_000_000 + period)), 1);
+}
+
+#[test]
+fn by_default_a_new_setpoint_waits_for_the_streams_period() {
+    let settings = LinkSettings::default();
+    let mut node = LinkNode::new(settings);
+    node.on_message(0, &PX4, &heartbeat());
+    node.on_setpoint(1_000_000, &hold_at(1.0, 1));
+    assert_eq!(setpoints_sent(node.poll(1_000_000)), 1);
+    node.on_setpoint(3_000_000, &hold_at(2.0, 2));
+    assert_eq!(setpoints_sent(node.poll(3_000_000)), 0);
+    assert_eq!(
+        setpoints_sent(node.poll(1_000_000 + settings.setpoint_period_ns)),
+        1
+    );
+    // It is reported sent when it went.
+    let (taken, sp) = node.take_sent_setpoint().unwrap();
+    assert_eq!((taken, sp.msg.seq), (3_000_000, 2));
 }
 
 #[test]

@@ -12,15 +12,28 @@ fn temp(name: &str) -> PathBuf {
     dir.join(name)
 }
 
-/// One lockstep paper-sim mission recorded (shared by the tests of this file).
+/// One lockstep paper-sim mission recorded (shared by the tests of this file), with
+/// `[px4_link] new_setpoints_at_once` on: the latency chain without the stream's wait.
 fn recording() -> PathBuf {
     static ONCE: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
     ONCE.get_or_init(|| {
         let path = temp("paper-sim.mcap");
+        let deploy = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../deploy/config/landing.toml"
+        );
+        let text = std::fs::read_to_string(deploy).unwrap();
+        let at_once = "new_setpoints_at_once = true";
+        let text = text.replace("new_setpoints_at_once = false", at_once);
+        assert!(text.contains(at_once));
+        let cfg = temp("at-once.toml");
+        std::fs::write(&cfg, text).unwrap();
         let o = landing(&[
             "run",
             "--scenario",
             "paper-sim",
+            "--config",
+            cfg.to_str().unwrap(),
             "--record",
             path.to_str().unwrap(),
         ]);
@@ -37,7 +50,8 @@ fn in_lockstep_a_frame_reaches_the_wire_after_exactly_its_stages_modelled_latenc
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     // camera-ingest 0.3 + aruco-pnp 1.5 + fsm 0.1 + px4-link 0.1 ms (deploy/graph.toml):
-    // the fsm answers the observation at once and px4-link sends a new setpoint at once.
+    // the fsm answers the observation at once and px4-link (new_setpoints_at_once) sends
+    // a new setpoint at once.
     // Waiting for the fsm's 50 Hz tick or the 25 Hz stream would add up to 20 or 40 ms.
     let e2e = &v["end_to_end_ms"];
     assert!(e2e["count"].as_u64().unwrap() > 200, "{e2e}");

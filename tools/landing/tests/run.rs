@@ -208,15 +208,18 @@ fn a_recording_and_the_plots_are_written_and_readable() {
         let meta = std::fs::metadata(dir.join(f)).unwrap();
         assert!(meta.len() > 10_000, "{f}: {} bytes", meta.len());
     }
-    let info = landing(&["mcap", "info", rec_s, "--json"]);
-    assert!(info.status.success());
-    let v: Value = serde_json::from_slice(&info.stdout).unwrap();
-    let topics: Vec<&str> = v["channels"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| c["topic"].as_str().unwrap())
-        .collect();
+    let topics_of = |file: &std::path::Path| -> Vec<String> {
+        let info = landing(&["mcap", "info", file.to_str().unwrap(), "--json"]);
+        assert!(info.status.success());
+        let v: Value = serde_json::from_slice(&info.stdout).unwrap();
+        v["channels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c["topic"].as_str().unwrap().to_string())
+            .collect()
+    };
+    let pipeline = topics_of(&rec);
     for t in [
         "/vehicle/state",
         "/pad/observation",
@@ -224,9 +227,19 @@ fn a_recording_and_the_plots_are_written_and_readable() {
         "/fsm/status",
         "/px4/request",
         "/px4/outcome",
-        "/sim/truth",
+        "/camera/frame",
+        "/tf",
     ] {
-        assert!(topics.contains(&t), "{t} missing: {topics:?}");
+        assert!(pipeline.iter().any(|p| p == t), "{t} missing: {pipeline:?}");
+    }
+    // Ground truth in a file of its own, never in the pipeline's.
+    assert!(
+        !pipeline.iter().any(|p| p.starts_with("/sim/truth")),
+        "{pipeline:?}"
+    );
+    let truth = topics_of(&dir.join("run.truth.mcap"));
+    for t in ["/sim/truth", "/sim/truth_state", "/scene/truth"] {
+        assert!(truth.iter().any(|p| p == t), "{t} missing: {truth:?}");
     }
 }
 
