@@ -12,5 +12,5 @@ pub mod mount;
 pub mod pad;
 
 pub use calibration::{CalibrationError, CameraCalibration};
-pub use mount::down_camera_from_body;
+pub use mount::{body_from_forward_camera, down_camera_from_body};
 pub use pad::{Board, MARKER_CELLS, Marker, PadError, PadModel, marker_cells};

@@ -11,6 +11,7 @@ use std::time::Duration;
 use anyhow::{Context as _, Result};
 use clap::Parser;
 use graph::{Graph, Transport};
+use ipc_types::msg::Pose;
 use recorder::{Recorder, RecorderConfig, RecorderStage, metadata};
 use runtime::StageArgs;
 use runtime::driver::{self, Beat};
@@ -58,8 +59,6 @@ fn run(args: &Args) -> Result<()> {
     if let Some(c) = &args.compression {
         cfg.compression = c.clone();
     }
-    let (_, aruco): (_, aruco_pnp::ArucoConfig) = args.stage.load("aruco_pnp")?;
-    let (_, depth): (_, depth_map::DepthMapConfig) = args.stage.load("depth_map")?;
     let graph_path = args
         .stage
         .graph
@@ -70,10 +69,9 @@ fn run(args: &Args) -> Result<()> {
     let mut options = cfg
         .options()
         .map_err(|e| anyhow::anyhow!("[recorder] {}: {}", e.key, e.message))?;
-    options.body_from_camera = Some(metadata::pose_of(
-        &aruco_pnp::down_camera_from_body(aruco.camera_position_in_body_m).inverse(),
-    ));
-    options.body_from_depth = Some(metadata::pose_of(&depth.body_from_camera()));
+    let (camera, depth) = mounts(args.stage.config.as_deref())?;
+    options.body_from_camera = camera;
+    options.body_from_depth = depth;
     let mut rec = Recorder::with_options(&args.out, options)?;
     let mut meta = metadata::stack(args.stage.config.as_deref(), &graph_path)?;
     meta.insert("topics".into(), spec_topics(&spec));
@@ -95,6 +93,35 @@ fn run(args: &Args) -> Result<()> {
     served?;
     tracing::info!(messages = n, out = %args.out.display(), "recording finished");
     Ok(())
+}
+
+/// The cameras' mounts for the transform tree, from the config's `[aruco_pnp]
+/// camera_position_in_body_m` and `[depth_map] camera_position_in_body_m` and
+/// `camera_rpy_deg` (read here, not through those stages' crates: a process depends on
+/// no other process); a camera whose keys are absent is left out of the tree.
+fn mounts(config: Option<&std::path::Path>) -> Result<(Option<Pose>, Option<Pose>)> {
+    let Some(path) = config else {
+        return Ok((None, None));
+    };
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let table: toml::Table =
+        toml::from_str(&text).with_context(|| format!("{}: not TOML", path.display()))?;
+    let triple = |section: &str, key: &str| -> Option<[f64; 3]> {
+        let a = table.get(section)?.get(key)?.as_array()?;
+        let v: Vec<f64> = a
+            .iter()
+            .filter_map(|x| x.as_float().or_else(|| x.as_integer().map(|i| i as f64)))
+            .collect();
+        <[f64; 3]>::try_from(v).ok()
+    };
+    let camera = triple("aruco_pnp", "camera_position_in_body_m")
+        .map(|p| metadata::pose_of(&optics::down_camera_from_body(p).inverse()));
+    let depth = triple("depth_map", "camera_position_in_body_m").map(|p| {
+        let rpy = triple("depth_map", "camera_rpy_deg").unwrap_or([0.0; 3]);
+        metadata::pose_of(&optics::body_from_forward_camera(p, rpy))
+    });
+    Ok((camera, depth))
 }
 
 /// Every iceoryx2 topic of the graph that is not ground truth or skipped, taken in
