@@ -57,7 +57,7 @@ peers:
 	@python3 -c 'import mcap, foxglove_schemas_protobuf' 2>/dev/null || python3 -m pip install --quiet --disable-pip-version-check mcap foxglove-schemas-protobuf
 	$(CARGO) build --release -p landing -p recorder
 	@rm -rf target/peers && mkdir -p target/peers
-	./target/release/landing run --scenario paper-sim --record target/peers/lockstep.mcap --raw-images >/dev/null
+	./target/release/landing run --scenario indoor-static --record target/peers/lockstep.mcap --raw-images >/dev/null
 	python3 tests/peers/foxglove_reader.py target/peers/lockstep.mcap --expect-raw-images
 	python3 tests/peers/foxglove_reader.py target/peers/lockstep.truth.mcap
 	./target/release/landing run --scenario paper-sim --processes --record target/peers/processes.mcap >/dev/null
