@@ -268,7 +268,11 @@ fn run_case(
     let prefix = IpcPrefix::unique("benchrec");
     let out = dir.join(format!("{name}.mcap"));
     let deploy = stack_config::deploy_dir();
-    let mut child = Command::new(binary("recorder")?)
+    let mut cmd = Command::new(binary("recorder")?);
+    // It stops with this process, however this one ends (a recorder left behind had
+    // outlived a bench that failed).
+    crate::run_processes::stop_with_parent(&mut cmd);
+    let mut child = cmd
         .args(["--ipc-prefix", prefix.as_str(), "--deploy-dir"])
         .arg(&deploy)
         .arg("--out")

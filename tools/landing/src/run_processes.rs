@@ -118,7 +118,7 @@ pub fn command(
 /// it then stops as systemd would stop it, releasing its shared memory, instead of
 /// flying on as an orphan. Must be spawned from the thread that lives as long as the
 /// child should (Linux ties the signal to the spawning thread): the main thread here.
-fn stop_with_parent(cmd: &mut Command) {
+pub(crate) fn stop_with_parent(cmd: &mut Command) {
     use std::os::unix::process::CommandExt;
     // SAFETY: getpid and getppid are async-signal-safe.
     let parent = unsafe { libc::getpid() };
