@@ -3,6 +3,9 @@
 use serde::Deserialize;
 use stack_config::{Invalid, Validate, check_range};
 
+use ipc_types::msg::Pose;
+
+use crate::metadata::pose_of;
 use crate::writer::{ChunkCompression, ImageFormat, RecordOptions};
 
 /// `[recorder]`.
@@ -86,4 +89,28 @@ impl RecorderConfig {
             body_from_depth: None,
         })
     }
+}
+
+/// The cameras' mounts for the transform tree (down camera, depth camera), read from a
+/// stack config's text: `[aruco_pnp] camera_position_in_body_m`, `[depth_map]
+/// camera_position_in_body_m` and `camera_rpy_deg`. Read here rather than through those
+/// stages' crates (a process depends on no other process); a camera whose keys are
+/// absent is left out of the tree.
+pub fn mounts(config_text: &str) -> Result<(Option<Pose>, Option<Pose>), toml::de::Error> {
+    let table: toml::Table = toml::from_str(config_text)?;
+    let triple = |section: &str, key: &str| -> Option<[f64; 3]> {
+        let a = table.get(section)?.get(key)?.as_array()?;
+        let v: Vec<f64> = a
+            .iter()
+            .filter_map(|x| x.as_float().or_else(|| x.as_integer().map(|i| i as f64)))
+            .collect();
+        <[f64; 3]>::try_from(v).ok()
+    };
+    let camera = triple("aruco_pnp", "camera_position_in_body_m")
+        .map(|p| pose_of(&optics::down_camera_from_body(p).inverse()));
+    let depth = triple("depth_map", "camera_position_in_body_m").map(|p| {
+        let rpy = triple("depth_map", "camera_rpy_deg").unwrap_or([0.0; 3]);
+        pose_of(&optics::body_from_forward_camera(p, rpy))
+    });
+    Ok((camera, depth))
 }

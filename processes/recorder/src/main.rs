@@ -95,33 +95,14 @@ fn run(args: &Args) -> Result<()> {
     Ok(())
 }
 
-/// The cameras' mounts for the transform tree, from the config's `[aruco_pnp]
-/// camera_position_in_body_m` and `[depth_map] camera_position_in_body_m` and
-/// `camera_rpy_deg` (read here, not through those stages' crates: a process depends on
-/// no other process); a camera whose keys are absent is left out of the tree.
+/// The cameras' mounts from the config file (none without one).
 fn mounts(config: Option<&std::path::Path>) -> Result<(Option<Pose>, Option<Pose>)> {
     let Some(path) = config else {
         return Ok((None, None));
     };
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let table: toml::Table =
-        toml::from_str(&text).with_context(|| format!("{}: not TOML", path.display()))?;
-    let triple = |section: &str, key: &str| -> Option<[f64; 3]> {
-        let a = table.get(section)?.get(key)?.as_array()?;
-        let v: Vec<f64> = a
-            .iter()
-            .filter_map(|x| x.as_float().or_else(|| x.as_integer().map(|i| i as f64)))
-            .collect();
-        <[f64; 3]>::try_from(v).ok()
-    };
-    let camera = triple("aruco_pnp", "camera_position_in_body_m")
-        .map(|p| metadata::pose_of(&optics::down_camera_from_body(p).inverse()));
-    let depth = triple("depth_map", "camera_position_in_body_m").map(|p| {
-        let rpy = triple("depth_map", "camera_rpy_deg").unwrap_or([0.0; 3]);
-        metadata::pose_of(&optics::body_from_forward_camera(p, rpy))
-    });
-    Ok((camera, depth))
+    recorder::config::mounts(&text).with_context(|| format!("{}: not TOML", path.display()))
 }
 
 /// Every iceoryx2 topic of the graph that is not ground truth or skipped, taken in

@@ -93,6 +93,9 @@ pub struct LatencyReport {
     pub rates_hz: BTreeMap<String, f64>,
     /// Where the recording broke, when it did (what came before is in the report).
     pub broken: Option<String>,
+    /// The end-to-end samples, ms (the histogram's).
+    #[serde(skip)]
+    pub end_to_end_samples_ms: Vec<f64>,
 }
 
 /// One stamp of a header, from JSON.
@@ -238,6 +241,7 @@ pub fn analyse(file: &Path) -> Result<LatencyReport> {
             .collect(),
         rates_hz,
         broken: summary.broken.map(|b| b.to_string()),
+        end_to_end_samples_ms: e2e,
     })
 }
 
@@ -252,29 +256,13 @@ fn row(name: &str, p: &Percentiles) -> String {
 pub fn run(args: &LatencyArgs) -> Result<()> {
     let report = analyse(&args.file)?;
     if let Some(dir) = &args.plot {
-        let mut e2e = vec![];
-        // The histogram's samples: read once more (the report keeps percentiles only).
-        let sent = format!("/{}", topics::PX4_SETPOINT_SENT);
-        let mut first: HashMap<u64, f64> = HashMap::new();
-        recorder::read_messages(&args.file, &mut |m| {
-            if m.topic != sent {
-                return;
-            }
-            if let Ok(v) = serde_json::from_slice::<Value>(m.data)
-                && let Some((_, capture, stamps)) = header(&v)
-                && capture > 0
-                && stamps
-                    .first()
-                    .is_some_and(|s| s.stage == Stage::Sensor as u32)
-                && let (Some(a), Some(b)) = (stamps.first(), stamps.last())
-            {
-                first.entry(capture).or_insert(ms(a.exit_ns, b.exit_ns));
-            }
-        })?;
-        e2e.extend(first.values());
         std::fs::create_dir_all(dir)?;
         let p = dir.join("end_to_end_ms.png");
-        plot::write_histogram(&p, "camera frame -> setpoint on the wire (ms)", &e2e)?;
+        plot::write_histogram(
+            &p,
+            "camera frame -> setpoint on the wire (ms)",
+            &report.end_to_end_samples_ms,
+        )?;
         eprintln!("  plot: {}", p.display());
     }
     if args.json {

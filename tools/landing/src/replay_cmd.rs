@@ -4,8 +4,8 @@
 //!
 //! aruco-pnp: every recorded vehicle state and every raw camera frame (`--raw-images`
 //! recordings: a JPEG frame is not the frame the stage saw) is handed to a new
-//! `ArucoStage` built from the flight's config (the recording's metadata) and the
-//! scenario's calibration and pad, in the order the flight's stage saw them: each frame
+//! `ArucoStage`, built as `landing run` builds it (`run_lockstep::stage_for`) from the
+//! flight's config (the recording's metadata) and the scenario's calibration and pad, in the order the flight's stage saw them: each frame
 //! at the time the flight's aruco-pnp took it (its stamp on the observation), after every
 //! state px4-link had published by then. Each observation is compared, field by field and
 //! bit for bit, with the recorded one of the same capture time; the stage stamps (times
@@ -15,7 +15,6 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use aruco_pnp::{ArucoStage, PadEstimator, down_camera_from_body};
 use clap::Args;
 use foxglove::Decode;
 use foxglove::schemas::RawImage;
@@ -23,10 +22,9 @@ use ipc_types::msg::{
     CameraFrameHeader, Header, LinkHealth, MAX_STAGES, PadObservation, Pose, Stage as StageId,
     StageStamp, VehicleState,
 };
-use optics::{CameraCalibration, PadModel};
 use serde::Serialize;
 use serde_json::Value;
-use stage::{Input, Message, Outbox, SliceHeader, SliceMut, Stage, StageError};
+use stage::{Input, Message, Outbox, SliceHeader, SliceMut, StageError};
 
 use crate::config_cmd::StackConfig;
 
@@ -305,13 +303,20 @@ fn replay_aruco(args: &ReplayArgs) -> Result<ReplayReport> {
     };
     let scenario = meta.get("scenario").map_or("paper-sim", String::as_str);
     let scn = sim::scenario::load(scenario, &deploy)?;
-    let estimator = PadEstimator::new(
-        CameraCalibration::load(scn.calibration_path())?,
-        PadModel::load(scn.pad_path())?,
-        down_camera_from_body(cfg.aruco_pnp.camera_position_in_body_m),
-        cfg.aruco_pnp.settings(),
-    )?;
-    let mut stage = ArucoStage::new(estimator, cfg.aruco_pnp.max_state_age_ms * 1_000_000);
+    // The stage as `landing run` builds it, from the graph's node.
+    let graph = graph::Graph::load(&graph::default_path(&deploy))?;
+    let Some(node) = graph.node("aruco-pnp") else {
+        bail!("the graph has no aruco-pnp node");
+    };
+    let setup = crate::run_lockstep::Setup {
+        scenario: &scn,
+        seed: meta.get("seed").and_then(|s| s.parse().ok()).unwrap_or(1),
+        config: &cfg,
+        fsm: crate::run_lockstep::mission(&cfg, &scn)?,
+    };
+    let Some(mut stage) = crate::run_lockstep::stage_for(node, &setup)? else {
+        bail!("no stage for aruco-pnp");
+    };
 
     // Frames at the time the flight's stage took them: its stamp on the observation, else
     // (no observation came of it) when camera-ingest published it.

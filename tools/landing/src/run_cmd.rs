@@ -204,13 +204,10 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             if args.raw_images {
                 options.images = recorder::ImageFormat::Raw;
             }
-            options.body_from_camera = Some(recorder::metadata::pose_of(
-                &aruco_pnp::down_camera_from_body(cfg.aruco_pnp.camera_position_in_body_m)
-                    .inverse(),
-            ));
-            options.body_from_depth = Some(recorder::metadata::pose_of(
-                &cfg.depth_map.body_from_camera(),
-            ));
+            // The mounts as the recorder process reads them.
+            let text = std::fs::read_to_string(&cfg_path)
+                .with_context(|| format!("reading {}", cfg_path.display()))?;
+            (options.body_from_camera, options.body_from_depth) = recorder::config::mounts(&text)?;
             let mut pipeline = Recorder::with_options(p, options)?;
             pipeline.write_metadata("landing", meta)?;
             rec.pipeline = Some(pipeline);
