@@ -25,6 +25,7 @@ pub mod plan_cmd;
 pub mod plot;
 pub mod procs;
 pub mod replay_cmd;
+pub mod replay_fsm;
 pub mod run_cmd;
 pub mod run_eval;
 pub mod run_lockstep;

@@ -33,17 +33,22 @@ use crate::config_cmd::StackConfig;
 pub struct ReplayArgs {
     /// The recording (made with --raw-images for aruco-pnp).
     #[arg(value_name = "FILE.mcap")]
-    file: PathBuf,
-    /// The stage to run again: aruco-pnp.
+    pub(crate) file: PathBuf,
+    /// The stage to run again: aruco-pnp (a --raw-images recording) or fsm.
     #[arg(long)]
-    stage: String,
+    pub(crate) stage: String,
     /// The deploy directory (scenarios, calibrations; default: found as `landing run`
     /// finds it).
     #[arg(long)]
-    deploy_dir: Option<PathBuf>,
+    pub(crate) deploy_dir: Option<PathBuf>,
+    /// Run the stage with this stack configuration instead of the flight's (its
+    /// metadata): what the change would have done to the flight's outputs, on the same
+    /// inputs.
+    #[arg(long, value_name = "FILE.toml")]
+    pub(crate) config: Option<PathBuf>,
     /// Print the result as JSON.
     #[arg(long)]
-    json: bool,
+    pub(crate) json: bool,
 }
 
 /// How a replay compared with the flight.
@@ -67,23 +72,27 @@ pub struct ReplayReport {
     pub missing: Vec<u64>,
     /// Outputs the replay made that the flight did not record.
     pub extra: u64,
+    /// The flight's outputs compared, for people (the fsm: its transitions; empty for
+    /// stages with many outputs).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub flown: Vec<String>,
 }
 
-fn f64_of(v: &Value) -> f64 {
+pub(crate) fn f64_of(v: &Value) -> f64 {
     // JSON has no NaN: the recorder wrote non-finite numbers as null.
     v.as_f64().unwrap_or(f64::NAN)
 }
 
-fn u64_of(v: &Value) -> Result<u64> {
+pub(crate) fn u64_of(v: &Value) -> Result<u64> {
     v.as_u64()
         .with_context(|| format!("not an unsigned integer: {v}"))
 }
 
-fn u32_of(v: &Value) -> Result<u32> {
+pub(crate) fn u32_of(v: &Value) -> Result<u32> {
     Ok(u32::try_from(u64_of(v)?)?)
 }
 
-fn arr<const N: usize>(v: &Value) -> [f64; N] {
+pub(crate) fn arr<const N: usize>(v: &Value) -> [f64; N] {
     let mut out = [f64::NAN; N];
     for (o, x) in out.iter_mut().zip(v.as_array().into_iter().flatten()) {
         *o = f64_of(x);
@@ -91,7 +100,7 @@ fn arr<const N: usize>(v: &Value) -> [f64; N] {
     out
 }
 
-fn header(v: &Value) -> Result<Header> {
+pub(crate) fn header(v: &Value) -> Result<Header> {
     let mut h = Header {
         seq: u64_of(&v["seq"])?,
         capture_ns: u64_of(&v["capture_ns"])?,
@@ -115,7 +124,7 @@ fn header(v: &Value) -> Result<Header> {
     Ok(h)
 }
 
-fn pose(v: &Value) -> Pose {
+pub(crate) fn pose(v: &Value) -> Pose {
     Pose {
         translation: arr(&v["translation"]),
         rotation_xyzw: arr(&v["rotation_xyzw"]),
@@ -123,7 +132,7 @@ fn pose(v: &Value) -> Pose {
 }
 
 /// A vehicle state as recorded (JSON).
-fn vehicle_state(v: &Value) -> Result<VehicleState> {
+pub(crate) fn vehicle_state(v: &Value) -> Result<VehicleState> {
     let l = &v["link"];
     Ok(VehicleState {
         msg: header(&v["msg"])?,
@@ -159,7 +168,7 @@ fn frame_header(v: &Value) -> Result<CameraFrameHeader> {
 }
 
 /// The exit of `stage`'s stamp in `h`.
-fn exit_of(h: &Header, stage: StageId) -> Option<u64> {
+pub(crate) fn exit_of(h: &Header, stage: StageId) -> Option<u64> {
     h.stages()
         .iter()
         .find(|s| s.stage == stage as u32)
@@ -167,7 +176,7 @@ fn exit_of(h: &Header, stage: StageId) -> Option<u64> {
 }
 
 /// The enter of `stage`'s stamp in `h`.
-fn enter_of(h: &Header, stage: StageId) -> Option<u64> {
+pub(crate) fn enter_of(h: &Header, stage: StageId) -> Option<u64> {
     h.stages()
         .iter()
         .find(|s| s.stage == stage as u32)
@@ -209,7 +218,7 @@ fn results(o: &PadObservation) -> Result<Value> {
 }
 
 /// The first field where two JSON values differ.
-fn first_difference(a: &Value, b: &Value, at: &str) -> Option<String> {
+pub(crate) fn first_difference(a: &Value, b: &Value, at: &str) -> Option<String> {
     match (a, b) {
         (Value::Object(x), Value::Object(y)) => {
             for (k, va) in x {
@@ -234,6 +243,63 @@ fn first_difference(a: &Value, b: &Value, at: &str) -> Option<String> {
     }
 }
 
+/// The flight a recording holds, as its metadata tells: the config, the scenario and the
+/// seed it flew with, to build a stage as `landing run` built it.
+pub(crate) struct Flight {
+    deploy: PathBuf,
+    config: StackConfig,
+    scenario: sim::scenario::LoadedScenario,
+    seed: u64,
+}
+
+impl Flight {
+    /// The flight of the recording `args.file`, whose reading gave `summary`.
+    pub(crate) fn of(args: &ReplayArgs, summary: &recorder::ReadSummary) -> Result<Self> {
+        if let Some(b) = &summary.broken {
+            bail!("{}: {b}", args.file.display());
+        }
+        let deploy = args
+            .deploy_dir
+            .clone()
+            .unwrap_or_else(stack_config::deploy_dir);
+        let meta = summary.metadata.get("landing").cloned().unwrap_or_default();
+        let config: StackConfig = match (&args.config, meta.get("config")) {
+            (Some(path), _) => stack_config::load(path)?,
+            (None, Some(text)) => stack_config::parse(text, &args.file)
+                .context("the recording's config (metadata)")?,
+            (None, None) => bail!(
+                "{}: no config in its metadata (give one with --config)",
+                args.file.display()
+            ),
+        };
+        let name = meta.get("scenario").map_or("paper-sim", String::as_str);
+        let scenario = sim::scenario::load(name, &deploy)?;
+        let seed = meta.get("seed").and_then(|s| s.parse().ok()).unwrap_or(1);
+        Ok(Self {
+            deploy,
+            config,
+            scenario,
+            seed,
+        })
+    }
+
+    /// The graph node `name`'s stage, built as `landing run` builds it
+    /// (`run_lockstep::stage_for`).
+    pub(crate) fn stage(&self, name: &str) -> Result<Option<Box<dyn stage::Stage>>> {
+        let graph = graph::Graph::load(&graph::default_path(&self.deploy))?;
+        let Some(node) = graph.node(name) else {
+            bail!("the graph has no {name} node");
+        };
+        let setup = crate::run_lockstep::Setup {
+            scenario: &self.scenario,
+            seed: self.seed,
+            config: &self.config,
+            fsm: crate::run_lockstep::mission(&self.config, &self.scenario)?,
+        };
+        crate::run_lockstep::stage_for(node, &setup)
+    }
+}
+
 /// One input event of the replay, in the order the flight's stage met them.
 enum Event {
     State(VehicleState),
@@ -242,10 +308,6 @@ enum Event {
 
 /// Replays aruco-pnp.
 fn replay_aruco(args: &ReplayArgs) -> Result<ReplayReport> {
-    let deploy = args
-        .deploy_dir
-        .clone()
-        .unwrap_or_else(stack_config::deploy_dir);
     let mut states: Vec<(u64, VehicleState)> = vec![];
     let mut headers: HashMap<u64, CameraFrameHeader> = HashMap::new();
     let mut images: Vec<RawImage> = vec![];
@@ -284,9 +346,7 @@ fn replay_aruco(args: &ReplayArgs) -> Result<ReplayReport> {
     if let Some(e) = failure {
         return Err(e);
     }
-    if let Some(b) = &summary.broken {
-        bail!("{}: {b}", args.file.display());
-    }
+    let flight = Flight::of(args, &summary)?;
     if images.is_empty() {
         if jpeg {
             bail!(
@@ -296,25 +356,7 @@ fn replay_aruco(args: &ReplayArgs) -> Result<ReplayReport> {
         }
         bail!("{}: no camera frames (/camera/frame)", args.file.display());
     }
-    let meta = summary.metadata.get("landing").cloned().unwrap_or_default();
-    let cfg: StackConfig = match meta.get("config") {
-        Some(text) => toml::from_str(text).context("the recording's config (metadata)")?,
-        None => bail!("{}: no config in its metadata", args.file.display()),
-    };
-    let scenario = meta.get("scenario").map_or("paper-sim", String::as_str);
-    let scn = sim::scenario::load(scenario, &deploy)?;
-    // The stage as `landing run` builds it, from the graph's node.
-    let graph = graph::Graph::load(&graph::default_path(&deploy))?;
-    let Some(node) = graph.node("aruco-pnp") else {
-        bail!("the graph has no aruco-pnp node");
-    };
-    let setup = crate::run_lockstep::Setup {
-        scenario: &scn,
-        seed: meta.get("seed").and_then(|s| s.parse().ok()).unwrap_or(1),
-        config: &cfg,
-        fsm: crate::run_lockstep::mission(&cfg, &scn)?,
-    };
-    let Some(mut stage) = crate::run_lockstep::stage_for(node, &setup)? else {
+    let Some(mut stage) = flight.stage("aruco-pnp")? else {
         bail!("no stage for aruco-pnp");
     };
 
@@ -365,6 +407,7 @@ fn replay_aruco(args: &ReplayArgs) -> Result<ReplayReport> {
         differences: vec![],
         missing: vec![],
         extra: 0,
+        flown: vec![],
     };
     let mut replayed: HashMap<u64, Value> = HashMap::new();
     for o in &out.observations {
@@ -397,7 +440,8 @@ fn replay_aruco(args: &ReplayArgs) -> Result<ReplayReport> {
 pub fn run(args: &ReplayArgs) -> Result<bool> {
     let report = match args.stage.as_str() {
         "aruco-pnp" => replay_aruco(args)?,
-        other => bail!("--stage {other}: allowed: aruco-pnp"),
+        "fsm" => crate::replay_fsm::replay(args)?,
+        other => bail!("--stage {other}: allowed: aruco-pnp, fsm"),
     };
     let differing = report.different;
     if args.json {
@@ -413,6 +457,9 @@ pub fn run(args: &ReplayArgs) -> Result<bool> {
             report.missing.len(),
             report.extra
         );
+        for f in &report.flown {
+            println!("  in flight: {f}");
+        }
         for d in &report.differences {
             println!("  {d}");
         }

@@ -168,3 +168,77 @@ fn replaying_aruco_pnp_on_jpeg_frames_is_refused_in_one_line() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("allowed: aruco-pnp"), "{err}");
 }
+
+/// `landing replay --stage fsm --json` on `path` (with `extra` arguments): the report.
+fn replay_fsm(path: &std::path::Path, extra: &[&str]) -> (bool, serde_json::Value) {
+    let mut args = vec!["replay", path.to_str().unwrap(), "--stage", "fsm", "--json"];
+    args.extend_from_slice(extra);
+    let o = landing(&args);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&o.stderr)));
+    (o.status.success(), v)
+}
+
+#[test]
+fn replaying_the_fsm_reproduces_every_transition_of_the_flight_and_its_time() {
+    let (ok, v) = replay_fsm(&recording(), &[]);
+    assert!(ok, "{v}");
+    // idle -> takeoff -> goto-preset -> track -> descend -> land -> landed.
+    assert!(v["recorded"].as_u64().unwrap() >= 6, "{v}");
+    assert_eq!(v["identical"], v["recorded"], "{v}");
+    assert_eq!(v["replayed"], v["recorded"], "{v}");
+    let flown = v["flown"].to_string();
+    assert!(flown.contains("land -> landed"), "{v}");
+}
+
+#[test]
+fn replaying_the_fsm_with_another_config_shows_the_transitions_it_changes() {
+    // The same inputs, a tighter alignment before the descent: the fsm descends later.
+    let deploy = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../deploy/config/landing.toml"
+    );
+    let text = std::fs::read_to_string(deploy).unwrap();
+    let tighter = text.replace("\nalign_m = 0.3\n", "\nalign_m = 0.1\n");
+    assert_ne!(
+        text, tighter,
+        "deploy/config/landing.toml has no `align_m = 0.3`"
+    );
+    let cfg = temp("tighter-align.toml");
+    std::fs::write(&cfg, tighter).unwrap();
+    let (ok, v) = replay_fsm(&recording(), &["--config", cfg.to_str().unwrap()]);
+    assert!(!ok, "{v}");
+    assert!(v["different"].as_u64().unwrap() >= 1, "{v}");
+    let first = v["differences"][0].as_str().unwrap();
+    assert!(first.contains("track -> descend"), "{v}");
+}
+
+#[test]
+fn replaying_the_fsm_of_a_flight_the_watchdog_ended_reproduces_its_safety_order() {
+    // Every stage its own process: the inputs as iceoryx2 delivered them, and the
+    // watchdog's order when aruco-pnp dies.
+    let path = temp("killed-aruco.mcap");
+    let p = path.to_str().unwrap();
+    let o = landing(&[
+        "run",
+        "--scenario",
+        "paper-sim",
+        "--processes",
+        "--inject",
+        "kill:aruco-pnp@track",
+        "--record",
+        p,
+    ]);
+    // Not on the pad: the run says so in its exit status; the recording is what counts.
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("SAFE LANDING"), "{said}");
+    let (ok, v) = replay_fsm(&path, &[]);
+    assert!(ok, "{v}");
+    assert_eq!(v["identical"], v["recorded"], "{v}");
+    assert_eq!(v["replayed"], v["recorded"], "{v}");
+    let flown = v["flown"].to_string();
+    assert!(flown.contains("-> safe-land"), "{v}");
+    assert!(flown.contains("watchdog: aruco-pnp"), "{v}");
+    let _ = std::fs::remove_file(&path);
+    let _ = std::fs::remove_file(path.with_extension("truth.mcap"));
+}
