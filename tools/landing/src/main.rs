@@ -3,7 +3,7 @@
 use landing::{
     bench_aruco, bench_depth, bench_faults, bench_ipc, bench_perception, bench_planner,
     bench_recorder, bench_sim, config_cmd, graph_cmd, inject_cmd, latency_cmd, map_cmd, pad_detect,
-    pad_print, plan_cmd, replay_cmd, run_cmd, status_cmd,
+    pad_print, plan_cmd, plot_cmd, replay_cmd, run_cmd, status_cmd,
 };
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -52,9 +52,13 @@ enum Command {
     /// sequence gaps; --plot draws the end-to-end histogram (docs/recording.md).
     Latency(latency_cmd::LatencyArgs),
     /// Run one stage again on a recording's inputs through its own library and compare
-    /// its outputs, bit for bit, with what it published in flight (aruco-pnp; record with
-    /// --raw-images). Exit code 1 when they differ.
+    /// its outputs, bit for bit, with what it published in flight (aruco-pnp, recorded with
+    /// --raw-images: its observations; fsm: its transitions). Exit code 1 when they differ.
     Replay(replay_cmd::ReplayArgs),
+    /// Draw a recording's trajectory plots into a directory: the plots `landing run
+    /// --plot` draws (from FILE.truth.mcap beside it when there is one; else the stack's
+    /// own estimates, as on a real flight).
+    Plot(plot_cmd::PlotArgs),
     /// Print the pipeline's dataflow graph (deploy/graph.toml): every process with the
     /// topics it reads and publishes, rates, drop policies, heartbeat deadlines; as text,
     /// JSON or Graphviz DOT. A graph that breaks a rule (an undeclared topic, a cycle
@@ -234,6 +238,7 @@ fn main() -> ExitCode {
             Ok(false) => return ExitCode::from(1),
             other => other.map(|_| ()),
         },
+        Command::Plot(args) => plot_cmd::run(&args),
         Command::Graph(args) => graph_cmd::run(&args),
         Command::Clean => clean(cli.ipc_prefix.as_deref()),
         Command::Status(args) => status_cmd::run(&args, cli.ipc_prefix.as_deref()),

@@ -18,15 +18,13 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use foxglove::Decode;
 use foxglove::schemas::RawImage;
-use ipc_types::msg::{
-    CameraFrameHeader, Header, LinkHealth, MAX_STAGES, PadObservation, Pose, Stage as StageId,
-    StageStamp, VehicleState,
-};
+use ipc_types::msg::{CameraFrameHeader, Header, PadObservation, Stage as StageId, VehicleState};
 use serde::Serialize;
 use serde_json::Value;
 use stage::{Input, Message, Outbox, SliceHeader, SliceMut, StageError};
 
 use crate::config_cmd::StackConfig;
+use crate::recorded_json::{frame_header, header, vehicle_state};
 
 /// Arguments of `landing replay`.
 #[derive(Debug, Args)]
@@ -76,95 +74,6 @@ pub struct ReplayReport {
     /// stages with many outputs).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub flown: Vec<String>,
-}
-
-pub(crate) fn f64_of(v: &Value) -> f64 {
-    // JSON has no NaN: the recorder wrote non-finite numbers as null.
-    v.as_f64().unwrap_or(f64::NAN)
-}
-
-pub(crate) fn u64_of(v: &Value) -> Result<u64> {
-    v.as_u64()
-        .with_context(|| format!("not an unsigned integer: {v}"))
-}
-
-pub(crate) fn u32_of(v: &Value) -> Result<u32> {
-    Ok(u32::try_from(u64_of(v)?)?)
-}
-
-pub(crate) fn arr<const N: usize>(v: &Value) -> [f64; N] {
-    let mut out = [f64::NAN; N];
-    for (o, x) in out.iter_mut().zip(v.as_array().into_iter().flatten()) {
-        *o = f64_of(x);
-    }
-    out
-}
-
-pub(crate) fn header(v: &Value) -> Result<Header> {
-    let mut h = Header {
-        seq: u64_of(&v["seq"])?,
-        capture_ns: u64_of(&v["capture_ns"])?,
-        stage_count: u32_of(&v["stage_count"])?,
-        reserved: 0,
-        ..Header::default()
-    };
-    for (s, x) in h
-        .stages
-        .iter_mut()
-        .zip(v["stages"].as_array().into_iter().flatten())
-        .take(MAX_STAGES)
-    {
-        *s = StageStamp {
-            stage: u32_of(&x["stage"])?,
-            reserved: 0,
-            enter_ns: u64_of(&x["enter_ns"])?,
-            exit_ns: u64_of(&x["exit_ns"])?,
-        };
-    }
-    Ok(h)
-}
-
-pub(crate) fn pose(v: &Value) -> Pose {
-    Pose {
-        translation: arr(&v["translation"]),
-        rotation_xyzw: arr(&v["rotation_xyzw"]),
-    }
-}
-
-/// A vehicle state as recorded (JSON).
-pub(crate) fn vehicle_state(v: &Value) -> Result<VehicleState> {
-    let l = &v["link"];
-    Ok(VehicleState {
-        msg: header(&v["msg"])?,
-        world_from_body: pose(&v["world_from_body"]),
-        velocity: arr(&v["velocity"]),
-        body_rates: arr(&v["body_rates"]),
-        armed: u32_of(&v["armed"])?,
-        flight_mode: u32_of(&v["flight_mode"])?,
-        landed_state: u32_of(&v["landed_state"])?,
-        reserved: 0,
-        link: LinkHealth {
-            connected: u32_of(&l["connected"])?,
-            parse_errors: u32_of(&l["parse_errors"])?,
-            last_heartbeat_ns: u64_of(&l["last_heartbeat_ns"])?,
-            last_telemetry_ns: u64_of(&l["last_telemetry_ns"])?,
-            messages_lost: u64_of(&l["messages_lost"])?,
-        },
-    })
-}
-
-/// A camera frame's header as recorded (JSON).
-fn frame_header(v: &Value) -> Result<CameraFrameHeader> {
-    Ok(CameraFrameHeader {
-        msg: header(&v["msg"])?,
-        width: u32_of(&v["width"])?,
-        height: u32_of(&v["height"])?,
-        stride: u32_of(&v["stride"])?,
-        encoding: u32_of(&v["encoding"])?,
-        camera_id: u32_of(&v["camera_id"])?,
-        undistorted: u32_of(&v["undistorted"])?,
-        exposure_ns: u64_of(&v["exposure_ns"])?,
-    })
 }
 
 /// The exit of `stage`'s stamp in `h`.

@@ -13,18 +13,19 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use ipc_types::msg::{
-    FsmStatus, Header, LinkOutcome, MAX_CONTROL_POINTS, MAX_MARKERS, MissionState, PadObservation,
-    SafetyCommand, Stage as StageId, Text, Trajectory, VehicleState, WatchdogView,
+    FsmStatus, Header, LinkOutcome, MissionState, PadObservation, SafetyCommand, Stage as StageId,
+    Trajectory, VehicleState, WatchdogView,
 };
 use ipc_types::topics;
 use serde_json::Value;
 use stage::{Input, Message, Outbox, SliceHeader, SliceMut, StageError};
 
-use crate::replay_cmd::{
-    Flight, ReplayArgs, ReplayReport, arr, f64_of, header, pose, u32_of, u64_of, vehicle_state,
+use crate::recorded_json::{
+    fsm_status, header, observation, outcome, safety, trajectory, vehicle_state,
 };
+use crate::replay_cmd::{Flight, ReplayArgs, ReplayReport};
 
 /// An input of the fsm as recorded.
 enum FsmInput {
@@ -49,67 +50,6 @@ impl FsmInput {
         };
         Input { topic, msg }
     }
-}
-
-fn observation(v: &Value) -> Result<PadObservation> {
-    let mut o = PadObservation {
-        msg: header(&v["msg"])?,
-        camera_from_pad: pose(&v["camera_from_pad"]),
-        world_from_pad: pose(&v["world_from_pad"]),
-        covariance: arr(&v["covariance"]),
-        reprojection_error_px: f64_of(&v["reprojection_error_px"]),
-        marker_count: u32_of(&v["marker_count"])?,
-        world_valid: u32_of(&v["world_valid"])?,
-        ..PadObservation::default()
-    };
-    let ids = v["marker_ids"].as_array().context("marker_ids")?;
-    for (o, i) in o.marker_ids.iter_mut().zip(ids).take(MAX_MARKERS) {
-        *o = u32_of(i)?;
-    }
-    Ok(o)
-}
-
-fn trajectory(v: &Value) -> Result<Trajectory> {
-    let mut t = Trajectory {
-        msg: header(&v["msg"])?,
-        id: u64_of(&v["id"])?,
-        start_ns: u64_of(&v["start_ns"])?,
-        knot_interval_s: f64_of(&v["knot_interval_s"]),
-        count: u32_of(&v["count"])?,
-        emergency: u32_of(&v["emergency"])?,
-        ..Trajectory::default()
-    };
-    let points = v["control_points"].as_array().context("control_points")?;
-    for (o, p) in t
-        .control_points
-        .iter_mut()
-        .zip(points)
-        .take(MAX_CONTROL_POINTS)
-    {
-        *o = [f64_of(&p["x"]), f64_of(&p["y"]), f64_of(&p["z"])];
-    }
-    Ok(t)
-}
-
-fn outcome(v: &Value) -> Result<LinkOutcome> {
-    Ok(LinkOutcome {
-        msg: header(&v["msg"])?,
-        id: u64_of(&v["id"])?,
-        kind: u32_of(&v["kind"])?,
-        outcome: u32_of(&v["outcome"])?,
-        result: u32_of(&v["result"])?,
-        reserved: 0,
-    })
-}
-
-fn safety(v: &Value) -> Result<SafetyCommand> {
-    Ok(SafetyCommand {
-        msg: header(&v["msg"])?,
-        action: u32_of(&v["action"])?,
-        reserved: 0,
-        source: Text::new(v["source"].as_str().unwrap_or("")),
-        reason: Text::new(v["reason"].as_str().unwrap_or("")),
-    })
 }
 
 /// A transition as a status shows it.
@@ -243,15 +183,7 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
                     ..WatchdogView::default()
                 }),
                 topics::FSM_STATUS => {
-                    flown.add(
-                        h.seq,
-                        Shown {
-                            from: u32_of(&v["previous"])?,
-                            to: u32_of(&v["state"])?,
-                            at_ns: u64_of(&v["since_ns"])?,
-                            reason: v["reason"].as_str().unwrap_or("").to_string(),
-                        },
-                    );
+                    flown.add_status(&fsm_status(&v)?);
                     return Ok(());
                 }
                 _ => return Ok(()),

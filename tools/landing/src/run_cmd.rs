@@ -96,7 +96,7 @@ pub struct RunArgs {
 }
 
 /// The evaluator's record as the flight log the summary and the plots read.
-fn flight_log(
+pub(crate) fn flight_log(
     name: &str,
     seed: u64,
     eval: &Evaluator,

@@ -122,7 +122,15 @@ fn a_cut_recording_is_reported_to_the_cut_and_the_cut_is_named_by_its_offset() {
 fn a_file_that_is_not_mcap_is_one_line_saying_so() {
     let path = temp("random.mcap");
     std::fs::write(&path, b"not a recording at all, just words").unwrap();
-    for cmd in [&["mcap", "info"][..], &["latency"][..]] {
+    let out = temp("random-plots");
+    let plot = ["plot", "--out", out.to_str().unwrap()];
+    let replay = ["replay", "--stage", "fsm"];
+    for cmd in [
+        &["mcap", "info"][..],
+        &["latency"][..],
+        &plot[..],
+        &replay[..],
+    ] {
         let mut args = cmd.to_vec();
         args.push(path.to_str().unwrap());
         let o = landing(&args);
@@ -241,4 +249,60 @@ fn replaying_the_fsm_of_a_flight_the_watchdog_ended_reproduces_its_safety_order(
     assert!(flown.contains("watchdog: aruco-pnp"), "{v}");
     let _ = std::fs::remove_file(&path);
     let _ = std::fs::remove_file(path.with_extension("truth.mcap"));
+}
+
+#[test]
+fn plotting_a_recording_draws_the_plots_the_run_drew() {
+    let path = temp("plotted.mcap");
+    let (run_dir, rec_dir) = (temp("run-plots"), temp("recording-plots"));
+    let o = landing(&[
+        "run",
+        "--scenario",
+        "indoor-moving",
+        "--record",
+        path.to_str().unwrap(),
+        "--plot",
+        run_dir.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = landing(&[
+        "plot",
+        path.to_str().unwrap(),
+        "--out",
+        rec_dir.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("truth: "),
+        "the truth file beside it was not read: {err}"
+    );
+    // The same referee on the same messages: the same pixels.
+    for name in ["top.png", "3d.png"] {
+        let from_run = std::fs::read(run_dir.join(name)).unwrap();
+        let from_recording = std::fs::read(rec_dir.join(name)).unwrap();
+        assert!(from_run.starts_with(b"\x89PNG"), "{name}");
+        assert!(from_run == from_recording, "{name} differs");
+    }
+
+    // A flight without the simulator's truth (a real one): the stack's estimates.
+    let alone = temp("alone");
+    std::fs::create_dir_all(&alone).unwrap();
+    let copy = alone.join("flight.mcap");
+    std::fs::copy(&path, &copy).unwrap();
+    let est_dir = temp("estimate-plots");
+    let o = landing(&[
+        "plot",
+        copy.to_str().unwrap(),
+        "--out",
+        est_dir.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(!err.contains("truth: "), "{err}");
+    let estimated = std::fs::read(est_dir.join("top.png")).unwrap();
+    assert!(estimated.starts_with(b"\x89PNG"));
+    assert!(estimated != std::fs::read(rec_dir.join("top.png")).unwrap());
+    let printed = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(printed.lines().count(), 2, "{printed}");
 }
