@@ -34,8 +34,9 @@ done
 [ -d "$ROOT" ] || { echo "install.sh: --root $ROOT is not a directory" >&2; exit 2; }
 R=${ROOT%/}
 
-# What runs on the vehicle (the simulator does not), and `landing` for `landing clean`.
-BINARIES="camera-ingest aruco-pnp depth-map planner fsm px4-link watchdog landing"
+# What runs on the vehicle (the simulator does not), the flight recorder, and `landing`
+# for `landing clean`.
+BINARIES="camera-ingest aruco-pnp depth-map planner fsm px4-link watchdog recorder landing"
 UNITS_DIR="$R/etc/systemd/system"
 USER_NAME=landing
 
@@ -81,7 +82,9 @@ if [ "$UNINSTALL" = 1 ]; then
     for b in $BINARIES; do rm -f "$R/usr/local/bin/$b"; done
     rm -rf "$R/etc/landing"
     rm -f "$UNITS_DIR/landing@.service" "$UNITS_DIR/landing-clean.service" \
-        "$UNITS_DIR/landing.target" "$UNITS_DIR/multi-user.target.wants/landing.target"
+        "$UNITS_DIR/landing-recorder.service" "$UNITS_DIR/landing.target" \
+        "$UNITS_DIR/multi-user.target.wants/landing.target"
+    rm -rf "$UNITS_DIR/landing.target.wants"
     rm -rf "$UNITS_DIR"/landing@*.service.d
     rm -f "$R/etc/tmpfiles.d/landing.conf"
     remove_user
@@ -113,8 +116,10 @@ for d in "$DEPLOY"/systemd/*.service.d; do
     install -m 0644 "$d"/*.conf "$UNITS_DIR/$name/"
 done
 install -m 0644 "$DEPLOY/tmpfiles.d/landing.conf" "$R/etc/tmpfiles.d/landing.conf"
-mkdir -p "$UNITS_DIR/multi-user.target.wants"
+mkdir -p "$UNITS_DIR/multi-user.target.wants" "$UNITS_DIR/landing.target.wants"
 ln -sf ../landing.target "$UNITS_DIR/multi-user.target.wants/landing.target"
+# The recorder starts with the stack (its [Install] WantedBy=landing.target).
+ln -sf ../landing-recorder.service "$UNITS_DIR/landing.target.wants/landing-recorder.service"
 if systemd_live; then
     systemd-tmpfiles --create /etc/tmpfiles.d/landing.conf
     systemctl daemon-reload

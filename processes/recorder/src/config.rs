@@ -26,6 +26,11 @@ pub struct RecorderConfig {
     /// Topics left out: the simulator's camera, which camera-ingest republishes as
     /// camera/frame (recording both would encode every frame twice).
     pub skip: Vec<String>,
+    /// Serve the live view (Foxglove's WebSocket protocol) on `live_address`.
+    pub live: bool,
+    /// Where the live view listens, `IP:PORT`: loopback by default; the vehicle's
+    /// network address (or 0.0.0.0) lets a ground-station laptop connect.
+    pub live_address: String,
 }
 
 impl Default for RecorderConfig {
@@ -37,6 +42,8 @@ impl Default for RecorderConfig {
             flush_period_ms: 1000,
             map_period_ms: 500,
             skip: vec!["sim/camera".into()],
+            live: false,
+            live_address: "127.0.0.1:8765".into(),
         }
     }
 }
@@ -48,6 +55,7 @@ impl Validate for RecorderConfig {
         check_range("jpeg_quality", self.jpeg_quality, 1, 100)?;
         check_range("flush_period_ms", self.flush_period_ms, 10, 1000)?;
         check_range("map_period_ms", self.map_period_ms, 0, 60_000)?;
+        self.live_socket()?;
         Ok(())
     }
 }
@@ -76,6 +84,19 @@ impl RecorderConfig {
                 format!("`{other}` (allowed: \"zstd\", \"lz4\", \"none\")"),
             )),
         }
+    }
+
+    /// Where the live view listens.
+    pub fn live_socket(&self) -> Result<std::net::SocketAddr, Invalid> {
+        self.live_address.parse().map_err(|_| {
+            Invalid::new(
+                "live_address",
+                format!(
+                    "`{}` (allowed: IP:PORT, e.g. \"127.0.0.1:8765\" or \"0.0.0.0:8765\")",
+                    self.live_address
+                ),
+            )
+        })
     }
 
     /// The writer's options (the camera mount is the caller's to add).
@@ -113,4 +134,34 @@ pub fn mounts(config_text: &str) -> Result<(Option<Pose>, Option<Pose>), toml::d
         pose_of(&optics::body_from_forward_camera(p, rpy))
     });
     Ok((camera, depth))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_live_view_listens_on_loopback_unless_the_config_says_otherwise() {
+        let cfg = RecorderConfig::default();
+        assert!(!cfg.live);
+        assert!(cfg.live_socket().unwrap().ip().is_loopback());
+        let shipped: toml::Table =
+            toml::from_str(include_str!("../../../deploy/config/landing.toml")).unwrap();
+        let shipped: RecorderConfig = shipped["recorder"].clone().try_into().unwrap();
+        assert!(!shipped.live);
+        assert!(shipped.live_socket().unwrap().ip().is_loopback());
+    }
+
+    #[test]
+    fn a_live_address_that_is_not_ip_and_port_names_the_key_and_what_is_allowed() {
+        for bad in ["localhost:8765", "127.0.0.1", "8765", ""] {
+            let cfg = RecorderConfig {
+                live_address: bad.into(),
+                ..RecorderConfig::default()
+            };
+            let e = cfg.validate().unwrap_err();
+            assert_eq!(e.key, "live_address");
+            assert!(e.message.contains("IP:PORT"), "{}", e.message);
+        }
+    }
 }

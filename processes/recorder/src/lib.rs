@@ -19,3 +19,73 @@ pub use read::{
 pub use schema::{Recordable, SchemaError, json_schema_of, schema_for};
 pub use stage::RecorderStage;
 pub use writer::{ChunkCompression, ImageFormat, RecordError, RecordOptions, Recorder};
+
+/// A new recording's path in `dir`, named by the UTC time `at` (`20261126T201500Z.mcap`;
+/// `-1`, `-2`, ... when that name is taken): a recorder restarted within the second never
+/// truncates the file before it. Creates `dir`.
+pub fn dated_path(
+    dir: &std::path::Path,
+    at: std::time::SystemTime,
+) -> std::io::Result<std::path::PathBuf> {
+    std::fs::create_dir_all(dir)?;
+    let secs = at
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let (days, rest) = (secs / 86_400, secs % 86_400);
+    let (y, m, d) = civil_from_days(days as i64);
+    let stem = format!(
+        "{y:04}{m:02}{d:02}T{:02}{:02}{:02}Z",
+        rest / 3600,
+        rest / 60 % 60,
+        rest % 60
+    );
+    let mut path = dir.join(format!("{stem}.mcap"));
+    let mut k = 0;
+    while path.exists() {
+        k += 1;
+        path = dir.join(format!("{stem}-{k}.mcap"));
+    }
+    Ok(path)
+}
+
+/// Year, month, day of the civil (proleptic Gregorian) calendar `days` after 1970-01-01
+/// (Howard Hinnant's `civil_from_days`).
+fn civil_from_days(days: i64) -> (i64, u32, u32) {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    (y, m, d)
+}
+
+#[cfg(test)]
+mod dated_tests {
+    use super::*;
+    use std::time::{Duration, UNIX_EPOCH};
+
+    #[test]
+    fn a_dated_recording_is_named_by_its_utc_start_and_never_reuses_a_name() {
+        let dir = std::env::temp_dir().join(format!("landing-dated-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        // 2026-11-26 20:15:00 UTC; 2000-02-29 (a leap day) 23:59:59.
+        let at = UNIX_EPOCH + Duration::from_secs(1_795_724_100);
+        let first = dated_path(&dir, at).unwrap();
+        assert_eq!(first, dir.join("20261126T201500Z.mcap"));
+        std::fs::write(&first, b"").unwrap();
+        assert_eq!(
+            dated_path(&dir, at).unwrap(),
+            dir.join("20261126T201500Z-1.mcap")
+        );
+        let leap = UNIX_EPOCH + Duration::from_secs(951_868_799);
+        assert_eq!(
+            dated_path(&dir, leap).unwrap(),
+            dir.join("20000229T235959Z.mcap")
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

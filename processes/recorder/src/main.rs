@@ -24,9 +24,18 @@ use stage::lockstep::{InputSpec, NodeSpec};
 struct Args {
     #[command(flatten)]
     stage: StageArgs,
-    /// The recording to write (created or truncated).
+    /// The recording to write (created or truncated). Without it (or --out-dir), only the
+    /// live view.
+    #[arg(long, conflicts_with = "out_dir")]
+    out: Option<PathBuf>,
+    /// Write the recording into this directory, named by the UTC time it starts
+    /// (20261126T201500Z.mcap): what the systemd unit does, one file per start.
+    #[arg(long, value_name = "DIR")]
+    out_dir: Option<PathBuf>,
+    /// Serve the live view (Foxglove's WebSocket protocol) on [recorder] live_address,
+    /// as [recorder] live = true does.
     #[arg(long)]
-    out: PathBuf,
+    live: bool,
     /// Camera frames as foxglove.RawImage (exact; what `landing replay --stage
     /// aruco-pnp` needs) instead of [recorder] images.
     #[arg(long)]
@@ -72,7 +81,26 @@ fn run(args: &Args) -> Result<()> {
     let (camera, depth) = mounts(args.stage.config.as_deref())?;
     options.body_from_camera = camera;
     options.body_from_depth = depth;
-    let mut rec = Recorder::with_options(&args.out, options)?;
+    let live = args.live || cfg.live;
+    let out = match (&args.out, &args.out_dir) {
+        (Some(p), _) => Some(p.clone()),
+        (None, Some(dir)) => Some(recorder::dated_path(dir, std::time::SystemTime::now())?),
+        (None, None) => None,
+    };
+    let mut rec = match &out {
+        Some(out) => Recorder::with_options(out, options)?,
+        None if live => Recorder::without_file(options),
+        None => anyhow::bail!(
+            "nothing to do: give --out FILE.mcap (or --out-dir DIR), --live, or both ([recorder] live = true)"
+        ),
+    };
+    if live {
+        let address = cfg
+            .live_socket()
+            .map_err(|e| anyhow::anyhow!("[recorder] {}: {}", e.key, e.message))?;
+        let at = rec.serve_live(address)?;
+        tracing::info!(address = %at, "live view: open ws://{at} in Foxglove");
+    }
     let mut meta = metadata::stack(args.stage.config.as_deref(), &graph_path)?;
     meta.insert("topics".into(), spec_topics(&spec));
     meta.extend(args.meta.iter().cloned());
@@ -84,14 +112,16 @@ fn run(args: &Args) -> Result<()> {
         deadline: Duration::from_millis(500),
     };
     let mut stage = RecorderStage::new(rec);
-    tracing::info!(out = %args.out.display(), topics = spec.inputs.len(), "recording");
+    let out = out.as_ref().map_or_else(
+        || "(live view only)".to_string(),
+        |p| p.display().to_string(),
+    );
+    tracing::info!(out = %out, topics = spec.inputs.len(), "recording");
     let served = driver::run(&ipc, &spec, &mut stage, None, beat);
     // The file is finished whatever ended the run.
-    let n = stage
-        .finish()
-        .with_context(|| format!("finishing {}", args.out.display()))?;
+    let n = stage.finish().with_context(|| format!("finishing {out}"))?;
     served?;
-    tracing::info!(messages = n, out = %args.out.display(), "recording finished");
+    tracing::info!(messages = n, out = %out, "recording finished");
     Ok(())
 }
 

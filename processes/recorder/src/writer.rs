@@ -14,6 +14,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::fmt;
 use std::fs::File;
 use std::io::BufWriter;
+use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -49,6 +50,14 @@ pub enum RecordError {
     /// A message could not be turned into JSON.
     #[error(transparent)]
     Encode(#[from] SchemaError),
+    /// The live view's WebSocket server did not start (address in use, not allowed).
+    #[error("the live view cannot listen on {address}: {error}")]
+    Live {
+        /// The address asked for.
+        address: String,
+        /// What the server said.
+        error: foxglove::FoxgloveError,
+    },
     /// A topic was given a second message type.
     #[error("topic {topic} carries {has}, not {got}")]
     TopicType {
@@ -131,6 +140,7 @@ pub struct Recorder {
     path: PathBuf,
     ctx: Arc<Context>,
     handle: Option<McapWriterHandle<BufWriter<File>>>,
+    live: Option<foxglove::WebSocketServerHandle>,
     options: RecordOptions,
     json: HashMap<String, JsonChannel>,
     compressed: HashMap<String, Channel<CompressedImage>>,
@@ -190,16 +200,32 @@ impl Recorder {
             .context(&ctx)
             .create(BufWriter::new(file))
             .map_err(write_err)?;
+        Ok(Self::on(ctx, path.to_path_buf(), Some(handle), options))
+    }
+
+    /// A recorder without a file: what it records goes only to the live view
+    /// ([`Recorder::serve_live`]).
+    pub fn without_file(options: RecordOptions) -> Self {
+        Self::on(Context::new(), PathBuf::from("(no file)"), None, options)
+    }
+
+    fn on(
+        ctx: Arc<Context>,
+        path: PathBuf,
+        handle: Option<McapWriterHandle<BufWriter<File>>>,
+        options: RecordOptions,
+    ) -> Self {
         let tf = ctx.channel_builder(TF_TOPIC).build::<FrameTransforms>();
         let log = ctx.channel_builder(LOG_TOPIC).build::<Log>();
         let mut scene = HashMap::new();
         for topic in visual::SCENE_TOPICS {
             scene.insert(topic, ctx.channel_builder(topic).build::<SceneUpdate>());
         }
-        Ok(Self {
-            path: path.to_path_buf(),
+        Self {
+            path,
             ctx,
-            handle: Some(handle),
+            handle,
+            live: None,
             options,
             json: HashMap::new(),
             compressed: HashMap::new(),
@@ -211,7 +237,33 @@ impl Recorder {
             messages: 0,
             last_flush_ns: None,
             last_map_ns: None,
-        })
+        }
+    }
+
+    /// Serves everything recorded from now on over Foxglove's WebSocket protocol at
+    /// `address` (`HOST:PORT`; port 0 picks a free one), through the same SDK that
+    /// writes the file: a ground station opens `ws://HOST:PORT` in Foxglove. Returns the
+    /// address it listens on. The server runs on the SDK's own threads and stops with
+    /// [`Recorder::finish`].
+    pub fn serve_live(&mut self, address: SocketAddr) -> Result<SocketAddr, RecordError> {
+        let fail = |error| RecordError::Live {
+            address: address.to_string(),
+            error,
+        };
+        let handle = foxglove::WebSocketServer::new()
+            .name(concat!("landing ", env!("CARGO_PKG_VERSION")))
+            .bind(address.ip().to_string(), address.port())
+            .context(&self.ctx)
+            .start_blocking()
+            .map_err(fail)?;
+        let at = SocketAddr::new(address.ip(), handle.port());
+        self.live = Some(handle);
+        Ok(at)
+    }
+
+    /// Whether it writes a file ([`Recorder::without_file`] does not).
+    pub fn has_file(&self) -> bool {
+        self.handle.is_some()
     }
 
     /// The file being written.
@@ -477,6 +529,10 @@ impl Recorder {
     /// Writes the index and summary that make the file complete; returns the number of
     /// messages recorded.
     pub fn finish(mut self) -> Result<u64, RecordError> {
+        if let Some(live) = self.live.take() {
+            // Clients are told the server goes; the flight's file is what must not wait.
+            drop(live.stop());
+        }
         if let Some(h) = self.handle.take() {
             h.close().map_err(|e| self.write_error(e))?;
         }

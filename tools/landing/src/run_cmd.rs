@@ -70,6 +70,12 @@ pub struct RunArgs {
     /// CAP_SYS_NICE), as the latency table in docs/recording.md is measured.
     #[arg(long, requires = "processes")]
     realtime: bool,
+    /// Serve the flight live to Foxglove (Open connection > ws://ADDRESS, Foxglove's
+    /// WebSocket protocol) on [recorder] live_address, loopback by default: every topic
+    /// --record keeps, as it is published. In lockstep the simulation then keeps to the
+    /// wall clock's pace.
+    #[arg(long)]
+    live: bool,
     /// --record: camera frames raw (foxglove.RawImage) instead of JPEG, bit-exact: what
     /// `landing replay --stage aruco-pnp` needs.
     #[arg(long, requires = "record")]
@@ -175,43 +181,60 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         skip: cfg.recorder.skip.clone(),
         ..Recording::default()
     };
+    let mut meta = recorder::metadata::stack(Some(&cfg_path), &graph_path)?;
+    meta.insert("scenario".into(), scn.scenario.name.clone());
+    meta.insert("seed".into(), seed.to_string());
+    meta.insert(
+        "mode".into(),
+        if args.processes {
+            "processes"
+        } else {
+            "lockstep"
+        }
+        .into(),
+    );
     if let Some(p) = &args.record {
         // As --plot does: a new directory for the outputs is made, not refused.
         if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir)
                 .with_context(|| format!("--record: cannot create {}", dir.display()))?;
         }
-        let mut meta = recorder::metadata::stack(Some(&cfg_path), &graph_path)?;
-        meta.insert("scenario".into(), scn.scenario.name.clone());
-        meta.insert("seed".into(), seed.to_string());
-        meta.insert(
-            "mode".into(),
-            if args.processes {
-                "processes"
-            } else {
-                "lockstep"
-            }
-            .into(),
-        );
         let mut truth = Recorder::create(&truth_path(p))?;
         truth.write_metadata("landing", meta.clone())?;
         rec.truth = Some(truth);
-        if !args.processes {
-            let mut options = cfg
-                .recorder
-                .options()
-                .map_err(|e| anyhow::anyhow!("[recorder] {}: {}", e.key, e.message))?;
-            if args.raw_images {
-                options.images = recorder::ImageFormat::Raw;
-            }
-            // The mounts as the recorder process reads them.
-            let text = std::fs::read_to_string(&cfg_path)
-                .with_context(|| format!("reading {}", cfg_path.display()))?;
-            (options.body_from_camera, options.body_from_depth) = recorder::config::mounts(&text)?;
-            let mut pipeline = Recorder::with_options(p, options)?;
-            pipeline.write_metadata("landing", meta)?;
-            rec.pipeline = Some(pipeline);
+    }
+    let config_error =
+        |e: stack_config::Invalid| anyhow::anyhow!("[recorder] {}: {}", e.key, e.message);
+    // In lockstep this process records the pipeline and serves the live view, with the
+    // recorder process's code; --processes starts that process for them.
+    if !args.processes && (args.record.is_some() || args.live) {
+        let mut options = cfg.recorder.options().map_err(config_error)?;
+        if args.raw_images {
+            options.images = recorder::ImageFormat::Raw;
         }
+        // The mounts as the recorder process reads them.
+        let text = std::fs::read_to_string(&cfg_path)
+            .with_context(|| format!("reading {}", cfg_path.display()))?;
+        (options.body_from_camera, options.body_from_depth) = recorder::config::mounts(&text)?;
+        let mut pipeline = match &args.record {
+            Some(p) => {
+                let mut r = Recorder::with_options(p, options)?;
+                r.write_metadata("landing", meta)?;
+                r
+            }
+            None => Recorder::without_file(options),
+        };
+        if args.live {
+            let at = pipeline.serve_live(cfg.recorder.live_socket().map_err(config_error)?)?;
+            eprintln!("  live view: ws://{at} (Foxglove: Open connection)");
+        }
+        rec.pipeline = Some(pipeline);
+    }
+    if args.processes && args.live {
+        let at = cfg.recorder.live_socket().map_err(config_error)?;
+        eprintln!(
+            "  live view: ws://{at} (Foxglove: Open connection; the recorder process serves it)"
+        );
     }
     let tty = std::io::stderr().is_terminal();
     eprintln!(
@@ -252,7 +275,11 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             graph: &graph,
             graph_path: &graph_path,
             injections: &injections,
-            record: args.record.as_deref().map(|p| (p, args.raw_images)),
+            recorder: run_processes::RecorderLaunch {
+                out: args.record.as_deref(),
+                raw_images: args.raw_images,
+                live: args.live,
+            },
             realtime: args.realtime,
         };
         let r = run_processes::run(&launch, &mut rec.truth, progress)?;
@@ -277,6 +304,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             scn.scenario.duration_s,
             &mut referee,
             &mut rec,
+            args.live,
             progress,
         )?;
         if tty {
@@ -355,7 +383,11 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         .flatten()
     {
         let path = r.path().to_path_buf();
+        let file = r.has_file();
         let n = r.finish()?;
+        if !file {
+            continue;
+        }
         eprintln!("  recording: {} ({n} messages)", path.display());
     }
     if args.processes

@@ -123,15 +123,18 @@ pub fn driver(
 }
 
 /// Runs the mission on `driver` to its end or `duration_s`; `progress` is called about
-/// once per simulated second.
+/// once per simulated second. `paced`: simulated time never runs ahead of the wall clock
+/// (a live view watches it as it would a flight).
 pub fn run(
     driver: &mut Lockstep,
     duration_s: f64,
     referee: &mut Referee,
     rec: &mut Recording,
+    paced: bool,
     mut progress: impl FnMut(f64, MissionState, Option<f64>),
 ) -> Result<End> {
     let end_ns = (duration_s * 1e9) as u64;
+    let started = std::time::Instant::now();
     let mut next_progress = 0u64;
     let mut failure: Option<anyhow::Error> = None;
     loop {
@@ -148,6 +151,12 @@ pub fn run(
         let Some(now) = step else {
             bail!("the lockstep driver ran out of work (no stage ticks)");
         };
+        if paced {
+            let ahead = std::time::Duration::from_nanos(now).saturating_sub(started.elapsed());
+            if !ahead.is_zero() {
+                std::thread::sleep(ahead);
+            }
+        }
         if let Some(end) = referee.finished() {
             return Ok(end);
         }

@@ -48,12 +48,22 @@ pub struct Launch<'a> {
     pub graph_path: &'a Path,
     /// Faults to do to the processes in flight (`--inject`).
     pub injections: &'a [Injection],
-    /// `--record`: the recording the `recorder` process writes, and whether its camera
-    /// frames are raw.
-    pub record: Option<(&'a Path, bool)>,
+    /// The `recorder` process: `--record` and `--live`.
+    pub recorder: RecorderLaunch<'a>,
     /// `--realtime`: the deployment's SCHED_FIFO priorities on the processes that have
     /// them (deploy/systemd drop-ins).
     pub realtime: bool,
+}
+
+/// What the `recorder` process is started for (not at all when both are off).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RecorderLaunch<'a> {
+    /// `--record`: the recording it writes.
+    pub out: Option<&'a Path>,
+    /// `--raw-images`: camera frames raw.
+    pub raw_images: bool,
+    /// `--live`: it serves the live view on `[recorder] live_address`.
+    pub live: bool,
 }
 
 /// How a `--processes` run ended.
@@ -174,7 +184,8 @@ pub fn run(
     std::fs::create_dir_all(launch.log_dir)
         .with_context(|| format!("creating {}", launch.log_dir.display()))?;
     let mut children = Children::default();
-    if let Some((out, raw)) = launch.record {
+    let r = launch.recorder;
+    if r.out.is_some() || r.live {
         // First: it subscribes before anything is published.
         let log: PathBuf = launch.log_dir.join("recorder.log");
         let file = File::create(&log).with_context(|| format!("creating {}", log.display()))?;
@@ -185,11 +196,15 @@ pub fn run(
             .arg(launch.deploy)
             .arg("--graph")
             .arg(launch.graph_path)
-            .args(["--ipc-prefix", prefix.as_str()])
-            .arg("--out")
-            .arg(out);
-        if raw {
+            .args(["--ipc-prefix", prefix.as_str()]);
+        if let Some(out) = r.out {
+            cmd.arg("--out").arg(out);
+        }
+        if r.raw_images {
             cmd.arg("--raw-images");
+        }
+        if r.live {
+            cmd.arg("--live");
         }
         cmd.arg(format!("--meta=scenario={}", launch.scenario.scenario.name))
             .arg(format!("--meta=seed={}", launch.seed))

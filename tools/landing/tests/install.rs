@@ -37,7 +37,11 @@ fn install(root: &Path, extra: &[&str]) -> String {
 /// The units to check: the target, the cleanup, one instance per vehicle node.
 fn units() -> Vec<String> {
     let g = graph::Graph::load(&repo().join("deploy/graph.toml")).unwrap();
-    let mut units = vec!["landing.target".to_string(), "landing-clean.service".into()];
+    let mut units = vec![
+        "landing.target".to_string(),
+        "landing-clean.service".into(),
+        "landing-recorder.service".into(),
+    ];
     for n in g.nodes.iter().filter(|n| n.on_vehicle) {
         units.push(format!("landing@{}.service", n.binary));
     }
@@ -53,7 +57,7 @@ fn the_install_script_installs_twice_passes_systemds_checks_and_uninstalls() {
     install(&root, &[]);
     // Every process the vehicle runs, and `landing` for `landing clean`.
     let vehicle = graph::STACK_BINARIES.iter().filter(|b| **b != "sim");
-    for b in vehicle.chain(&["landing"]) {
+    for b in vehicle.chain(graph::OBSERVER_BINARIES).chain(&["landing"]) {
         let p = root.join("usr/local/bin").join(b);
         assert!(p.is_file(), "{} missing", p.display());
     }
@@ -64,6 +68,11 @@ fn the_install_script_installs_twice_passes_systemds_checks_and_uninstalls() {
         root.join("etc/systemd/system/multi-user.target.wants/landing.target")
             .exists(),
         "landing.target is enabled"
+    );
+    assert!(
+        root.join("etc/systemd/system/landing.target.wants/landing-recorder.service")
+            .exists(),
+        "the recorder starts with the stack"
     );
     let passwd = std::fs::read_to_string(root.join("etc/passwd")).unwrap();
     assert_eq!(
@@ -100,6 +109,12 @@ fn the_install_script_installs_twice_passes_systemds_checks_and_uninstalls() {
     assert!(!root.join("usr/local/bin/fsm").exists());
     assert!(!root.join("etc/landing").exists());
     assert!(!root.join("etc/systemd/system/landing@.service").exists());
+    assert!(
+        !root
+            .join("etc/systemd/system/landing-recorder.service")
+            .exists()
+    );
+    assert!(!root.join("usr/local/bin/recorder").exists());
     let passwd = std::fs::read_to_string(root.join("etc/passwd")).unwrap();
     assert!(!passwd.contains("landing:"), "{passwd}");
     let _ = std::fs::remove_dir_all(&root);

@@ -1,0 +1,124 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a panic is a failed test
+//! `landing run --live`: a Foxglove client (here a plain WebSocket client speaking the
+//! protocol) watches the mission as it flies, paced to the wall clock.
+
+use std::io::{BufRead, BufReader};
+use std::net::TcpStream;
+use std::process::{Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+use tungstenite::client::IntoClientRequest;
+use tungstenite::stream::MaybeTlsStream;
+use tungstenite::{Message, WebSocket};
+
+/// MissionState's raw values the test looks for (ipc_types::msg::MissionState).
+fn state_name(raw: u64) -> String {
+    let s = ipc_types::msg::MissionState::from_raw(raw as u32).unwrap();
+    s.name().to_string()
+}
+
+fn connect(addr: &str) -> WebSocket<MaybeTlsStream<TcpStream>> {
+    let mut request = format!("ws://{addr}").into_client_request().unwrap();
+    request
+        .headers_mut()
+        .insert("Sec-WebSocket-Protocol", "foxglove.sdk.v1".parse().unwrap());
+    tungstenite::connect(request).unwrap().0
+}
+
+#[test]
+fn a_foxglove_client_watches_the_mission_live_as_it_flies() {
+    let dir = std::env::temp_dir().join(format!("landing-live-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let deploy = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../deploy/config/landing.toml"
+    );
+    let text = std::fs::read_to_string(deploy).unwrap();
+    let any_port = text.replace(
+        "live_address = \"127.0.0.1:8765\"",
+        "live_address = \"127.0.0.1:0\"",
+    );
+    assert_ne!(text, any_port);
+    let cfg = dir.join("live.toml");
+    std::fs::write(&cfg, any_port).unwrap();
+
+    let started = Instant::now();
+    let mut run = Command::new(env!("CARGO_BIN_EXE_landing"))
+        .args(["run", "--scenario", "indoor-static", "--live", "--config"])
+        .arg(&cfg)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (tx, rx) = mpsc::channel();
+    let stderr = run.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    let line = rx.recv_timeout(Duration::from_secs(60)).unwrap();
+    let at = line
+        .find("ws://")
+        .unwrap_or_else(|| panic!("first line: {line}"));
+    let addr: String = line[at + 5..]
+        .chars()
+        .take_while(|c| c.is_ascii_digit() || *c == '.' || *c == ':')
+        .collect();
+    let mut ws = connect(&addr);
+
+    // Subscribe to the fsm's status as soon as it is advertised; collect the states.
+    let mut states: Vec<String> = vec![];
+    let mut subscribed = false;
+    loop {
+        let msg = match ws.read() {
+            Ok(m) => m,
+            // The run ended: the server went with it.
+            Err(_) => break,
+        };
+        match msg {
+            Message::Text(t) => {
+                let v: Value = serde_json::from_str(&t).unwrap();
+                if v["op"] == "advertise" && !subscribed {
+                    for c in v["channels"].as_array().unwrap() {
+                        if c["topic"] == "/fsm/status" {
+                            let sub = serde_json::json!({
+                                "op": "subscribe",
+                                "subscriptions": [{"id": 1, "channelId": c["id"]}],
+                            });
+                            ws.send(Message::Text(sub.to_string().into())).unwrap();
+                            subscribed = true;
+                        }
+                    }
+                }
+            }
+            Message::Binary(b) => {
+                let v: Value = serde_json::from_slice(&b[13..]).unwrap();
+                let name = state_name(v["state"].as_u64().unwrap());
+                if states.last() != Some(&name) {
+                    states.push(name);
+                }
+            }
+            Message::Close(_) => break,
+            _ => {}
+        }
+    }
+    let status = run.wait().unwrap();
+    let log: Vec<String> = rx.try_iter().collect();
+    assert!(status.success(), "{}", log.join("\n"));
+    // Seen live, in order, from before the pad was found to the landing.
+    let track = states.iter().position(|s| s == "track");
+    let landed = states.iter().position(|s| s == "landed");
+    assert!(
+        matches!((track, landed), (Some(t), Some(l)) if t < l),
+        "states seen live: {states:?}"
+    );
+    // Paced: the mission's ~10 simulated seconds took at least as long on the wall.
+    assert!(
+        started.elapsed() > Duration::from_secs(9),
+        "{:?}",
+        started.elapsed()
+    );
+}
