@@ -1011,7 +1011,7 @@ impl Liveness {
 #[repr(C)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("landing::ProcessHealth/v2")]
+#[type_name("landing::ProcessHealth/v3")]
 pub struct ProcessHealth {
     /// Process name.
     pub name: Text,
@@ -1025,13 +1025,18 @@ pub struct ProcessHealth {
     pub last_heartbeat_ns: u64,
     /// When it was last found hung or dead (monotonic ns); 0 when never.
     pub fault_ns: u64,
+    /// The CPU time it has used since it started, ns, as last measured (0: not measured:
+    /// lockstep, or no measurement yet).
+    pub cpu_ns: u64,
+    /// Its CPU use between the last two measurements, percent of one core.
+    pub cpu_percent: f64,
 }
 
 /// The watchdog's view of the whole stack.
 #[repr(C)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("landing::WatchdogView/v2")]
+#[type_name("landing::WatchdogView/v3")]
 pub struct WatchdogView {
     /// Sequence, time, stage stamps.
     pub msg: Header,
@@ -1121,6 +1126,8 @@ pub enum ProcessEventKind {
     Beat = 1,
     /// The process's iceoryx2 node is dead or gone.
     Died = 2,
+    /// The process's CPU time was measured: `cpu_ns`.
+    Cpu = 3,
 }
 
 impl ProcessEventKind {
@@ -1129,6 +1136,7 @@ impl ProcessEventKind {
         match raw {
             1 => Some(Self::Beat),
             2 => Some(Self::Died),
+            3 => Some(Self::Cpu),
             _ => None,
         }
     }
@@ -1141,7 +1149,7 @@ impl ProcessEventKind {
 #[repr(C)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("landing::ProcessEvent/v1")]
+#[type_name("landing::ProcessEvent/v2")]
 pub struct ProcessEvent {
     /// Sequence, time.
     pub msg: Header,
@@ -1151,6 +1159,9 @@ pub struct ProcessEvent {
     pub kind: u32,
     /// Keeps the layout free of implicit padding.
     pub reserved: u32,
+    /// [`ProcessEventKind::Cpu`]: the CPU time the process has used since it started
+    /// (user and system, every thread), ns; 0 otherwise.
+    pub cpu_ns: u64,
 }
 
 /// Kinds of ground-truth events.

@@ -65,6 +65,7 @@ fn a_stage_added_through_the_graph_runs_in_lockstep() {
         scn.scenario.duration_s,
         &mut referee,
         &mut Recording::default(),
+        false,
         |_, _, _| {},
     )
     .unwrap();

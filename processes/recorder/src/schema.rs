@@ -66,7 +66,7 @@ recordable!(
     LinkRequest => "landing::LinkRequest/v1",
     LinkOutcome => "landing::LinkOutcome/v1",
     SafetyCommand => "landing::SafetyCommand/v1",
-    WatchdogView => "landing::WatchdogView/v2",
+    WatchdogView => "landing::WatchdogView/v3",
     OccupancyMapHeader => "landing::OccupancyMapHeader/v1",
     CameraFrameHeader => "landing::CameraFrameHeader/v1",
     DepthFrameHeader => "landing::DepthFrameHeader/v1",

@@ -306,6 +306,8 @@ pub struct ListedNode {
     pub alive: bool,
     /// Its system-wide unique id: a process restarted under the same name has another.
     pub id: u128,
+    /// The process that made it (`None` when iceoryx2 cannot tell).
+    pub pid: Option<u32>,
 }
 
 /// A process's connection to iceoryx2: one node, named after the process. Dropped, it
@@ -649,15 +651,19 @@ impl Ipc {
         let mut out = Vec::new();
         let listed = Node::<Svc>::list(&self.config, |state| {
             let (details, alive, id) = match &state {
-                NodeState::Alive(v) => (v.details(), true, v.id().value()),
-                NodeState::Dead(v) => (v.details(), false, v.id().value()),
+                NodeState::Alive(v) => (v.details(), true, v.id()),
+                NodeState::Dead(v) => (v.details(), false, v.id()),
                 _ => return CallbackProgression::Continue,
             };
             if let Some(d) = details {
                 out.push(ListedNode {
                     name: d.name().as_str().to_string(),
                     alive,
-                    id,
+                    id: id.value(),
+                    pid: id
+                        .pid::<Svc>()
+                        .ok()
+                        .and_then(|p| u32::try_from(p.value()).ok()),
                 });
             }
             CallbackProgression::Continue

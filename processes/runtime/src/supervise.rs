@@ -3,6 +3,8 @@
 //! process is a beat; a node of the stack that is listed dead, or that was alive and is
 //! no longer listed, is a death (whoever cleaned it up first). After a death the source
 //! removes the dead node's resources, so that a process systemd restarts reconnects.
+//! Every [`CPU_PERIOD_NS`] it also reads each listed process's CPU time from
+//! `/proc/<pid>/stat` (the node list names the pid), for the watchdog's view.
 
 use std::time::Duration;
 
@@ -21,6 +23,27 @@ struct Watched {
     listed: Option<u128>,
     /// Reported dead since it was last seen alive.
     reported: bool,
+    /// Its process, from the node list.
+    pid: Option<u32>,
+}
+
+/// How often the CPU time of each watched process is read, ns.
+pub const CPU_PERIOD_NS: u64 = 1_000_000_000;
+
+/// The CPU time (user and system, every thread) process `pid` has used, ns, from
+/// `/proc/<pid>/stat`; `None` when it cannot be read (gone, not Linux).
+pub fn process_cpu_ns(pid: u32) -> Option<u64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The command name (field 2) is in parentheses and may hold spaces: count from the
+    // last ')'. utime and stime are fields 14 and 15, the 12th and 13th after it.
+    let rest = stat.get(stat.rfind(')')? + 1..)?;
+    let mut fields = rest.split_whitespace().skip(11);
+    let utime: u64 = fields.next()?.parse().ok()?;
+    let stime: u64 = fields.next()?.parse().ok()?;
+    // SAFETY: sysconf reads a constant of the system; no memory is touched.
+    let ticks = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
+    let ticks = u64::try_from(ticks).ok().filter(|t| *t > 0)?;
+    Some((utime + stime).saturating_mul(1_000_000_000) / ticks)
 }
 
 /// Why the supervision source could not start.
@@ -40,6 +63,7 @@ pub struct Supervision {
     watched: Vec<Watched>,
     poll_ns: u64,
     next_poll_ns: u64,
+    next_cpu_ns: u64,
     seq: u64,
     beats: u64,
     deaths: u64,
@@ -67,6 +91,7 @@ impl Supervision {
                 heartbeat: ipc.heartbeat_listener(name, *deadline)?,
                 listed: None,
                 reported: false,
+                pid: None,
             });
         }
         Ok(Self {
@@ -74,6 +99,7 @@ impl Supervision {
             watched,
             poll_ns: u64::try_from(poll.as_nanos()).unwrap_or(u64::MAX).max(1),
             next_poll_ns: 0,
+            next_cpu_ns: 0,
             seq: 0,
             beats: 0,
             deaths: 0,
@@ -81,7 +107,13 @@ impl Supervision {
         })
     }
 
-    fn event(&mut self, k: usize, kind: ProcessEventKind, now_ns: u64) -> ProcessEvent {
+    fn event(
+        &mut self,
+        k: usize,
+        kind: ProcessEventKind,
+        now_ns: u64,
+        cpu_ns: u64,
+    ) -> ProcessEvent {
         self.seq += 1;
         ProcessEvent {
             msg: Header {
@@ -91,6 +123,7 @@ impl Supervision {
             process: Text::new(&self.watched[k].name),
             kind: kind as u32,
             reserved: 0,
+            cpu_ns,
         }
     }
 
@@ -101,10 +134,9 @@ impl Supervision {
         };
         let mut died = Vec::new();
         for (k, w) in self.watched.iter_mut().enumerate() {
-            let alive = nodes
-                .iter()
-                .find(|n| n.alive && n.name == w.name)
-                .map(|n| n.id);
+            let node = nodes.iter().find(|n| n.alive && n.name == w.name);
+            w.pid = node.and_then(|n| n.pid);
+            let alive = node.map(|n| n.id);
             match (w.listed, alive) {
                 // Restarted between two looks (systemd is quick): the node it had is
                 // gone, another of its name is here. A death, and alive again.
@@ -153,7 +185,7 @@ impl External for Supervision {
             if beat {
                 let _ = self.watched[k].heartbeat.try_wait(|_| {});
                 self.beats += 1;
-                events.push((k, ProcessEventKind::Beat, at));
+                events.push((k, ProcessEventKind::Beat, at, 0));
             }
         }
         if at >= self.next_poll_ns {
@@ -164,11 +196,19 @@ impl External for Supervision {
             let seen = clock();
             for k in died {
                 self.deaths += 1;
-                events.push((k, ProcessEventKind::Died, seen));
+                events.push((k, ProcessEventKind::Died, seen, 0));
             }
         }
-        for (k, kind, at) in events {
-            let e = self.event(k, kind, at);
+        if at >= self.next_cpu_ns {
+            self.next_cpu_ns = at + CPU_PERIOD_NS;
+            for (k, w) in self.watched.iter().enumerate() {
+                if let Some(cpu) = w.pid.and_then(process_cpu_ns) {
+                    events.push((k, ProcessEventKind::Cpu, clock(), cpu));
+                }
+            }
+        }
+        for (k, kind, at, cpu) in events {
+            let e = self.event(k, kind, at, cpu);
             let input = Input {
                 topic: topics::WATCHDOG_LIVENESS,
                 msg: Message::ProcessEvent(&e),
@@ -190,5 +230,31 @@ impl External for Supervision {
             ("nodes_gone", self.deaths),
             ("dead_nodes_cleaned", self.cleaned),
         ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_processs_cpu_time_is_read_from_proc_and_grows_as_it_works() {
+        let me = std::process::id();
+        let before = process_cpu_ns(me).unwrap();
+        // Work until the kernel has counted at least one more tick (10 ms at 100 Hz).
+        let start = std::time::Instant::now();
+        let mut x = 0u64;
+        let after = loop {
+            for i in 0..100_000u64 {
+                x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(i);
+            }
+            let now = process_cpu_ns(me).unwrap();
+            if now > before || start.elapsed().as_secs() > 20 {
+                break now;
+            }
+        };
+        std::hint::black_box(x);
+        assert!(after > before, "{before} -> {after} ns after 20 s of work");
+        assert_eq!(process_cpu_ns(u32::MAX), None, "no such process");
     }
 }

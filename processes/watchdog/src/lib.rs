@@ -185,6 +185,10 @@ struct ProcessState {
     fault_ns: Option<u64>,
     missed: u32,
     decided: bool,
+    /// The last CPU measurement: when, and the CPU time then, ns.
+    cpu: Option<(u64, u64)>,
+    /// CPU use between the last two measurements, percent of one core.
+    cpu_percent: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -250,6 +254,8 @@ impl Watchdog {
                     fault_ns: None,
                     missed: 0,
                     decided: false,
+                    cpu: None,
+                    cpu_percent: 0.0,
                 };
                 cfg.processes.len()
             ],
@@ -284,6 +290,24 @@ impl Watchdog {
             p.last_beat_ns = Some(now_ns);
             p.liveness = Liveness::Alive;
             p.decided = false;
+        }
+    }
+
+    /// `process` had used `cpu_ns` of CPU time at `now_ns`: its CPU use since the last
+    /// measurement goes into the view. A restarted process (less CPU time than before)
+    /// starts over.
+    pub fn cpu(&mut self, process: &str, now_ns: u64, cpu_ns: u64) {
+        if let Some(k) = self.process_index(process) {
+            let p = &mut self.processes[k];
+            if let Some((t0, c0)) = p.cpu
+                && now_ns > t0
+                && cpu_ns >= c0
+            {
+                p.cpu_percent = (cpu_ns - c0) as f64 / (now_ns - t0) as f64 * 100.0;
+            } else {
+                p.cpu_percent = 0.0;
+            }
+            p.cpu = Some((now_ns, cpu_ns));
         }
     }
 
@@ -493,6 +517,8 @@ impl Watchdog {
                 reserved: 0,
                 last_heartbeat_ns: p.last_beat_ns.unwrap_or(0),
                 fault_ns: p.fault_ns.unwrap_or(0),
+                cpu_ns: p.cpu.map_or(0, |(_, c)| c),
+                cpu_percent: p.cpu_percent,
             };
         }
         v

@@ -299,3 +299,37 @@ fn an_order_stands_for_its_flight_and_the_next_flight_starts_without_it() {
         Some((SafetyAction::SafeLand, "fsm died".into()))
     );
 }
+
+#[test]
+fn the_view_shows_each_processs_cpu_use_between_its_last_two_measurements() {
+    let mut w = watchdog();
+    let health = |w: &Watchdog, name: &str| {
+        let v = w.view();
+        *v.processes
+            .iter()
+            .find(|p| p.name.as_str() == name)
+            .unwrap()
+    };
+    assert_eq!(health(&w, "fsm").cpu_ns, 0, "not measured yet");
+    w.cpu("fsm", 1_000 * MS, 40 * MS);
+    assert_eq!(
+        health(&w, "fsm").cpu_percent,
+        0.0,
+        "one measurement is no rate"
+    );
+    // 250 ms of CPU in a second: a quarter of a core.
+    w.cpu("fsm", 2_000 * MS, 290 * MS);
+    let h = health(&w, "fsm");
+    assert_eq!(h.cpu_ns, 290 * MS);
+    assert!((h.cpu_percent - 25.0).abs() < 1e-9, "{}", h.cpu_percent);
+    assert_eq!(
+        health(&w, "planner").cpu_ns,
+        0,
+        "another process is untouched"
+    );
+    // Restarted: less CPU time than before starts over rather than going negative.
+    w.cpu("fsm", 3_000 * MS, 5 * MS);
+    assert_eq!(health(&w, "fsm").cpu_percent, 0.0);
+    // A process the watchdog does not watch is ignored.
+    w.cpu("nobody", 3_000 * MS, 5 * MS);
+}

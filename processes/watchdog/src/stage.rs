@@ -274,6 +274,9 @@ impl Stage for WatchdogStage {
                         self.counts.deaths += 1;
                         self.dog.died(e.process.as_str(), now_ns);
                     }
+                    Some(ProcessEventKind::Cpu) => {
+                        self.dog.cpu(e.process.as_str(), e.msg.capture_ns, e.cpu_ns);
+                    }
                     None => {}
                 }
                 return Ok(());

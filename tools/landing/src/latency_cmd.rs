@@ -91,11 +91,50 @@ pub struct LatencyReport {
     pub drops: BTreeMap<String, u64>,
     /// Messages per second, by topic.
     pub rates_hz: BTreeMap<String, f64>,
+    /// Each supervised process's CPU use, percent of one core, from the watchdog's view
+    /// (measured every second from /proc; none in lockstep, one process).
+    pub cpu_percent: BTreeMap<String, CpuUse>,
     /// Where the recording broke, when it did (what came before is in the report).
     pub broken: Option<String>,
     /// The end-to-end samples, ms (the histogram's).
     #[serde(skip)]
     pub end_to_end_samples_ms: Vec<f64>,
+}
+
+/// A process's CPU use over a recording, percent of one core.
+#[derive(Debug, Clone, Serialize)]
+pub struct CpuUse {
+    /// Over the whole recording: CPU time used / wall time between the first and the last
+    /// measurement.
+    pub mean: f64,
+    /// The largest one-second measurement.
+    pub max: f64,
+    /// One-second measurements that found CPU time used (an idle second repeats the
+    /// last one and is not counted).
+    pub samples: usize,
+}
+
+/// The CPU measurements of one process: (view time, CPU time, percent) when it changed.
+#[derive(Default)]
+struct CpuTrack {
+    samples: Vec<(u64, u64, f64)>,
+}
+
+impl CpuTrack {
+    fn usage(&self) -> Option<CpuUse> {
+        let (first, last) = (self.samples.first()?, self.samples.last()?);
+        let wall = last.0.checked_sub(first.0).filter(|w| *w > 0)?;
+        // A restart (less CPU time than before) leaves the mean to the measurements.
+        let mean = match last.1.checked_sub(first.1) {
+            Some(cpu) => cpu as f64 / wall as f64 * 100.0,
+            None => self.samples.iter().map(|s| s.2).sum::<f64>() / self.samples.len() as f64,
+        };
+        Some(CpuUse {
+            mean,
+            max: self.samples.iter().skip(1).map(|s| s.2).fold(0.0, f64::max),
+            samples: self.samples.len() - 1,
+        })
+    }
 }
 
 /// One stamp of a header, from JSON.
@@ -143,6 +182,8 @@ pub fn analyse(file: &Path) -> Result<LatencyReport> {
     let mut drops: BTreeMap<String, u64> = BTreeMap::new();
     let mut counts: BTreeMap<String, u64> = BTreeMap::new();
     let mut span: HashMap<String, (u64, u64)> = HashMap::new();
+    let mut cpu: BTreeMap<String, CpuTrack> = BTreeMap::new();
+    let view_topic = format!("/{}", topics::WATCHDOG_VIEW);
     let summary = recorder::read_messages(file, &mut |m| {
         if m.encoding != "json" {
             return;
@@ -150,6 +191,20 @@ pub fn analyse(file: &Path) -> Result<LatencyReport> {
         let Ok(v) = serde_json::from_slice::<Value>(m.data) else {
             return;
         };
+        if m.topic == view_topic {
+            let n = v["count"].as_u64().unwrap_or(0) as usize;
+            for p in v["processes"].as_array().into_iter().flatten().take(n) {
+                let (Some(name), Some(ns)) = (p["name"].as_str(), p["cpu_ns"].as_u64()) else {
+                    continue;
+                };
+                let track = cpu.entry(name.to_string()).or_default();
+                let changed = track.samples.last().is_none_or(|l| l.1 != ns);
+                if ns > 0 && changed {
+                    let percent = p["cpu_percent"].as_f64().unwrap_or(0.0);
+                    track.samples.push((m.log_time, ns, percent));
+                }
+            }
+        }
         let Some((seq, capture, stamps)) = header(&v) else {
             return;
         };
@@ -240,6 +295,10 @@ pub fn analyse(file: &Path) -> Result<LatencyReport> {
             .map(|(t, n)| (t[1..].to_string(), n))
             .collect(),
         rates_hz,
+        cpu_percent: cpu
+            .iter()
+            .filter_map(|(k, t)| Some((k.clone(), t.usage()?)))
+            .collect(),
         broken: summary.broken.map(|b| b.to_string()),
         end_to_end_samples_ms: e2e,
     })
@@ -289,6 +348,15 @@ pub fn run(args: &LatencyArgs) -> Result<()> {
         for (t, r) in &report.rates_hz {
             let d = report.drops.get(t).copied().unwrap_or(0);
             println!("  {t:<32} {r:>8.1} {d:>7}");
+        }
+        if !report.cpu_percent.is_empty() {
+            println!(
+                "{:<34} {:>8} {:>7}",
+                "cpu, % of one core", "mean", "max 1 s"
+            );
+            for (p, c) in &report.cpu_percent {
+                println!("  {p:<32} {:>8.1} {:>7.1}", c.mean, c.max);
+            }
         }
     }
     if report.end_to_end_ms.is_none() {

@@ -221,34 +221,65 @@ fn replaying_the_fsm_with_another_config_shows_the_transitions_it_changes() {
     assert!(first.contains("track -> descend"), "{v}");
 }
 
+/// One paper-sim flight with every stage its own process, aruco-pnp killed while
+/// tracking, recorded (shared by the tests of this file): the inputs as iceoryx2
+/// delivered them, and the watchdog's order.
+fn processes_recording() -> PathBuf {
+    static ONCE: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    ONCE.get_or_init(|| {
+        let path = temp("killed-aruco.mcap");
+        let o = landing(&[
+            "run",
+            "--scenario",
+            "paper-sim",
+            "--processes",
+            "--inject",
+            "kill:aruco-pnp@track",
+            "--record",
+            path.to_str().unwrap(),
+        ]);
+        // Not on the pad: the run says so in its exit status; the recording is what counts.
+        let said = String::from_utf8_lossy(&o.stdout);
+        assert!(said.contains("SAFE LANDING"), "{said}");
+        path
+    })
+    .clone()
+}
+
 #[test]
 fn replaying_the_fsm_of_a_flight_the_watchdog_ended_reproduces_its_safety_order() {
-    // Every stage its own process: the inputs as iceoryx2 delivered them, and the
-    // watchdog's order when aruco-pnp dies.
-    let path = temp("killed-aruco.mcap");
-    let p = path.to_str().unwrap();
-    let o = landing(&[
-        "run",
-        "--scenario",
-        "paper-sim",
-        "--processes",
-        "--inject",
-        "kill:aruco-pnp@track",
-        "--record",
-        p,
-    ]);
-    // Not on the pad: the run says so in its exit status; the recording is what counts.
-    let said = String::from_utf8_lossy(&o.stdout);
-    assert!(said.contains("SAFE LANDING"), "{said}");
-    let (ok, v) = replay_fsm(&path, &[]);
+    let (ok, v) = replay_fsm(&processes_recording(), &[]);
     assert!(ok, "{v}");
     assert_eq!(v["identical"], v["recorded"], "{v}");
     assert_eq!(v["replayed"], v["recorded"], "{v}");
     let flown = v["flown"].to_string();
     assert!(flown.contains("-> safe-land"), "{v}");
     assert!(flown.contains("watchdog: aruco-pnp"), "{v}");
-    let _ = std::fs::remove_file(&path);
-    let _ = std::fs::remove_file(path.with_extension("truth.mcap"));
+}
+
+#[test]
+fn latency_reports_each_supervised_processs_cpu_use_from_the_watchdogs_view() {
+    let path = processes_recording();
+    let o = landing(&["latency", "--json", path.to_str().unwrap()]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let cpu = v["cpu_percent"].as_object().unwrap();
+    // Every process the watchdog supervises; aruco-pnp until it was killed.
+    for p in [
+        "camera-ingest",
+        "aruco-pnp",
+        "depth-map",
+        "planner",
+        "fsm",
+        "px4-link",
+    ] {
+        let c = &cpu.get(p).unwrap_or_else(|| panic!("no cpu for {p}: {v}"));
+        let (mean, max) = (c["mean"].as_f64().unwrap(), c["max"].as_f64().unwrap());
+        assert!(mean > 0.0 && mean <= 100.0, "{p}: {c}");
+        assert!(max >= mean * 0.5 && max <= 200.0, "{p}: {c}");
+    }
+    // The camera path works every frame; the planner and the fsm do little.
+    let mean = |p: &str| cpu[p]["mean"].as_f64().unwrap();
+    assert!(mean("depth-map") > mean("fsm"), "{v}");
 }
 
 #[test]
