@@ -6,7 +6,6 @@
 
 use std::io::ErrorKind;
 use std::net::{SocketAddr, UdpSocket};
-use std::time::Duration;
 
 use stage::{Counter, External, Flow, Input, Message, StageError};
 
@@ -79,6 +78,8 @@ impl UdpLink {
             source,
         };
         let socket = UdpSocket::bind(listen).map_err(err)?;
+        // Reads never wait: `wait` waits in ppoll, then drains.
+        socket.set_nonblocking(true).map_err(err)?;
         let local = socket.local_addr().map_err(err)?;
         Ok(Self {
             socket,
@@ -130,32 +131,25 @@ impl External for UdpLink {
         clock: &dyn Fn() -> u64,
         deliver: &mut dyn FnMut(Input<'_>, u64) -> Result<(), StageError>,
     ) -> Result<Flow, StageError> {
-        // The first read may wait (a zero timeout would mean forever); the rest only
-        // drain what is already there.
-        let mut wait = Duration::from_nanos(timeout_ns).max(Duration::from_micros(1));
-        if !self.wake.is_empty() {
-            // Datagrams or another input, whichever comes first.
-            use std::os::fd::AsRawFd;
-            let mut fds = Vec::with_capacity(self.wake.len() + 1);
-            fds.push(self.socket.as_raw_fd());
-            fds.extend_from_slice(&self.wake);
-            let ready = crate::ipc::wait_fds(&fds, timeout_ns);
-            if !ready.first().copied().unwrap_or(false) {
-                return Ok(Flow::Open);
-            }
-            wait = Duration::from_micros(1);
+        // One wait, in ppoll (the kernel's timer precision), on the socket and on
+        // whatever else may end it; then every datagram already there, without waiting.
+        // (A socket read timeout would not do for the drain: the kernel rounds it up to
+        // a jiffy, 4-10 ms, during which a setpoint arriving on another input waited.)
+        use std::os::fd::AsRawFd;
+        let mut fds = Vec::with_capacity(self.wake.len() + 1);
+        fds.push(self.socket.as_raw_fd());
+        fds.extend_from_slice(&self.wake);
+        let ready = crate::ipc::wait_fds(&fds, timeout_ns);
+        if !ready.first().copied().unwrap_or(false) {
+            return Ok(Flow::Open);
         }
         loop {
-            if let Err(e) = self.socket.set_read_timeout(Some(wait)) {
-                return Err(StageError::Transport(format!("UDP {}: {e}", self.local)));
-            }
             match self.socket.recv_from(&mut self.buf) {
                 Ok((n, from)) => {
                     self.stats.datagrams_in += 1;
                     match (self.reply, self.peer) {
                         (Reply::FirstPeerElseRemote, Some(kept)) if kept != from => {
                             self.stats.foreign_datagrams += 1;
-                            wait = Duration::from_micros(1);
                             continue;
                         }
                         _ => self.peer = Some(from),
@@ -165,7 +159,6 @@ impl External for UdpLink {
                         msg: Message::Mavlink(self.buf.get(..n).unwrap_or(&[])),
                     };
                     deliver(input, clock())?;
-                    wait = Duration::from_micros(1);
                 }
                 Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
                     return Ok(Flow::Open);
