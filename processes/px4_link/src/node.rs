@@ -284,8 +284,11 @@ pub fn to_request(r: &LinkRequest) -> Option<Request> {
 }
 
 fn outcome(now_ns: u64, id: u64, kind: u32, code: LinkOutcomeKind, result: u32) -> LinkOutcome {
+    // Stamped as every publisher's message: when it left is what a replay orders by.
+    let mut msg = Header::captured_at(now_ns);
+    msg.push_stage(Stage::Px4Link, now_ns, now_ns);
     LinkOutcome {
-        msg: Header::captured_at(now_ns),
+        msg,
         id,
         kind,
         outcome: code as u32,

@@ -12,8 +12,9 @@
 use foxglove::bytes::Bytes;
 use foxglove::schemas::{
     Color, CompressedImage, CubePrimitive, Duration, FrameTransform, FrameTransforms,
-    LinePrimitive, Log, Point3, Pose as FxPose, Quaternion, RawImage, SceneEntity, SceneUpdate,
-    SpherePrimitive, Timestamp, Vector3, line_primitive, log,
+    LinePrimitive, Log, PackedElementField, Point3, Pose as FxPose, Quaternion, RawImage,
+    SceneEntity, SceneUpdate, SpherePrimitive, Timestamp, Vector3, VoxelGrid, line_primitive, log,
+    packed_element_field,
 };
 use ipc_types::msg::{
     CameraFrameHeader, CellState, DepthFrameHeader, FsmStatus, MissionState, OccupancyMapHeader,
@@ -392,6 +393,41 @@ pub fn map_scene(h: &OccupancyMapHeader, cells: &[u8]) -> Option<SceneUpdate> {
     })
 }
 
+/// The field of [`voxel_grid`]'s cells: the raw [`CellState`].
+pub const VOXEL_FIELD: &str = "state";
+
+/// The whole map, every cell, as `foxglove.VoxelGrid` (one byte per cell, the raw
+/// [`CellState`], x fastest then y then z, as the map is laid out): exact, what a replay
+/// of depth-map compares and a replay of the planner feeds; Foxglove draws it in 3-D.
+/// `None` for a header that does not fit its cells.
+pub fn voxel_grid(h: &OccupancyMapHeader, cells: &[u8]) -> Option<VoxelGrid> {
+    let [nx, ny, nz] = h.dims;
+    let n = (nx as usize)
+        .checked_mul(ny as usize)?
+        .checked_mul(nz as usize)?;
+    let res = h.resolution;
+    if res.is_nan() || res <= 0.0 || !finite(&h.origin) || n > cells.len() {
+        return None;
+    }
+    Some(VoxelGrid {
+        timestamp: Some(stamp(h.msg.capture_ns)),
+        frame_id: WORLD.into(),
+        pose: at(h.origin),
+        row_count: ny,
+        column_count: nx,
+        cell_size: Some(vec3([res; 3])),
+        slice_stride: nx.checked_mul(ny)?,
+        row_stride: nx,
+        cell_stride: 1,
+        fields: vec![PackedElementField {
+            name: VOXEL_FIELD.into(),
+            offset: 0,
+            r#type: packed_element_field::NumericType::Uint8 as i32,
+        }],
+        data: Bytes::copy_from_slice(cells.get(..n)?),
+    })
+}
+
 /// The B-spline (sampled) and its control points.
 pub fn trajectory_scene(m: &Trajectory) -> Option<SceneUpdate> {
     let n = (m.count as usize).min(m.control_points.len());
@@ -490,4 +526,46 @@ pub fn safety_log(m: &SafetyCommand) -> Log {
         m.source.as_str(),
         format!("safety order {}: {}", m.action, m.reason.as_str()),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_voxel_grid_holds_every_cell_where_foxglove_reads_it() {
+        let (nx, ny, nz) = (4u32, 3u32, 2u32);
+        let h = OccupancyMapHeader {
+            origin: [-1.0, 2.0, 0.5],
+            resolution: 0.25,
+            dims: [nx, ny, nz],
+            ..OccupancyMapHeader::default()
+        };
+        let mut cells = vec![CellState::Free as u8; (nx * ny * nz) as usize];
+        // The stack's layout: x fastest, then y, then z.
+        let (x, y, z) = (3usize, 1usize, 1usize);
+        cells[x + nx as usize * (y + ny as usize * z)] = CellState::Occupied as u8;
+        let g = voxel_grid(&h, &cells).unwrap();
+        // Foxglove's: z = i / slice_stride, y = (i % slice_stride) / row_stride,
+        // x = (i % row_stride) / cell_stride.
+        let i = g
+            .data
+            .iter()
+            .position(|c| *c == CellState::Occupied as u8)
+            .unwrap() as u32;
+        assert_eq!(i / g.slice_stride, z as u32);
+        assert_eq!((i % g.slice_stride) / g.row_stride, y as u32);
+        assert_eq!((i % g.row_stride) / g.cell_stride, x as u32);
+        assert_eq!((g.column_count, g.row_count), (nx, ny));
+        assert_eq!(g.data.len(), cells.len());
+        assert_eq!(g.fields[0].name, VOXEL_FIELD);
+        let origin = g.pose.unwrap().position.unwrap();
+        assert_eq!((origin.x, origin.y, origin.z), (-1.0, 2.0, 0.5));
+        // A header bigger than its cells is left out, not read past.
+        let big = OccupancyMapHeader {
+            dims: [nx, ny, nz + 1],
+            ..h
+        };
+        assert!(voxel_grid(&big, &cells).is_none());
+    }
 }

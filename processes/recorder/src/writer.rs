@@ -18,7 +18,7 @@ use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use foxglove::schemas::{CompressedImage, FrameTransforms, Log, RawImage, SceneUpdate};
+use foxglove::schemas::{CompressedImage, FrameTransforms, Log, RawImage, SceneUpdate, VoxelGrid};
 use foxglove::{
     Channel, Context, McapCompression, McapWriteOptions, McapWriter, McapWriterHandle,
     PartialMetadata, RawChannel, Schema,
@@ -145,6 +145,7 @@ pub struct Recorder {
     json: HashMap<String, JsonChannel>,
     compressed: HashMap<String, Channel<CompressedImage>>,
     raw: HashMap<String, Channel<RawImage>>,
+    voxels: HashMap<String, Channel<VoxelGrid>>,
     tf: Channel<FrameTransforms>,
     scene: HashMap<&'static str, Channel<SceneUpdate>>,
     log: Channel<Log>,
@@ -230,6 +231,7 @@ impl Recorder {
             json: HashMap::new(),
             compressed: HashMap::new(),
             raw: HashMap::new(),
+            voxels: HashMap::new(),
             tf,
             scene,
             log,
@@ -381,6 +383,14 @@ impl Recorder {
             }
             Message::OccupancyMap(h, cells) => {
                 self.write_message(&format!("{name}/header"), t, h)?;
+                if let Some(grid) = visual::voxel_grid(h, cells) {
+                    let ctx = &self.ctx;
+                    self.voxels
+                        .entry(name.clone())
+                        .or_insert_with(|| ctx.channel_builder(&name).build::<VoxelGrid>())
+                        .log_with_meta(&grid, PartialMetadata::with_log_time(t));
+                    self.messages += 1;
+                }
                 let due = self
                     .last_map_ns
                     .is_none_or(|l| t.saturating_sub(l) >= self.options.map_period_ns);

@@ -33,8 +33,22 @@ use crate::stats::percentile;
 #[derive(Debug, Args)]
 pub struct LatencyArgs {
     /// The recording (`landing run --record`, or the `recorder` process).
-    #[arg(value_name = "FILE.mcap")]
-    file: PathBuf,
+    #[arg(value_name = "FILE.mcap", required_unless_present = "live")]
+    file: Option<PathBuf>,
+    /// Watch the running stack (the global --ipc-prefix, else $LANDING_IPC_PREFIX)
+    /// instead of a recording: a summary line every --period, the whole report at the
+    /// end (--seconds, or Ctrl-C).
+    #[arg(long, conflicts_with = "file")]
+    live: bool,
+    /// --live: stop after this many seconds (default: at Ctrl-C).
+    #[arg(long, requires = "live", value_name = "S", value_parser = positive_seconds)]
+    seconds: Option<f64>,
+    /// --live: a summary line this often, seconds.
+    #[arg(long, requires = "live", value_name = "S", default_value = "2", value_parser = positive_seconds)]
+    period: f64,
+    /// --live: the graph whose topics to watch (default: the deploy directory's).
+    #[arg(long, requires = "live", value_name = "FILE.toml")]
+    graph: Option<PathBuf>,
     /// Print the result as one JSON object on stdout.
     #[arg(long)]
     json: bool,
@@ -172,55 +186,55 @@ fn ms(a: u64, b: u64) -> f64 {
     (b as f64 - a as f64) * 1e-6
 }
 
-/// Reads `file` and computes the report.
-pub fn analyse(file: &Path) -> Result<LatencyReport> {
-    let sent_topic = format!("/{}", topics::PX4_SETPOINT_SENT);
-    // First wire time per capture: (delivered, wire, chain of (stage, exit)).
-    let mut chains: HashMap<u64, (u64, Vec<Stamp>)> = HashMap::new();
-    let mut per_topic: BTreeMap<String, Vec<f64>> = BTreeMap::new();
-    let mut last_seq: HashMap<String, u64> = HashMap::new();
-    let mut drops: BTreeMap<String, u64> = BTreeMap::new();
-    let mut counts: BTreeMap<String, u64> = BTreeMap::new();
-    let mut span: HashMap<String, (u64, u64)> = HashMap::new();
-    let mut cpu: BTreeMap<String, CpuTrack> = BTreeMap::new();
-    let view_topic = format!("/{}", topics::WATCHDOG_VIEW);
-    let summary = recorder::read_messages(file, &mut |m| {
-        if m.encoding != "json" {
-            return;
-        }
-        let Ok(v) = serde_json::from_slice::<Value>(m.data) else {
-            return;
-        };
-        if m.topic == view_topic {
+/// The latency analysis of a stream of recorded messages (a file's, or the live bus's):
+/// each message as the recorder writes its JSON, on its recorded channel name
+/// (`/vehicle/state`, `/camera/frame/header`), at its log time.
+#[derive(Default)]
+pub struct Analysis {
+    /// First wire time per capture: (wire, chain of stamps).
+    chains: HashMap<u64, (u64, Vec<Stamp>)>,
+    per_topic: BTreeMap<String, Vec<f64>>,
+    last_seq: HashMap<String, u64>,
+    drops: BTreeMap<String, u64>,
+    counts: BTreeMap<String, u64>,
+    span: HashMap<String, (u64, u64)>,
+    cpu: BTreeMap<String, CpuTrack>,
+}
+
+impl Analysis {
+    /// Takes in one message: `channel` as recorded (`/px4/setpoint_sent`), its JSON.
+    pub fn add(&mut self, channel: &str, log_time: u64, v: &Value) {
+        if channel.strip_prefix('/') == Some(topics::WATCHDOG_VIEW) {
             let n = v["count"].as_u64().unwrap_or(0) as usize;
             for p in v["processes"].as_array().into_iter().flatten().take(n) {
                 let (Some(name), Some(ns)) = (p["name"].as_str(), p["cpu_ns"].as_u64()) else {
                     continue;
                 };
-                let track = cpu.entry(name.to_string()).or_default();
+                let track = self.cpu.entry(name.to_string()).or_default();
                 let changed = track.samples.last().is_none_or(|l| l.1 != ns);
                 if ns > 0 && changed {
                     let percent = p["cpu_percent"].as_f64().unwrap_or(0.0);
-                    track.samples.push((m.log_time, ns, percent));
+                    track.samples.push((log_time, ns, percent));
                 }
             }
         }
-        let Some((seq, capture, stamps)) = header(&v) else {
+        let Some((seq, capture, stamps)) = header(v) else {
             return;
         };
-        let topic = m.topic.to_string();
-        *counts.entry(topic.clone()).or_insert(0) += 1;
-        let s = span
+        let topic = channel.to_string();
+        *self.counts.entry(topic.clone()).or_insert(0) += 1;
+        let s = self
+            .span
             .entry(topic.clone())
-            .or_insert((m.log_time, m.log_time));
-        s.1 = m.log_time;
+            .or_insert((log_time, log_time));
+        s.1 = log_time;
         // Drops: a sequence that jumps (repeats, as the fsm's periodic status, are not).
-        if let Some(prev) = last_seq.insert(topic.clone(), seq)
+        if let Some(prev) = self.last_seq.insert(topic.clone(), seq)
             && seq > prev + 1
         {
-            *drops.entry(topic.clone()).or_insert(0) += seq - prev - 1;
+            *self.drops.entry(topic.clone()).or_insert(0) += seq - prev - 1;
         } else {
-            drops.entry(topic.clone()).or_insert(0);
+            self.drops.entry(topic.clone()).or_insert(0);
         }
         if let Some(last) = stamps.last() {
             let from = match stamps.len() {
@@ -228,13 +242,14 @@ pub fn analyse(file: &Path) -> Result<LatencyReport> {
                 n => stamps[n - 2].exit_ns,
             };
             if capture > 0 && last.exit_ns >= from {
-                per_topic
-                    .entry(format!("{} -> {}", stage_name(last.stage), &topic[1..]))
+                let name = topic.get(1..).unwrap_or(&topic);
+                self.per_topic
+                    .entry(format!("{} -> {name}", stage_name(last.stage)))
                     .or_default()
                     .push(ms(from, last.exit_ns));
             }
         }
-        if m.topic == sent_topic
+        if channel.strip_prefix('/') == Some(topics::PX4_SETPOINT_SENT)
             && capture > 0
             && stamps
                 .first()
@@ -244,64 +259,94 @@ pub fn analyse(file: &Path) -> Result<LatencyReport> {
                 .is_some_and(|s| s.stage == Stage::Px4Link as u32)
         {
             let wire = stamps.last().map_or(0, |s| s.exit_ns);
-            match chains.get(&capture) {
+            match self.chains.get(&capture) {
                 Some((w, _)) if *w <= wire => {}
                 _ => {
-                    chains.insert(capture, (wire, stamps));
+                    self.chains.insert(capture, (wire, stamps));
                 }
             }
         }
-    })?;
-    let mut e2e = vec![];
-    let mut c2w = vec![];
-    let mut by_stage: BTreeMap<String, Vec<f64>> = BTreeMap::new();
-    for (capture, (wire, stamps)) in &chains {
-        let delivered = stamps[0].exit_ns;
-        e2e.push(ms(delivered, *wire));
-        c2w.push(ms(*capture, *wire));
-        for w in stamps.windows(2) {
-            by_stage
-                .entry(stage_name(w[1].stage))
-                .or_default()
-                .push(ms(w[0].exit_ns, w[1].exit_ns));
+    }
+
+    /// The report of everything taken in so far.
+    pub fn report(&self) -> LatencyReport {
+        let mut e2e = vec![];
+        let mut c2w = vec![];
+        let mut by_stage: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+        for (capture, (wire, stamps)) in &self.chains {
+            let delivered = stamps[0].exit_ns;
+            e2e.push(ms(delivered, *wire));
+            c2w.push(ms(*capture, *wire));
+            for w in stamps.windows(2) {
+                by_stage
+                    .entry(stage_name(w[1].stage))
+                    .or_default()
+                    .push(ms(w[0].exit_ns, w[1].exit_ns));
+            }
+        }
+        let short = |t: &str| t.get(1..).unwrap_or(t).to_string();
+        let rates_hz = self
+            .counts
+            .iter()
+            .map(|(t, n)| {
+                let (a, b) = self.span.get(t).copied().unwrap_or((0, 0));
+                let secs = (b.saturating_sub(a)) as f64 * 1e-9;
+                let rate = if secs > 0.0 && *n > 1 {
+                    (*n - 1) as f64 / secs
+                } else {
+                    0.0
+                };
+                (short(t), rate)
+            })
+            .collect();
+        LatencyReport {
+            end_to_end_ms: Percentiles::of(&e2e),
+            capture_to_wire_ms: Percentiles::of(&c2w),
+            stages: by_stage
+                .iter()
+                .filter_map(|(k, v)| Some((k.clone(), Percentiles::of(v)?)))
+                .collect(),
+            topics: self
+                .per_topic
+                .iter()
+                .filter_map(|(k, v)| Some((k.clone(), Percentiles::of(v)?)))
+                .collect(),
+            drops: self.drops.iter().map(|(t, n)| (short(t), *n)).collect(),
+            rates_hz,
+            cpu_percent: self
+                .cpu
+                .iter()
+                .filter_map(|(k, t)| Some((k.clone(), t.usage()?)))
+                .collect(),
+            broken: None,
+            end_to_end_samples_ms: e2e,
         }
     }
-    let rates_hz = counts
-        .iter()
-        .map(|(t, n)| {
-            let (a, b) = span.get(t).copied().unwrap_or((0, 0));
-            let secs = (b.saturating_sub(a)) as f64 * 1e-9;
-            let rate = if secs > 0.0 && *n > 1 {
-                (*n - 1) as f64 / secs
-            } else {
-                0.0
-            };
-            (t[1..].to_string(), rate)
-        })
-        .collect();
-    Ok(LatencyReport {
-        end_to_end_ms: Percentiles::of(&e2e),
-        capture_to_wire_ms: Percentiles::of(&c2w),
-        stages: by_stage
-            .iter()
-            .filter_map(|(k, v)| Some((k.clone(), Percentiles::of(v)?)))
-            .collect(),
-        topics: per_topic
-            .iter()
-            .filter_map(|(k, v)| Some((k.clone(), Percentiles::of(v)?)))
-            .collect(),
-        drops: drops
-            .into_iter()
-            .map(|(t, n)| (t[1..].to_string(), n))
-            .collect(),
-        rates_hz,
-        cpu_percent: cpu
-            .iter()
-            .filter_map(|(k, t)| Some((k.clone(), t.usage()?)))
-            .collect(),
-        broken: summary.broken.map(|b| b.to_string()),
-        end_to_end_samples_ms: e2e,
-    })
+}
+
+/// Reads `file` and computes the report.
+pub fn analyse(file: &Path) -> Result<LatencyReport> {
+    let mut analysis = Analysis::default();
+    let summary = recorder::read_messages(file, &mut |m| {
+        if m.encoding != "json" {
+            return;
+        }
+        if let Ok(v) = serde_json::from_slice::<Value>(m.data) {
+            analysis.add(m.topic, m.log_time, &v);
+        }
+    })?;
+    let mut report = analysis.report();
+    report.broken = summary.broken.map(|b| b.to_string());
+    Ok(report)
+}
+
+fn positive_seconds(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 && v <= 86_400.0 => Ok(v),
+        _ => Err(format!(
+            "`{s}` (allowed: seconds, more than 0, at most 86400)"
+        )),
+    }
 }
 
 fn row(name: &str, p: &Percentiles) -> String {
@@ -311,9 +356,23 @@ fn row(name: &str, p: &Percentiles) -> String {
     )
 }
 
-/// Runs `landing latency`.
-pub fn run(args: &LatencyArgs) -> Result<()> {
-    let report = analyse(&args.file)?;
+/// Runs `landing latency` (`prefix`: the global --ipc-prefix, for --live).
+pub fn run(args: &LatencyArgs, prefix: Option<&str>) -> Result<()> {
+    let report = match &args.file {
+        Some(file) => analyse(file)?,
+        None => {
+            let graph = args
+                .graph
+                .clone()
+                .unwrap_or_else(|| graph::default_path(&stack_config::deploy_dir()));
+            crate::latency_live::watch(
+                prefix,
+                &graph,
+                std::time::Duration::from_secs_f64(args.period),
+                args.seconds,
+            )?
+        }
+    };
     if let Some(dir) = &args.plot {
         std::fs::create_dir_all(dir)?;
         let p = dir.join("end_to_end_ms.png");
@@ -364,8 +423,8 @@ pub fn run(args: &LatencyArgs) -> Result<()> {
             "  no setpoint on the wire derives from a camera frame: was the pad tracked, and was px4/setpoint_sent recorded?"
         );
     }
-    if let Some(b) = &report.broken {
-        bail!("{}: {b}", args.file.display());
+    if let (Some(b), Some(file)) = (&report.broken, &args.file) {
+        bail!("{}: {b}", file.display());
     }
     Ok(())
 }

@@ -47,9 +47,10 @@ enum Command {
     /// Look into MCAP recordings (`landing run --record`).
     #[command(subcommand)]
     Mcap(McapCommand),
-    /// Per-stage and end-to-end latency of a recording (camera frame -> pad observation
-    /// -> setpoint on the MAVLink wire), p50/p90/p99/max, message rates and drops by
-    /// sequence gaps; --plot draws the end-to-end histogram (docs/recording.md).
+    /// Per-stage and end-to-end latency of a recording, or of the running stack with
+    /// --live (camera frame -> pad observation -> setpoint on the MAVLink wire),
+    /// p50/p90/p99/max, message rates, drops by sequence gaps and CPU per process; --plot
+    /// draws the end-to-end histogram (docs/recording.md).
     Latency(latency_cmd::LatencyArgs),
     /// Run one stage again on a recording's inputs through its own library and compare
     /// its outputs, bit for bit, with what it published in flight (aruco-pnp, recorded with
@@ -233,7 +234,7 @@ fn main() -> ExitCode {
             other => other.map(|_| ()),
         },
         Command::Mcap(McapCommand::Info { file, json }) => mcap_info(&file, json),
-        Command::Latency(args) => latency_cmd::run(&args),
+        Command::Latency(args) => latency_cmd::run(&args, cli.ipc_prefix.as_deref()),
         Command::Replay(args) => match replay_cmd::run(&args) {
             Ok(false) => return ExitCode::from(1),
             other => other.map(|_| ()),

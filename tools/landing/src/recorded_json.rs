@@ -4,9 +4,9 @@
 
 use anyhow::{Context, Result};
 use ipc_types::msg::{
-    CameraFrameHeader, FsmStatus, Header, LinkHealth, LinkOutcome, MAX_CONTROL_POINTS, MAX_MARKERS,
-    MAX_STAGES, PadObservation, Point2, Pose, SafetyCommand, StageStamp, Text, Trajectory,
-    TruthEvent, TruthState, VehicleState,
+    CameraFrameHeader, DepthFrameHeader, FsmStatus, Header, Intrinsics, LinkHealth, LinkOutcome,
+    MAX_CONTROL_POINTS, MAX_MARKERS, MAX_STAGES, OccupancyMapHeader, PadObservation, Point2, Pose,
+    SafetyCommand, StageStamp, Text, Trajectory, TruthEvent, TruthState, VehicleState,
 };
 use serde_json::Value;
 
@@ -227,5 +227,37 @@ pub(crate) fn truth_event(v: &Value) -> Result<TruthEvent> {
         obstacle_index: u32_of(&v["obstacle_index"])?,
         reserved: 0,
         reason: Text::new(v["reason"].as_str().unwrap_or("")),
+    })
+}
+
+/// A depth frame's header as recorded (JSON).
+pub(crate) fn depth_header(v: &Value) -> Result<DepthFrameHeader> {
+    let k = &v["intrinsics"];
+    Ok(DepthFrameHeader {
+        msg: header(&v["msg"])?,
+        width: u32_of(&v["width"])?,
+        height: u32_of(&v["height"])?,
+        depth_scale_m: f64_of(&v["depth_scale_m"]),
+        intrinsics: Intrinsics {
+            fx: f64_of(&k["fx"]),
+            fy: f64_of(&k["fy"]),
+            cx: f64_of(&k["cx"]),
+            cy: f64_of(&k["cy"]),
+        },
+        camera_id: u32_of(&v["camera_id"])?,
+        reserved: 0,
+    })
+}
+
+/// An occupancy map's header as recorded (JSON).
+pub(crate) fn map_header(v: &Value) -> Result<OccupancyMapHeader> {
+    let d = &v["dims"];
+    Ok(OccupancyMapHeader {
+        msg: header(&v["msg"])?,
+        origin: arr(&v["origin"]),
+        resolution: f64_of(&v["resolution"]),
+        inflation: f64_of(&v["inflation"]),
+        dims: [u32_of(&d[0])?, u32_of(&d[1])?, u32_of(&d[2])?],
+        reserved: 0,
     })
 }

@@ -32,7 +32,8 @@ pub struct ReplayArgs {
     /// The recording (made with --raw-images for aruco-pnp).
     #[arg(value_name = "FILE.mcap")]
     pub(crate) file: PathBuf,
-    /// The stage to run again: aruco-pnp (a --raw-images recording) or fsm.
+    /// The stage to run again: aruco-pnp (a --raw-images recording), depth-map, planner
+    /// or fsm.
     #[arg(long)]
     pub(crate) stage: String,
     /// The deploy directory (scenarios, calibrations; default: found as `landing run`
@@ -350,7 +351,9 @@ pub fn run(args: &ReplayArgs) -> Result<bool> {
     let report = match args.stage.as_str() {
         "aruco-pnp" => replay_aruco(args)?,
         "fsm" => crate::replay_fsm::replay(args)?,
-        other => bail!("--stage {other}: allowed: aruco-pnp, fsm"),
+        "depth-map" => crate::replay_depth::replay(args)?,
+        "planner" => crate::replay_planner::replay(args)?,
+        other => bail!("--stage {other}: allowed: aruco-pnp, depth-map, planner, fsm"),
     };
     let differing = report.different;
     if args.json {

@@ -120,10 +120,16 @@ impl Outbox for Statuses {
     }
 }
 
-/// When the publisher let a message out: its last stamp's exit (the recorder's log time
-/// when it carries none).
-fn sent_at(h: &Header, log_time: u64) -> u64 {
-    h.stages().last().map_or(log_time, |s| s.exit_ns)
+/// When the publisher let a message out: its last stamp's exit. A message with no stamp
+/// (px4-link's outcomes before they were stamped) counts from its capture time, when it
+/// was made: the recorder's log time is when the recorder's round began, which can be
+/// before a message taken in that round was published.
+pub(crate) fn sent_at(h: &Header, log_time: u64) -> u64 {
+    match h.stages().last() {
+        Some(s) => s.exit_ns,
+        None if h.capture_ns > 0 => h.capture_ns,
+        None => log_time,
+    }
 }
 
 /// The fsm's step time on what it published: its stamp's enter.

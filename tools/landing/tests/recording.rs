@@ -172,9 +172,13 @@ fn replaying_aruco_pnp_on_jpeg_frames_is_refused_in_one_line() {
     assert!(!o.status.success());
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
     assert!(err.contains("--raw-images"), "{err}");
-    let o = landing(&["replay", path.to_str().unwrap(), "--stage", "planner"]);
+    let o = landing(&["replay", path.to_str().unwrap(), "--stage", "camera-ingest"]);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("allowed: aruco-pnp"), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("allowed: aruco-pnp, depth-map, planner, fsm"),
+        "{err}"
+    );
 }
 
 /// `landing replay --stage fsm --json` on `path` (with `extra` arguments): the report.
@@ -336,4 +340,35 @@ fn plotting_a_recording_draws_the_plots_the_run_drew() {
     assert!(estimated != std::fs::read(rec_dir.join("top.png")).unwrap());
     let printed = String::from_utf8_lossy(&o.stdout);
     assert_eq!(printed.lines().count(), 2, "{printed}");
+}
+
+/// `landing replay --stage STAGE --json` on `path`: whether it reproduced, the report.
+fn replay(path: &std::path::Path, stage: &str) -> (bool, serde_json::Value) {
+    let o = landing(&["replay", path.to_str().unwrap(), "--stage", stage, "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&o.stderr)));
+    (o.status.success(), v)
+}
+
+#[test]
+fn replaying_depth_map_reproduces_every_map_cell_for_cell_in_lockstep_and_in_processes() {
+    for path in [recording(), processes_recording()] {
+        let (ok, v) = replay(&path, "depth-map");
+        assert!(ok, "{}: {v}", path.display());
+        // A map every depth frame, 30 Hz, over the flight.
+        assert!(v["recorded"].as_u64().unwrap() > 100, "{v}");
+        assert_eq!(v["identical"], v["recorded"], "{v}");
+        assert_eq!(v["replayed"], v["recorded"], "{v}");
+    }
+}
+
+#[test]
+fn replaying_the_planner_reproduces_every_trajectory_in_lockstep_and_in_processes() {
+    for path in [recording(), processes_recording()] {
+        let (ok, v) = replay(&path, "planner");
+        assert!(ok, "{}: {v}", path.display());
+        assert!(v["recorded"].as_u64().unwrap() > 5, "{v}");
+        assert_eq!(v["identical"], v["recorded"], "{v}");
+        assert_eq!(v["replayed"], v["recorded"], "{v}");
+    }
 }

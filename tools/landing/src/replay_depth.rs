@@ -1,0 +1,265 @@
+//! `landing replay --stage depth-map`: the occupancy mapper run again on a recording's
+//! vehicle states and depth frames, every map it publishes compared, cell for cell, with
+//! the one the flight's depth-map published.
+//!
+//! Each recorded map carries depth-map's stamp: its enter is when the flight's stage
+//! made it, either on a depth frame (the map's capture time is the frame's, made at the
+//! time it took the frame) or on its clock (the same map again when frames stop). The
+//! replay builds a new stage as `landing run` builds it, hands it every state px4-link
+//! had published by then and each depth frame at the time the flight's stage took it,
+//! ticks it at the other map times, and compares the maps in order: the header (window
+//! origin, resolution, inflation, dims, capture time) and every cell of the window
+//! (`/map/occupancy`, `foxglove.VoxelGrid`, one byte per cell).
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+
+use anyhow::{Result, bail};
+use foxglove::Decode;
+use foxglove::schemas::{RawImage, VoxelGrid};
+use ipc_types::msg::{
+    DepthFrameHeader, Header, OccupancyMapHeader, Stage as StageId, VehicleState,
+};
+use ipc_types::topics;
+use stage::{Input, Message, Outbox, SliceHeader, SliceMut, StageError};
+
+use crate::recorded_json::{depth_header, map_header, vehicle_state};
+use crate::replay_cmd::{Flight, ReplayArgs, ReplayReport};
+
+/// The maps the replayed stage publishes, with their cells.
+#[derive(Default)]
+struct Maps(Vec<(OccupancyMapHeader, Vec<u8>)>);
+
+impl Outbox for Maps {
+    fn publish(&mut self, _topic: &str, _msg: Message<'_>) -> Result<(), StageError> {
+        Ok(())
+    }
+
+    fn publish_slice(
+        &mut self,
+        _topic: &str,
+        len: usize,
+        fill: &mut dyn FnMut(SliceMut<'_>) -> Option<SliceHeader>,
+    ) -> Result<bool, StageError> {
+        let mut cells = vec![0u8; len];
+        match fill(SliceMut::U8(&mut cells)) {
+            Some(SliceHeader::OccupancyMap(h)) => {
+                self.0.push((h, cells));
+                Ok(true)
+            }
+            _ => Ok(false),
+        }
+    }
+}
+
+/// One input of the replay, in the order the flight's stage met them.
+enum Event {
+    State(VehicleState),
+    Frame(DepthFrameHeader, Vec<u16>),
+    Tick,
+}
+
+fn enter_of(h: &Header, stage: StageId) -> Option<u64> {
+    h.stages()
+        .iter()
+        .rev()
+        .find(|s| s.stage == stage as u32)
+        .map(|s| s.enter_ns)
+}
+
+fn exit_of(h: &Header, stage: StageId) -> Option<u64> {
+    h.stages()
+        .iter()
+        .rev()
+        .find(|s| s.stage == stage as u32)
+        .map(|s| s.exit_ns)
+}
+
+/// A recorded map: its header and, when the recording holds them, its cells.
+struct Recorded {
+    header: OccupancyMapHeader,
+    cells: Option<Vec<u8>>,
+}
+
+/// The header's results (what the stage computed), without the stage stamps.
+fn same_header(a: &OccupancyMapHeader, b: &OccupancyMapHeader) -> Option<String> {
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    if a.msg.capture_ns != b.msg.capture_ns {
+        return Some(format!(
+            "capture {} replayed, {} in flight",
+            a.msg.capture_ns, b.msg.capture_ns
+        ));
+    }
+    if bits(&a.origin) != bits(&b.origin) {
+        return Some(format!(
+            "origin {:?} replayed, {:?} in flight",
+            a.origin, b.origin
+        ));
+    }
+    if a.resolution.to_bits() != b.resolution.to_bits()
+        || a.inflation.to_bits() != b.inflation.to_bits()
+        || a.dims != b.dims
+    {
+        return Some("resolution, inflation or dims".into());
+    }
+    None
+}
+
+/// Replays depth-map on the recording `args.file`.
+pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
+    let mut states: Vec<(u64, VehicleState)> = vec![];
+    let mut frame_headers: HashMap<u64, DepthFrameHeader> = HashMap::new();
+    let mut frames: HashMap<u64, Vec<u16>> = HashMap::new();
+    let mut maps: Vec<Recorded> = vec![];
+    // Cells by the map's log time, matched to headers logged at the same time.
+    let mut grids: BTreeMap<u64, Vec<u8>> = BTreeMap::new();
+    let mut header_times: Vec<u64> = vec![];
+    let mut failure: Option<anyhow::Error> = None;
+    let depth = format!("/{}", topics::SIM_DEPTH);
+    let map = format!("/{}", topics::MAP_OCCUPANCY);
+    let summary = recorder::read_messages(&args.file, &mut |m| {
+        let r = (|| -> Result<()> {
+            let topic = m.topic;
+            if topic == format!("/{}", topics::VEHICLE_STATE) {
+                let s = vehicle_state(&serde_json::from_slice(m.data)?)?;
+                let at = exit_of(&s.msg, StageId::Px4Link).unwrap_or(m.log_time);
+                states.push((at, s));
+            } else if topic == format!("{depth}/header") {
+                let h = depth_header(&serde_json::from_slice(m.data)?)?;
+                frame_headers.insert(h.msg.capture_ns, h);
+            } else if topic == depth && m.schema == "foxglove.RawImage" {
+                let img = RawImage::decode(m.data)?;
+                let ns = img.timestamp.map_or(0, |t| {
+                    u64::from(t.sec()) * 1_000_000_000 + u64::from(t.nsec())
+                });
+                let depths = img
+                    .data
+                    .chunks_exact(2)
+                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                    .collect();
+                frames.insert(ns, depths);
+            } else if topic == format!("{map}/header") {
+                let header = map_header(&serde_json::from_slice(m.data)?)?;
+                header_times.push(m.log_time);
+                maps.push(Recorded {
+                    header,
+                    cells: None,
+                });
+            } else if topic == map && m.schema == "foxglove.VoxelGrid" {
+                let grid = VoxelGrid::decode(m.data)?;
+                grids.insert(m.log_time, grid.data.to_vec());
+            }
+            Ok(())
+        })();
+        if let (Err(e), None) = (r, &failure) {
+            failure = Some(e.context(format!("message on {} at {} ns", m.topic, m.log_time)));
+        }
+    })?;
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    let flight = Flight::of(args, &summary)?;
+    if maps.is_empty() {
+        bail!("{}: no maps (/map/occupancy/header)", args.file.display());
+    }
+    if grids.is_empty() {
+        bail!(
+            "{}: no map cells (/map/occupancy, foxglove.VoxelGrid): recorded before the recorder kept them",
+            args.file.display()
+        );
+    }
+    if frames.is_empty() {
+        bail!("{}: no depth frames (/sim/depth)", args.file.display());
+    }
+    // Each header and its cells were logged together, at one log time.
+    for (m, t) in maps.iter_mut().zip(&header_times) {
+        m.cells = grids.remove(t);
+    }
+    let Some(mut stage) = flight.stage("depth-map")? else {
+        bail!("no stage for depth-map");
+    };
+
+    // When the flight's stage made each map; a frame's map at the time it took the frame.
+    let mut events: Vec<(u64, u8, Event)> = vec![];
+    let mut framed: BTreeSet<u64> = BTreeSet::new();
+    for m in &maps {
+        let Some(at) = enter_of(&m.header.msg, StageId::DepthMap) else {
+            continue;
+        };
+        let capture = m.header.msg.capture_ns;
+        let from_frame = !framed.contains(&capture)
+            && frame_headers.contains_key(&capture)
+            && frames.contains_key(&capture);
+        if from_frame {
+            framed.insert(capture);
+            let (Some(h), Some(d)) = (frame_headers.get(&capture), frames.remove(&capture)) else {
+                continue;
+            };
+            events.push((at, 1, Event::Frame(*h, d)));
+        } else {
+            events.push((at, 2, Event::Tick));
+        }
+    }
+    for (at, s) in states {
+        events.push((at, 0, Event::State(s)));
+    }
+    // States first at a tie (the graph's input order), then the frame, then the clock.
+    events.sort_by_key(|(at, kind, _)| (*at, *kind));
+    let mut out = Maps::default();
+    let mut inputs = 0u64;
+    for (at, _, e) in &events {
+        match e {
+            Event::State(s) => {
+                let input = Input {
+                    topic: topics::VEHICLE_STATE,
+                    msg: Message::VehicleState(s),
+                };
+                stage.on_input(*at, input, &mut out)?;
+            }
+            Event::Frame(h, d) => {
+                let input = Input {
+                    topic: topics::SIM_DEPTH,
+                    msg: Message::DepthFrame(h, d),
+                };
+                stage.on_input(*at, input, &mut out)?;
+            }
+            Event::Tick => stage.on_tick(*at, &mut out)?,
+        }
+        inputs += 1;
+    }
+    let mut report = ReplayReport {
+        stage: "depth-map".into(),
+        inputs,
+        recorded: maps.len() as u64,
+        replayed: out.0.len() as u64,
+        identical: 0,
+        different: 0,
+        differences: vec![],
+        missing: vec![],
+        extra: out.0.len().saturating_sub(maps.len()) as u64,
+        flown: vec![],
+    };
+    for (i, m) in maps.iter().enumerate() {
+        let Some((h, cells)) = out.0.get(i) else {
+            report.missing.push(m.header.msg.capture_ns);
+            continue;
+        };
+        let diff = same_header(h, &m.header).or_else(|| match &m.cells {
+            None => Some("no recorded cells to compare".into()),
+            Some(c) if c == cells => None,
+            Some(c) => {
+                let n = c.iter().zip(cells).filter(|(a, b)| a != b).count();
+                Some(format!("{n} of {} cells differ", c.len()))
+            }
+        });
+        match diff {
+            None => report.identical += 1,
+            Some(d) => {
+                report.different += 1;
+                if report.differences.len() < 10 {
+                    report.differences.push(format!("map {i}: {d}"));
+                }
+            }
+        }
+    }
+    Ok(report)
+}
