@@ -7,6 +7,7 @@ pub mod bench_aruco;
 pub mod bench_depth;
 pub mod bench_faults;
 pub mod bench_ipc;
+pub mod bench_latency;
 pub mod bench_perception;
 pub mod bench_planner;
 pub mod bench_recorder;

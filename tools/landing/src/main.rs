@@ -1,9 +1,9 @@
 //! `landing`: the one user-facing command of the landing stack.
 
 use landing::{
-    bench_aruco, bench_depth, bench_faults, bench_ipc, bench_perception, bench_planner,
-    bench_recorder, bench_sim, config_cmd, graph_cmd, inject_cmd, latency_cmd, map_cmd, pad_detect,
-    pad_print, plan_cmd, plot_cmd, replay_cmd, run_cmd, status_cmd,
+    bench_aruco, bench_depth, bench_faults, bench_ipc, bench_latency, bench_perception,
+    bench_planner, bench_recorder, bench_sim, config_cmd, graph_cmd, inject_cmd, latency_cmd,
+    map_cmd, pad_detect, pad_print, plan_cmd, plot_cmd, replay_cmd, run_cmd, status_cmd,
 };
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -150,6 +150,9 @@ enum BenchCommand {
     /// The recorder process under a flight's load (1280x720 camera at 30 Hz and every
     /// other topic): drops and its CPU, JPEG + zstd and raw + lz4.
     Recorder(bench_recorder::RecorderArgs),
+    /// Camera frame -> setpoint on the MAVLink wire, every stage its own process and the
+    /// simulator beside them: the shipped config and new_setpoints_at_once = true.
+    Latency(bench_latency::LatencyBenchArgs),
     /// Internal: the publishing side of `bench ipc`, started by it in a second process.
     #[command(hide = true)]
     IpcPeer(bench_ipc::PeerArgs),
@@ -218,6 +221,7 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::Planner(args)) => bench_planner::run(&args),
         Command::Bench(BenchCommand::Faults(args)) => bench_faults::run(&args),
         Command::Bench(BenchCommand::Recorder(args)) => bench_recorder::run(&args),
+        Command::Bench(BenchCommand::Latency(args)) => bench_latency::run(&args),
         Command::Plan(args) => match plan_cmd::run(&args) {
             Ok(false) => return ExitCode::from(plan_cmd::NO_PLAN),
             other => other.map(|_| ()),
