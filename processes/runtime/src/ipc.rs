@@ -70,6 +70,19 @@ pub enum NodeError {
         /// What iceoryx2 said.
         reason: String,
     },
+    /// Another live process already has this node under this prefix: a second stack on
+    /// the prefix would cross-talk with the first.
+    #[error(
+        "another `{name}` is running under iceoryx2 prefix `{prefix}`{pid}: one stack per prefix (stop it, or give this one another --ipc-prefix / LANDING_IPC_PREFIX)"
+    )]
+    Taken {
+        /// Node name.
+        name: String,
+        /// The prefix.
+        prefix: String,
+        /// ` (pid N)` when iceoryx2 names it.
+        pid: String,
+    },
 }
 
 /// Why a port could not be opened: its service (publish-subscribe, event or heartbeat)
@@ -427,6 +440,29 @@ impl Ipc {
             config,
             process: process.to_string(),
         })
+    }
+
+    /// [`Ipc::open`] for a process of which a stack runs one: refused when another live
+    /// process has the node `process` under `prefix`. Two stacks on one prefix would
+    /// deliver each other's messages; this makes the second one stop at its start. (Two
+    /// processes starting within the same instant can both pass; a restarted process
+    /// finds its predecessor's node dead, not alive.)
+    pub fn open_exclusive(process: &str, prefix: &IpcPrefix) -> Result<Self, NodeError> {
+        let ipc = Self::open(process, prefix)?;
+        let mine = ipc.node.id().value();
+        let other = ipc
+            .nodes()
+            .unwrap_or_default()
+            .into_iter()
+            .find(|n| n.alive && n.name == process && n.id != mine);
+        if let Some(n) = other {
+            return Err(NodeError::Taken {
+                name: process.to_string(),
+                prefix: prefix.as_str().to_string(),
+                pid: n.pid.map(|p| format!(" (pid {p})")).unwrap_or_default(),
+            });
+        }
+        Ok(ipc)
     }
 
     /// True once SIGTERM or SIGINT arrived (see [`crate::shutdown`]). Not

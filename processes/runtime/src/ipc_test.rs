@@ -146,3 +146,25 @@ fn a_loan_beyond_the_maximum_is_a_loan_error_naming_the_service() {
         "{e}"
     );
 }
+
+#[test]
+fn a_second_process_of_a_node_on_a_prefix_in_use_is_refused_naming_the_prefix() {
+    let prefix = IpcPrefix::unique("excl");
+    let first = Ipc::open_exclusive("fsm", &prefix).expect("first");
+    let Err(e) = Ipc::open_exclusive("fsm", &prefix) else {
+        panic!("the second was not refused");
+    };
+    let msg = e.to_string();
+    assert!(msg.contains(prefix.as_str()), "{msg}");
+    assert!(msg.contains("one stack per prefix"), "{msg}");
+    assert!(
+        msg.contains(&format!("pid {}", std::process::id())),
+        "{msg}"
+    );
+    // Another node, or another prefix, is free; so is the name once the first is gone.
+    let _planner = Ipc::open_exclusive("planner", &prefix).expect("another node");
+    let _elsewhere =
+        Ipc::open_exclusive("fsm", &IpcPrefix::unique("excl")).expect("another prefix");
+    drop(first);
+    let _again = Ipc::open_exclusive("fsm", &prefix).expect("free again");
+}

@@ -104,7 +104,8 @@ pub fn serve(
         }
     }
     let prefix = IpcPrefix::resolve(args.ipc_prefix.as_deref(), &ipc_cfg.prefix)?;
-    let ipc = Ipc::open(stage.name(), &prefix)?;
+    // One stack per prefix: a second process of this node refuses to start.
+    let ipc = Ipc::open_exclusive(stage.name(), &prefix)?;
     let beat = Beat {
         period: Duration::from_millis(ipc_cfg.heartbeat_period_ms),
         deadline: Duration::from_millis(node.heartbeat_deadline_ms),

@@ -47,6 +47,14 @@ impl Children {
         }
     }
 
+    /// Waits for the child started as `name` to exit (after a kill): its iceoryx2 node is
+    /// dead from then on, so the process started in its place may take the name.
+    pub fn reap(&mut self, name: &str) {
+        if let Some((_, c)) = self.0.iter_mut().find(|(n, _)| n == name) {
+            let _ = c.wait();
+        }
+    }
+
     /// The process id of the child started as `name`.
     pub fn pid_of(&self, name: &str) -> Option<u32> {
         self.0.iter().find(|(n, _)| n == name).map(|(_, c)| c.id())

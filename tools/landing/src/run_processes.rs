@@ -162,7 +162,9 @@ pub fn run(
         Some(p) => IpcPrefix::new(p)?,
         None => IpcPrefix::unique("run"),
     };
-    let ipc = Ipc::open("landing-run", &prefix)?;
+    // One stack per prefix: a second run on a prefix in use stops here, before it starts
+    // a process.
+    let ipc = Ipc::open_exclusive("landing-run", &prefix)?;
     // Subscribers before the publishers start: no event may be missed.
     let truth = ipc.subscriber::<TruthEvent>(services::SIM_TRUTH)?;
     let truth_state = ipc.subscriber::<TruthState>(services::SIM_TRUTH_STATE)?;
@@ -316,8 +318,9 @@ pub fn run(
                     // SAFETY: signalling our own child.
                     unsafe { libc::kill(pid as i32, sig) };
                     if inj.fault == Fault::Restart {
-                        // As systemd restarts a unit: the same command, its log
-                        // appended to.
+                        // As systemd restarts a unit: once the old process has exited,
+                        // the same command, its log appended to.
+                        children.reap(&inj.process);
                         let again = launch
                             .graph
                             .nodes

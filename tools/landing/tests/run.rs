@@ -302,3 +302,59 @@ fn an_unknown_scenario_is_one_line_and_exit_2() {
     assert_eq!(lines.len(), 1, "{err}");
     assert!(lines[0].contains("no-such-scenario"), "{err}");
 }
+
+#[test]
+fn a_second_stack_on_a_prefix_in_use_refuses_to_start_in_one_line() {
+    let name = format!("lt_twice_{}", std::process::id());
+    let mut first = std::process::Command::new(env!("CARGO_BIN_EXE_landing"))
+        .args([
+            "--ipc-prefix",
+            &name,
+            "run",
+            "--scenario",
+            "paper-sim",
+            "--processes",
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Until the first run's own node is up on the prefix.
+    let prefix = runtime::IpcPrefix::new(&name).unwrap();
+    let probe = runtime::Ipc::open("test-probe", &prefix).unwrap();
+    let start = std::time::Instant::now();
+    while !probe
+        .nodes()
+        .unwrap_or_default()
+        .iter()
+        .any(|n| n.alive && n.name == "landing-run")
+    {
+        assert!(
+            start.elapsed().as_secs() < 60,
+            "the first run never came up"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let second = landing(&[
+        "--ipc-prefix",
+        &name,
+        "run",
+        "--scenario",
+        "paper-sim",
+        "--processes",
+    ]);
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert!(!second.status.success(), "{err}");
+    let line = err
+        .lines()
+        .find(|l| l.starts_with("error:"))
+        .unwrap_or_default();
+    assert!(
+        line.contains(&format!("prefix `{name}`")) && line.contains("one stack per prefix"),
+        "{err}"
+    );
+    // The first flies on, untouched; stopped here as Ctrl-C stops it.
+    unsafe { libc::kill(first.id() as i32, libc::SIGINT) };
+    first.wait().unwrap();
+    drop(probe);
+}
