@@ -305,36 +305,11 @@ fn an_unknown_scenario_is_one_line_and_exit_2() {
 
 #[test]
 fn a_second_stack_on_a_prefix_in_use_refuses_to_start_in_one_line() {
+    // The running stack's `landing run` node, held here: a whole second stack would load
+    // the machine the flight tests beside this one run on.
     let name = format!("lt_twice_{}", std::process::id());
-    let mut first = std::process::Command::new(env!("CARGO_BIN_EXE_landing"))
-        .args([
-            "--ipc-prefix",
-            &name,
-            "run",
-            "--scenario",
-            "paper-sim",
-            "--processes",
-        ])
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    // Until the first run's own node is up on the prefix.
     let prefix = runtime::IpcPrefix::new(&name).unwrap();
-    let probe = runtime::Ipc::open("test-probe", &prefix).unwrap();
-    let start = std::time::Instant::now();
-    while !probe
-        .nodes()
-        .unwrap_or_default()
-        .iter()
-        .any(|n| n.alive && n.name == "landing-run")
-    {
-        assert!(
-            start.elapsed().as_secs() < 60,
-            "the first run never came up"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
+    let running = runtime::Ipc::open_exclusive("landing-run", &prefix).unwrap();
     let second = landing(&[
         "--ipc-prefix",
         &name,
@@ -353,8 +328,15 @@ fn a_second_stack_on_a_prefix_in_use_refuses_to_start_in_one_line() {
         line.contains(&format!("prefix `{name}`")) && line.contains("one stack per prefix"),
         "{err}"
     );
-    // The first flies on, untouched; stopped here as Ctrl-C stops it.
-    unsafe { libc::kill(first.id() as i32, libc::SIGINT) };
-    first.wait().unwrap();
-    drop(probe);
+    assert!(
+        line.contains(&format!("pid {}", std::process::id())),
+        "{err}"
+    );
+    // It stopped before starting any process: nothing of it is on the prefix.
+    let nodes = running.nodes().unwrap_or_default();
+    assert!(
+        nodes.iter().all(|n| !n.alive || n.name == "landing-run"),
+        "{:?}",
+        nodes.iter().map(|n| &n.name).collect::<Vec<_>>()
+    );
 }
