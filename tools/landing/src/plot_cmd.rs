@@ -60,41 +60,30 @@ struct Read {
 
 /// Reads the messages of `path` the plots need into `read`.
 fn read_file(path: &Path, read: &mut Read) -> Result<()> {
-    let mut failure: Option<anyhow::Error> = None;
-    let summary = recorder::read_messages(path, &mut |m| {
+    let summary = crate::recorded_json::read_recording(path, |m| {
         if m.encoding != "json" {
-            return;
+            return Ok(());
         }
         let topic = m.topic.trim_start_matches('/');
-        let r = (|| -> Result<()> {
-            let event = match topic {
-                topics::FSM_STATUS => Event::Status(fsm_status(&serde_json::from_slice(m.data)?)?),
-                topics::VEHICLE_STATE => {
-                    Event::State(vehicle_state(&serde_json::from_slice(m.data)?)?)
+        let event = match topic {
+            topics::FSM_STATUS => Event::Status(fsm_status(&serde_json::from_slice(m.data)?)?),
+            topics::VEHICLE_STATE => Event::State(vehicle_state(&serde_json::from_slice(m.data)?)?),
+            topics::SIM_TRUTH => Event::Truth(truth_event(&serde_json::from_slice(m.data)?)?),
+            topics::SIM_TRUTH_STATE => {
+                Event::TruthState(truth_state(&serde_json::from_slice(m.data)?)?)
+            }
+            topics::PLANNER_STATS => {
+                let v: Value = serde_json::from_slice(m.data)?;
+                if let Some(ms) = stage_ms(&header(&v["msg"])?, StageId::Planner) {
+                    read.planning_ms.push(ms);
                 }
-                topics::SIM_TRUTH => Event::Truth(truth_event(&serde_json::from_slice(m.data)?)?),
-                topics::SIM_TRUTH_STATE => {
-                    Event::TruthState(truth_state(&serde_json::from_slice(m.data)?)?)
-                }
-                topics::PLANNER_STATS => {
-                    let v: Value = serde_json::from_slice(m.data)?;
-                    if let Some(ms) = stage_ms(&header(&v["msg"])?, StageId::Planner) {
-                        read.planning_ms.push(ms);
-                    }
-                    return Ok(());
-                }
-                _ => return Ok(()),
-            };
-            read.events.push((m.log_time, event));
-            Ok(())
-        })();
-        if let (Err(e), None) = (r, &failure) {
-            failure = Some(e.context(format!("message on {} at {} ns", m.topic, m.log_time)));
-        }
+                return Ok(());
+            }
+            _ => return Ok(()),
+        };
+        read.events.push((m.log_time, event));
+        Ok(())
     })?;
-    if let Some(e) = failure {
-        return Err(e);
-    }
     if let Some(b) = &summary.broken {
         // What was read is plotted; the damage is named.
         eprintln!("  {}: {b}", path.display());

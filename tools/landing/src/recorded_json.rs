@@ -261,3 +261,24 @@ pub(crate) fn map_header(v: &Value) -> Result<OccupancyMapHeader> {
         reserved: 0,
     })
 }
+
+/// Reads every message of the recording `file` with `each`; the first error `each`
+/// returns ends the reading as an error naming the message (topic, log time). What the
+/// reader found (metadata, where the file broke) is the summary.
+pub(crate) fn read_recording(
+    file: &std::path::Path,
+    mut each: impl FnMut(&recorder::RecordedMessage<'_>) -> Result<()>,
+) -> Result<recorder::ReadSummary> {
+    let mut failure: Option<anyhow::Error> = None;
+    let summary = recorder::read_messages(file, &mut |m| {
+        if failure.is_none()
+            && let Err(e) = each(m)
+        {
+            failure = Some(e.context(format!("message on {} at {} ns", m.topic, m.log_time)));
+        }
+    })?;
+    match failure {
+        Some(e) => Err(e),
+        None => Ok(summary),
+    }
+}

@@ -224,38 +224,29 @@ fn replay_aruco(args: &ReplayArgs) -> Result<ReplayReport> {
     // The recorded observations, by capture time: their JSON and the flight's header.
     let mut recorded: BTreeMap<u64, (Value, Header)> = BTreeMap::new();
     let mut jpeg = false;
-    let mut failure: Option<anyhow::Error> = None;
-    let summary = recorder::read_messages(&args.file, &mut |m| {
-        let r = (|| -> Result<()> {
-            match (m.topic, m.schema) {
-                ("/vehicle/state", _) => {
-                    let s = vehicle_state(&serde_json::from_slice(m.data)?)?;
-                    // When px4-link published it.
-                    let at = exit_of(&s.msg, StageId::Px4Link).unwrap_or(m.log_time);
-                    states.push((at, s));
-                }
-                ("/camera/frame/header", _) => {
-                    let h = frame_header(&serde_json::from_slice(m.data)?)?;
-                    headers.insert(h.msg.capture_ns, h);
-                }
-                ("/camera/frame", "foxglove.RawImage") => images.push(RawImage::decode(m.data)?),
-                ("/camera/frame", _) => jpeg = true,
-                ("/pad/observation", _) => {
-                    let v: Value = serde_json::from_slice(m.data)?;
-                    let h = header(&v["msg"])?;
-                    recorded.insert(h.capture_ns, (v, h));
-                }
-                _ => {}
+    let summary = crate::recorded_json::read_recording(&args.file, |m| {
+        match (m.topic, m.schema) {
+            ("/vehicle/state", _) => {
+                let s = vehicle_state(&serde_json::from_slice(m.data)?)?;
+                // When px4-link published it.
+                let at = exit_of(&s.msg, StageId::Px4Link).unwrap_or(m.log_time);
+                states.push((at, s));
             }
-            Ok(())
-        })();
-        if let (Err(e), None) = (r, &failure) {
-            failure = Some(e.context(format!("message on {} at {} ns", m.topic, m.log_time)));
+            ("/camera/frame/header", _) => {
+                let h = frame_header(&serde_json::from_slice(m.data)?)?;
+                headers.insert(h.msg.capture_ns, h);
+            }
+            ("/camera/frame", "foxglove.RawImage") => images.push(RawImage::decode(m.data)?),
+            ("/camera/frame", _) => jpeg = true,
+            ("/pad/observation", _) => {
+                let v: Value = serde_json::from_slice(m.data)?;
+                let h = header(&v["msg"])?;
+                recorded.insert(h.capture_ns, (v, h));
+            }
+            _ => {}
         }
+        Ok(())
     })?;
-    if let Some(e) = failure {
-        return Err(e);
-    }
     let flight = Flight::of(args, &summary)?;
     if images.is_empty() {
         if jpeg {

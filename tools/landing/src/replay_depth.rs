@@ -113,50 +113,41 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
     // Cells by the map's log time, matched to headers logged at the same time.
     let mut grids: BTreeMap<u64, Vec<u8>> = BTreeMap::new();
     let mut header_times: Vec<u64> = vec![];
-    let mut failure: Option<anyhow::Error> = None;
     let depth = format!("/{}", topics::SIM_DEPTH);
     let map = format!("/{}", topics::MAP_OCCUPANCY);
-    let summary = recorder::read_messages(&args.file, &mut |m| {
-        let r = (|| -> Result<()> {
-            let topic = m.topic;
-            if topic == format!("/{}", topics::VEHICLE_STATE) {
-                let s = vehicle_state(&serde_json::from_slice(m.data)?)?;
-                let at = exit_of(&s.msg, StageId::Px4Link).unwrap_or(m.log_time);
-                states.push((at, s));
-            } else if topic == format!("{depth}/header") {
-                let h = depth_header(&serde_json::from_slice(m.data)?)?;
-                frame_headers.insert(h.msg.capture_ns, h);
-            } else if topic == depth && m.schema == "foxglove.RawImage" {
-                let img = RawImage::decode(m.data)?;
-                let ns = img.timestamp.map_or(0, |t| {
-                    u64::from(t.sec()) * 1_000_000_000 + u64::from(t.nsec())
-                });
-                let depths = img
-                    .data
-                    .chunks_exact(2)
-                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
-                    .collect();
-                frames.insert(ns, depths);
-            } else if topic == format!("{map}/header") {
-                let header = map_header(&serde_json::from_slice(m.data)?)?;
-                header_times.push(m.log_time);
-                maps.push(Recorded {
-                    header,
-                    cells: None,
-                });
-            } else if topic == map && m.schema == "foxglove.VoxelGrid" {
-                let grid = VoxelGrid::decode(m.data)?;
-                grids.insert(m.log_time, grid.data.to_vec());
-            }
-            Ok(())
-        })();
-        if let (Err(e), None) = (r, &failure) {
-            failure = Some(e.context(format!("message on {} at {} ns", m.topic, m.log_time)));
+    let summary = crate::recorded_json::read_recording(&args.file, |m| {
+        let topic = m.topic;
+        if topic == format!("/{}", topics::VEHICLE_STATE) {
+            let s = vehicle_state(&serde_json::from_slice(m.data)?)?;
+            let at = exit_of(&s.msg, StageId::Px4Link).unwrap_or(m.log_time);
+            states.push((at, s));
+        } else if topic == format!("{depth}/header") {
+            let h = depth_header(&serde_json::from_slice(m.data)?)?;
+            frame_headers.insert(h.msg.capture_ns, h);
+        } else if topic == depth && m.schema == "foxglove.RawImage" {
+            let img = RawImage::decode(m.data)?;
+            let ns = img.timestamp.map_or(0, |t| {
+                u64::from(t.sec()) * 1_000_000_000 + u64::from(t.nsec())
+            });
+            let depths = img
+                .data
+                .chunks_exact(2)
+                .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                .collect();
+            frames.insert(ns, depths);
+        } else if topic == format!("{map}/header") {
+            let header = map_header(&serde_json::from_slice(m.data)?)?;
+            header_times.push(m.log_time);
+            maps.push(Recorded {
+                header,
+                cells: None,
+            });
+        } else if topic == map && m.schema == "foxglove.VoxelGrid" {
+            let grid = VoxelGrid::decode(m.data)?;
+            grids.insert(m.log_time, grid.data.to_vec());
         }
+        Ok(())
     })?;
-    if let Some(e) = failure {
-        return Err(e);
-    }
     let flight = Flight::of(args, &summary)?;
     if maps.is_empty() {
         bail!("{}: no maps (/map/occupancy/header)", args.file.display());

@@ -97,58 +97,49 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
     let mut flown: Vec<Value> = vec![];
     let mut map_headers: Vec<(u64, OccupancyMapHeader)> = vec![];
     let mut grids: BTreeMap<u64, Vec<u8>> = BTreeMap::new();
-    let mut failure: Option<anyhow::Error> = None;
     let map = format!("/{}", topics::MAP_OCCUPANCY);
-    let summary = recorder::read_messages(&args.file, &mut |m| {
-        let r = (|| -> Result<()> {
-            let topic = m.topic.trim_start_matches('/');
-            if m.topic == map && m.schema == "foxglove.VoxelGrid" {
-                grids.insert(m.log_time, VoxelGrid::decode(m.data)?.data.to_vec());
-                return Ok(());
-            }
-            if m.encoding != "json" {
-                return Ok(());
-            }
-            let v: Value = match topic {
-                t if t == topics::VEHICLE_STATE
-                    || t == topics::PLANNER_GOAL
-                    || t == topics::PLANNER_TRAJECTORY
-                    || t == topics::PLANNER_STATS
-                    || m.topic == format!("{map}/header") =>
-                {
-                    serde_json::from_slice(m.data)?
-                }
-                _ => return Ok(()),
-            };
-            let h = header(&v["msg"])?;
-            let at = sent_at(&h, m.log_time);
-            match topic {
-                t if t == topics::VEHICLE_STATE => {
-                    events.push((at, Event::State(vehicle_state(&v)?)));
-                }
-                t if t == topics::PLANNER_GOAL => events.push((at, Event::Goal(goal(&v)?))),
-                t if t == topics::PLANNER_TRAJECTORY => {
-                    if let Some(s) = planner_step(&h) {
-                        steps.insert(s, h.capture_ns);
-                    }
-                    flown.push(results(&v));
-                }
-                t if t == topics::PLANNER_STATS => {
-                    if let Some(s) = planner_step(&h) {
-                        steps.insert(s, h.capture_ns);
-                    }
-                }
-                _ => map_headers.push((m.log_time, map_header(&v)?)),
-            }
-            Ok(())
-        })();
-        if let (Err(e), None) = (r, &failure) {
-            failure = Some(e.context(format!("message on {} at {} ns", m.topic, m.log_time)));
+    let summary = crate::recorded_json::read_recording(&args.file, |m| {
+        let topic = m.topic.trim_start_matches('/');
+        if m.topic == map && m.schema == "foxglove.VoxelGrid" {
+            grids.insert(m.log_time, VoxelGrid::decode(m.data)?.data.to_vec());
+            return Ok(());
         }
+        if m.encoding != "json" {
+            return Ok(());
+        }
+        let v: Value = match topic {
+            t if t == topics::VEHICLE_STATE
+                || t == topics::PLANNER_GOAL
+                || t == topics::PLANNER_TRAJECTORY
+                || t == topics::PLANNER_STATS
+                || m.topic == format!("{map}/header") =>
+            {
+                serde_json::from_slice(m.data)?
+            }
+            _ => return Ok(()),
+        };
+        let h = header(&v["msg"])?;
+        let at = sent_at(&h, m.log_time);
+        match topic {
+            t if t == topics::VEHICLE_STATE => {
+                events.push((at, Event::State(vehicle_state(&v)?)));
+            }
+            t if t == topics::PLANNER_GOAL => events.push((at, Event::Goal(goal(&v)?))),
+            t if t == topics::PLANNER_TRAJECTORY => {
+                if let Some(s) = planner_step(&h) {
+                    steps.insert(s, h.capture_ns);
+                }
+                flown.push(results(&v));
+            }
+            t if t == topics::PLANNER_STATS => {
+                if let Some(s) = planner_step(&h) {
+                    steps.insert(s, h.capture_ns);
+                }
+            }
+            _ => map_headers.push((m.log_time, map_header(&v)?)),
+        }
+        Ok(())
     })?;
-    if let Some(e) = failure {
-        return Err(e);
-    }
     let flight = Flight::of(args, &summary)?;
     if grids.is_empty() {
         bail!(
