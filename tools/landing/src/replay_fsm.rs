@@ -132,15 +132,6 @@ pub(crate) fn sent_at(h: &Header, log_time: u64) -> u64 {
     }
 }
 
-/// The fsm's step time on what it published: its stamp's enter.
-fn fsm_step(h: &Header) -> Option<u64> {
-    h.stages()
-        .iter()
-        .rev()
-        .find(|s| s.stage == StageId::Fsm as u32)
-        .map(|s| s.enter_ns)
-}
-
 /// Replays the fsm of the recording `args.file`.
 pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
     let mut inputs: Vec<(u64, FsmInput)> = vec![];
@@ -172,7 +163,7 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
         }
         let v: Value = serde_json::from_slice(m.data)?;
         let h = header(&v["msg"])?;
-        if published_by_fsm && let Some(t) = fsm_step(&h) {
+        if published_by_fsm && let Some(t) = crate::replay_cmd::enter_of(&h, StageId::Fsm) {
             steps.insert(t);
         }
         let input = match topic {

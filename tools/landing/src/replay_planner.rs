@@ -15,9 +15,7 @@ use std::collections::BTreeMap;
 use anyhow::{Result, bail};
 use foxglove::Decode;
 use foxglove::schemas::VoxelGrid;
-use ipc_types::msg::{
-    Header, OccupancyMapHeader, PlannerGoal, Stage as StageId, Trajectory, VehicleState,
-};
+use ipc_types::msg::{OccupancyMapHeader, PlannerGoal, Stage as StageId, Trajectory, VehicleState};
 use ipc_types::topics;
 use serde_json::Value;
 use stage::{Input, Message, Outbox, SliceHeader, SliceMut, StageError};
@@ -66,14 +64,6 @@ enum Event {
     State(VehicleState),
     Goal(PlannerGoal),
     Map(OccupancyMapHeader, Vec<u8>),
-}
-
-fn planner_step(h: &Header) -> Option<u64> {
-    h.stages()
-        .iter()
-        .rev()
-        .find(|s| s.stage == StageId::Planner as u32)
-        .map(|s| s.enter_ns)
 }
 
 /// A trajectory's results as JSON, without its header's stage stamps.
@@ -126,13 +116,13 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
             }
             t if t == topics::PLANNER_GOAL => events.push((at, Event::Goal(goal(&v)?))),
             t if t == topics::PLANNER_TRAJECTORY => {
-                if let Some(s) = planner_step(&h) {
+                if let Some(s) = crate::replay_cmd::enter_of(&h, StageId::Planner) {
                     steps.insert(s, h.capture_ns);
                 }
                 flown.push(results(&v));
             }
             t if t == topics::PLANNER_STATS => {
-                if let Some(s) = planner_step(&h) {
+                if let Some(s) = crate::replay_cmd::enter_of(&h, StageId::Planner) {
                     steps.insert(s, h.capture_ns);
                 }
             }
