@@ -282,3 +282,55 @@ pub(crate) fn read_recording(
         None => Ok(summary),
     }
 }
+
+/// One recorded map: the log time of its header, the header, and its cells when the
+/// recording holds them.
+pub(crate) struct RecordedMap {
+    pub log_time: u64,
+    pub header: OccupancyMapHeader,
+    pub cells: Option<Vec<u8>>,
+}
+
+/// The maps of a recording, each header (`/map/occupancy/header`) paired with the cells
+/// (`/map/occupancy`, `foxglove.VoxelGrid`) the recorder wrote right after it. Log times
+/// alone do not pair them: they are the recorder's round start, which two maps share
+/// when it takes both in one round.
+#[derive(Default)]
+pub(crate) struct RecordedMaps {
+    pub maps: Vec<RecordedMap>,
+    /// VoxelGrid messages met, paired or not.
+    pub grids: usize,
+}
+
+impl RecordedMaps {
+    /// Takes `m` when it is part of a map; `Ok(false)` leaves it to the caller.
+    pub(crate) fn take(&mut self, m: &recorder::RecordedMessage<'_>) -> Result<bool> {
+        let map = format!("/{}", ipc_types::topics::MAP_OCCUPANCY);
+        if m.topic == map && m.schema == "foxglove.VoxelGrid" {
+            use foxglove::Decode;
+            let grid = foxglove::schemas::VoxelGrid::decode(m.data)?;
+            self.grids += 1;
+            if let Some(last) = self.maps.last_mut()
+                && last.log_time == m.log_time
+                && last.cells.is_none()
+            {
+                last.cells = Some(grid.data.to_vec());
+            }
+            return Ok(true);
+        }
+        if m.topic == format!("{map}/header") {
+            let header = map_header(&serde_json::from_slice(m.data)?)?;
+            self.maps.push(RecordedMap {
+                log_time: m.log_time,
+                header,
+                cells: None,
+            });
+            return Ok(true);
+        }
+        Ok(false)
+    }
+}
+
+#[cfg(test)]
+#[path = "recorded_json_test.rs"]
+mod tests;

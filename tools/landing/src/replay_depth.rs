@@ -11,18 +11,18 @@
 //! origin, resolution, inflation, dims, capture time) and every cell of the window
 //! (`/map/occupancy`, `foxglove.VoxelGrid`, one byte per cell).
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeSet, HashMap};
 
 use anyhow::{Result, bail};
 use foxglove::Decode;
-use foxglove::schemas::{RawImage, VoxelGrid};
+use foxglove::schemas::RawImage;
 use ipc_types::msg::{
     DepthFrameHeader, Header, OccupancyMapHeader, Stage as StageId, VehicleState,
 };
 use ipc_types::topics;
 use stage::{Input, Message, Outbox, SliceHeader, SliceMut, StageError};
 
-use crate::recorded_json::{depth_header, map_header, vehicle_state};
+use crate::recorded_json::{RecordedMaps, depth_header, vehicle_state};
 use crate::replay_cmd::{Flight, ReplayArgs, ReplayReport};
 
 /// The maps the replayed stage publishes, with their cells.
@@ -74,12 +74,6 @@ fn exit_of(h: &Header, stage: StageId) -> Option<u64> {
         .map(|s| s.exit_ns)
 }
 
-/// A recorded map: its header and, when the recording holds them, its cells.
-struct Recorded {
-    header: OccupancyMapHeader,
-    cells: Option<Vec<u8>>,
-}
-
 /// The header's results (what the stage computed), without the stage stamps.
 fn same_header(a: &OccupancyMapHeader, b: &OccupancyMapHeader) -> Option<String> {
     let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
@@ -109,12 +103,8 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
     let mut states: Vec<(u64, VehicleState)> = vec![];
     let mut frame_headers: HashMap<u64, DepthFrameHeader> = HashMap::new();
     let mut frames: HashMap<u64, Vec<u16>> = HashMap::new();
-    let mut maps: Vec<Recorded> = vec![];
-    // Cells by the map's log time, matched to headers logged at the same time.
-    let mut grids: BTreeMap<u64, Vec<u8>> = BTreeMap::new();
-    let mut header_times: Vec<u64> = vec![];
+    let mut recorded = RecordedMaps::default();
     let depth = format!("/{}", topics::SIM_DEPTH);
-    let map = format!("/{}", topics::MAP_OCCUPANCY);
     let summary = crate::recorded_json::read_recording(&args.file, |m| {
         let topic = m.topic;
         if topic == format!("/{}", topics::VEHICLE_STATE) {
@@ -135,24 +125,17 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
                 .map(|b| u16::from_le_bytes([b[0], b[1]]))
                 .collect();
             frames.insert(ns, depths);
-        } else if topic == format!("{map}/header") {
-            let header = map_header(&serde_json::from_slice(m.data)?)?;
-            header_times.push(m.log_time);
-            maps.push(Recorded {
-                header,
-                cells: None,
-            });
-        } else if topic == map && m.schema == "foxglove.VoxelGrid" {
-            let grid = VoxelGrid::decode(m.data)?;
-            grids.insert(m.log_time, grid.data.to_vec());
+        } else {
+            recorded.take(m)?;
         }
         Ok(())
     })?;
     let flight = Flight::of(args, &summary)?;
+    let RecordedMaps { maps, grids } = recorded;
     if maps.is_empty() {
         bail!("{}: no maps (/map/occupancy/header)", args.file.display());
     }
-    if grids.is_empty() {
+    if grids == 0 {
         bail!(
             "{}: no map cells (/map/occupancy, foxglove.VoxelGrid): recorded before the recorder kept them",
             args.file.display()
@@ -160,10 +143,6 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
     }
     if frames.is_empty() {
         bail!("{}: no depth frames (/sim/depth)", args.file.display());
-    }
-    // Each header and its cells were logged together, at one log time.
-    for (m, t) in maps.iter_mut().zip(&header_times) {
-        m.cells = grids.remove(t);
     }
     let Some(mut stage) = flight.stage("depth-map")? else {
         bail!("no stage for depth-map");

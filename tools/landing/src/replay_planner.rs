@@ -13,14 +13,12 @@
 use std::collections::BTreeMap;
 
 use anyhow::{Result, bail};
-use foxglove::Decode;
-use foxglove::schemas::VoxelGrid;
 use ipc_types::msg::{OccupancyMapHeader, PlannerGoal, Stage as StageId, Trajectory, VehicleState};
 use ipc_types::topics;
 use serde_json::Value;
 use stage::{Input, Message, Outbox, SliceHeader, SliceMut, StageError};
 
-use crate::recorded_json::{arr, f64_of, header, map_header, u32_of, vehicle_state};
+use crate::recorded_json::{RecordedMaps, arr, f64_of, header, u32_of, vehicle_state};
 use crate::replay_cmd::{Flight, ReplayArgs, ReplayReport, first_difference};
 use crate::replay_fsm::sent_at;
 
@@ -85,13 +83,10 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
     let mut steps: BTreeMap<u64, u64> = BTreeMap::new();
     // The flight's trajectories in order, as JSON.
     let mut flown: Vec<Value> = vec![];
-    let mut map_headers: Vec<(u64, OccupancyMapHeader)> = vec![];
-    let mut grids: BTreeMap<u64, Vec<u8>> = BTreeMap::new();
-    let map = format!("/{}", topics::MAP_OCCUPANCY);
+    let mut maps = RecordedMaps::default();
     let summary = crate::recorded_json::read_recording(&args.file, |m| {
         let topic = m.topic.trim_start_matches('/');
-        if m.topic == map && m.schema == "foxglove.VoxelGrid" {
-            grids.insert(m.log_time, VoxelGrid::decode(m.data)?.data.to_vec());
+        if maps.take(m)? {
             return Ok(());
         }
         if m.encoding != "json" {
@@ -101,8 +96,7 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
             t if t == topics::VEHICLE_STATE
                 || t == topics::PLANNER_GOAL
                 || t == topics::PLANNER_TRAJECTORY
-                || t == topics::PLANNER_STATS
-                || m.topic == format!("{map}/header") =>
+                || t == topics::PLANNER_STATS =>
             {
                 serde_json::from_slice(m.data)?
             }
@@ -126,12 +120,12 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
                     steps.insert(s, h.capture_ns);
                 }
             }
-            _ => map_headers.push((m.log_time, map_header(&v)?)),
+            _ => {}
         }
         Ok(())
     })?;
     let flight = Flight::of(args, &summary)?;
-    if grids.is_empty() {
+    if maps.grids == 0 {
         bail!(
             "{}: no map cells (/map/occupancy, foxglove.VoxelGrid): recorded before the recorder kept them",
             args.file.display()
@@ -140,9 +134,12 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
     if steps.is_empty() {
         bail!("{}: the planner published nothing", args.file.display());
     }
-    for (t, h) in map_headers {
-        if let Some(cells) = grids.remove(&t) {
-            events.push((sent_at(&h.msg, t), Event::Map(h, cells)));
+    for m in maps.maps {
+        if let Some(cells) = m.cells {
+            events.push((
+                sent_at(&m.header.msg, m.log_time),
+                Event::Map(m.header, cells),
+            ));
         }
     }
     let Some(mut stage) = flight.stage("planner")? else {
