@@ -443,7 +443,7 @@ impl LandedState {
 #[repr(C)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("landing::LinkHealth/v1")]
+#[type_name("landing::LinkHealth/v2")]
 pub struct LinkHealth {
     /// 1 while autopilot heartbeats arrive within their timeout.
     pub connected: u32,
@@ -455,13 +455,29 @@ pub struct LinkHealth {
     pub last_telemetry_ns: u64,
     /// Messages lost according to MAVLink sequence numbers.
     pub messages_lost: u64,
+    /// 1 when the link is signed (MAVLink 2 signing, a key configured).
+    pub signed: u32,
+    /// Keeps the layout free of implicit padding.
+    pub reserved: u32,
+    /// Datagrams from an address other than the autopilot's, dropped unread.
+    pub wrong_address: u64,
+    /// Frames from a system or component other than the autopilot's, dropped.
+    pub wrong_source: u64,
+    /// Frames of a message id the dialect does not know, dropped.
+    pub unknown_id: u64,
+    /// Unsigned frames on a signed link, dropped.
+    pub unsigned: u64,
+    /// Frames whose signature does not match the key, dropped.
+    pub bad_signature: u64,
+    /// Signed frames played again (a timestamp not newer than the last), dropped.
+    pub replayed: u64,
 }
 
 /// The vehicle's estimated state, as the autopilot reports it (never ground truth).
 #[repr(C)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("landing::VehicleState/v1")]
+#[type_name("landing::VehicleState/v2")]
 pub struct VehicleState {
     /// Sequence, estimate time (`capture_ns`), stage stamps.
     pub msg: Header,

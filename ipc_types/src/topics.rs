@@ -52,7 +52,7 @@ impl Payload {
             Self::CameraFrame => "landing::CameraFrameHeader/v1",
             Self::DepthFrame => "landing::DepthFrameHeader/v1",
             Self::OccupancyMap => "landing::OccupancyMapHeader/v1",
-            Self::VehicleState => "landing::VehicleState/v1",
+            Self::VehicleState => "landing::VehicleState/v2",
             Self::PadObservation => "landing::PadObservation/v1",
             Self::PlannerGoal => "landing::PlannerGoal/v1",
             Self::Trajectory => "landing::Trajectory/v1",
@@ -113,6 +113,9 @@ pub const SIM_TRUTH_STATE: &str = "sim/truth_state";
 pub const MAVLINK_FROM_PX4: &str = "mavlink/from-px4";
 /// MAVLink to the autopilot.
 pub const MAVLINK_TO_PX4: &str = "mavlink/to-px4";
+/// Datagrams on a MAVLink link from an address other than the configured peer's: a
+/// stage counts them and never decodes them. Served by the UDP link, not iceoryx2.
+pub const MAVLINK_FOREIGN: &str = "mavlink/foreign";
 /// Frames from a camera device, a GStreamer pipeline or a recording, read by
 /// camera-ingest itself (OpenCV, on its capture thread): not iceoryx2. camera-ingest
 /// reads this instead of `sim/camera` when its source is not the simulator.
@@ -185,6 +188,12 @@ pub const TABLE: &[TopicInfo] = &[
     },
     TopicInfo {
         name: MAVLINK_TO_PX4,
+        service: None,
+        payload: Payload::Mavlink,
+        evaluator_only: false,
+    },
+    TopicInfo {
+        name: MAVLINK_FOREIGN,
         service: None,
         payload: Payload::Mavlink,
         evaluator_only: false,

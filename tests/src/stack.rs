@@ -95,6 +95,7 @@ impl Stack {
             &deploy.join("config/landing.toml"),
             &deploy,
             (free_udp_port(), free_udp_port()),
+            "",
         );
         Self {
             graph,

@@ -84,6 +84,10 @@ pub struct Px4LinkConfig {
     pub geofence_radius_m: f64,
     /// Position setpoints higher than this above the take-off point are refused, m.
     pub geofence_height_m: f64,
+    /// MAVLink 2 signing key file (32 raw bytes or 64 hex digits, owner-only
+    /// permissions), relative to this config file; empty: the link is not signed.
+    /// Install the same key on the autopilot with `landing link setup-signing`.
+    pub signing_key: String,
 }
 
 impl Default for Px4LinkConfig {
@@ -101,6 +105,7 @@ impl Default for Px4LinkConfig {
             max_acceleration_m_s2: SetpointBounds::default().max_acceleration_m_s2,
             geofence_radius_m: SetpointBounds::default().geofence_radius_m,
             geofence_height_m: SetpointBounds::default().geofence_height_m,
+            signing_key: String::new(),
         }
     }
 }
@@ -158,7 +163,14 @@ impl Px4LinkConfig {
         }
     }
 
-    /// The first peer to send to.
+    /// The signing key file, resolved against `config_dir` (the config file's
+    /// directory); `None` when the link is not signed.
+    pub fn signing_key_path(&self, config_dir: &std::path::Path) -> Option<PathBuf> {
+        (!self.signing_key.is_empty())
+            .then(|| stack_config::resolve_path(config_dir, &self.signing_key))
+    }
+
+    /// The autopilot's address: where datagrams go and the only one they are taken from.
     pub fn remote_address(&self) -> Result<SocketAddr, Invalid> {
         self.remote
             .parse()

@@ -530,6 +530,8 @@ impl Px4Link {
                 last_heartbeat_ns: self.telemetry.last_heartbeat_ns.unwrap_or(0),
                 last_telemetry_ns: self.telemetry.last_telemetry_ns,
                 messages_lost: self.telemetry.lost,
+                // The guard's counts are the stage's, added where it publishes.
+                ..LinkHealth::default()
             },
         })
     }

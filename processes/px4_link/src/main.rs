@@ -12,6 +12,7 @@ use anyhow::{Result, anyhow};
 use clap::Parser;
 use px4_link::LinkStage;
 use px4_link::config::Px4LinkConfig;
+use px4_protocol::signing::{Signer, SigningKey};
 use runtime::StageArgs;
 use stack_config::Validate;
 
@@ -30,6 +31,9 @@ struct Args {
     remote: Option<String>,
 }
 
+/// The link id px4-link signs with (one link per companion).
+const LINK_ID: u8 = 1;
+
 fn main() -> ExitCode {
     runtime::process_main("info", run)
 }
@@ -46,9 +50,18 @@ fn run(args: &Args) -> Result<()> {
         .map_err(|e| anyhow!("--link/--remote: {}", e.message))?;
     let address = cfg.address().map_err(|e| anyhow!(e.message))?;
     let remote = cfg.remote_address().map_err(|e| anyhow!(e.message))?;
+    // The key is read before the link opens: a key others may read stops the start.
+    let signer = match cfg.signing_key_path(&args.stage.config_dir()) {
+        Some(path) => Some(Signer::new(
+            SigningKey::load(&path)?,
+            LINK_ID,
+            runtime::unix_ns_at_monotonic_zero(),
+        )),
+        None => None,
+    };
     let mut link = transport::Transport::open(&address, remote)?;
-    tracing::info!(link = %cfg.link, "px4-link");
-    let mut stage = LinkStage::new(cfg.settings(), link.framing());
+    tracing::info!(link = %cfg.link, signed = signer.is_some(), "px4-link");
+    let mut stage = LinkStage::new(cfg.settings(), link.framing(), signer);
     runtime::serve(&args.stage, &ipc, &mut stage, Some(&mut link), None)?;
     Ok(())
 }

@@ -8,7 +8,8 @@ use ipc_types::msg::Stage as StageId;
 use ipc_types::topics;
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
-use px4_protocol::codec::{StreamDecoder, decode_datagram, encode};
+use px4_protocol::codec::{Guard, StreamDecoder};
+use px4_protocol::signing::Signer;
 use stage::{Counter, Input, Message, Outbox, Stage, StageError};
 
 use crate::{LinkNode, LinkSettings};
@@ -31,6 +32,11 @@ pub struct LinkStage {
     node: LinkNode,
     framing: Framing,
     decoder: StreamDecoder,
+    /// What is acted on: the autopilot's frames only, signed when a key is set.
+    guard: Guard,
+    /// Datagrams from another address than the autopilot's (the UDP link hands them
+    /// over on `mavlink/foreign`), never decoded.
+    wrong_address: u64,
     decoded: Vec<(MavHeader, MavMessage)>,
     frame: Vec<u8>,
     counts: Counts,
@@ -49,9 +55,13 @@ struct Counts {
 }
 
 impl LinkStage {
-    /// The stage of a link with `settings`, reading `framing`.
-    pub fn new(settings: LinkSettings, framing: Framing) -> Self {
+    /// The stage of a link with `settings`, reading `framing`; with `signer`, the link
+    /// is signed (MAVLink 2 signing: what goes out is signed, what comes in unsigned or
+    /// badly signed is counted and dropped).
+    pub fn new(settings: LinkSettings, framing: Framing, signer: Option<Signer>) -> Self {
         Self {
+            guard: Guard::new(Some(settings.target), signer),
+            wrong_address: 0,
             node: LinkNode::new(settings),
             framing,
             decoder: StreamDecoder::new(),
@@ -69,10 +79,12 @@ impl LinkStage {
 
     /// Sends what is due, then publishes outcomes and the vehicle state when due.
     fn service(&mut self, now_ns: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
-        let (frame, counts) = (&mut self.frame, &mut self.counts);
+        let (frame, counts, guard) = (&mut self.frame, &mut self.counts, &mut self.guard);
         self.node.send_due(now_ns, |header, m| {
             frame.clear();
-            encode(frame, header, m).map_err(|e| StageError::Transport(e.to_string()))?;
+            guard
+                .encode(frame, header, m, now_ns)
+                .map_err(|e| StageError::Transport(e.to_string()))?;
             counts.sent += 1;
             out.publish(topics::MAVLINK_TO_PX4, Message::Mavlink(frame))
         })?;
@@ -86,7 +98,16 @@ impl LinkStage {
             out.publish(topics::PX4_OUTCOME, Message::LinkOutcome(&o))?;
             self.counts.outcomes += 1;
         }
-        if let Some(state) = self.node.vehicle_state(now_ns) {
+        if let Some(mut state) = self.node.vehicle_state(now_ns) {
+            let r = self.guard.rejected();
+            let link = &mut state.link;
+            link.signed = u32::from(self.guard.signer().is_some());
+            link.wrong_address = self.wrong_address;
+            link.wrong_source = r.wrong_source;
+            link.unknown_id = r.unknown_id;
+            link.unsigned = r.unsigned;
+            link.bad_signature = r.bad_signature;
+            link.replayed = r.replayed;
             out.publish(topics::VEHICLE_STATE, Message::VehicleState(&state))?;
             self.counts.states += 1;
             self.last_link = state.link;
@@ -111,11 +132,21 @@ impl Stage for LinkStage {
         _out: &mut dyn Outbox,
     ) -> Result<(), StageError> {
         match input.msg {
+            Message::Mavlink(_) if input.topic == topics::MAVLINK_FOREIGN => {
+                self.wrong_address += 1;
+                if self.wrong_address.is_power_of_two() {
+                    tracing::warn!(
+                        wrong_address = self.wrong_address,
+                        "MAVLink datagrams from an address other than the autopilot's dropped"
+                    );
+                }
+            }
             Message::Mavlink(bytes) => {
                 self.decoded.clear();
+                let (guard, decoded) = (&mut self.guard, &mut self.decoded);
                 let errors = match self.framing {
-                    Framing::Datagram => decode_datagram(bytes, &mut self.decoded),
-                    Framing::Stream => self.decoder.push(bytes, &mut self.decoded),
+                    Framing::Datagram => self.decoder.push_datagram(bytes, now_ns, guard, decoded),
+                    Framing::Stream => self.decoder.push(bytes, now_ns, guard, decoded),
                 };
                 self.node.on_parse_errors(errors);
                 for (h, m) in &self.decoded {
@@ -159,6 +190,12 @@ impl Stage for LinkStage {
             ("received", c.received),
             ("sent", c.sent),
             ("parse_errors", u64::from(self.last_link.parse_errors)),
+            ("wrong_address", self.wrong_address),
+            ("wrong_source", self.guard.rejected().wrong_source),
+            ("unknown_id", self.guard.rejected().unknown_id),
+            ("unsigned", self.guard.rejected().unsigned),
+            ("bad_signature", self.guard.rejected().bad_signature),
+            ("replayed", self.guard.rejected().replayed),
             ("messages_lost", self.last_link.messages_lost),
             ("states", c.states),
             ("outcomes", c.outcomes),

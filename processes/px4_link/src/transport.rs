@@ -27,7 +27,8 @@ const REOPEN_PERIOD_NS: u64 = 1_000_000_000;
 
 /// Where MAVLink frames go and come from.
 pub enum Transport {
-    /// Datagrams (runtime's UDP link); replies go to whoever spoke last.
+    /// Datagrams (runtime's UDP link), to and from the configured autopilot address
+    /// only.
     Udp(UdpLink),
     /// A byte stream; `port` is `None` while it is being reopened after a failure.
     Serial {
@@ -45,16 +46,20 @@ pub enum Transport {
 }
 
 impl Transport {
-    /// Opens `address`; `remote` is where UDP sends before the autopilot is heard.
+    /// Opens `address`; `remote` is the autopilot's UDP address: where datagrams go, and
+    /// the only one they are taken from.
     pub fn open(address: &LinkAddress, remote: SocketAddr) -> Result<Self> {
         Ok(match address {
-            LinkAddress::Udp(listen) => Self::Udp(UdpLink::bind(
-                *listen,
-                Some(remote),
-                Reply::FirstPeerElseRemote,
-                topics::MAVLINK_FROM_PX4,
-                topics::MAVLINK_TO_PX4,
-            )?),
+            LinkAddress::Udp(listen) => Self::Udp(
+                UdpLink::bind(
+                    *listen,
+                    Some(remote),
+                    Reply::OnlyRemote,
+                    topics::MAVLINK_FROM_PX4,
+                    topics::MAVLINK_TO_PX4,
+                )?
+                .with_foreign_topic(topics::MAVLINK_FOREIGN),
+            ),
             LinkAddress::Serial { path, baud } => Self::Serial {
                 path: path.clone(),
                 baud: *baud,

@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use ipc_types::msg::{Header, LinkOutcomeKind, LinkRequest, LinkRequestKind, VehicleState};
 use landing_tests::process::Running;
 use mavlink::MavHeader;
-use px4_protocol::codec::{StreamDecoder, encode};
+use px4_protocol::codec::{Guard, StreamDecoder, encode};
 use runtime::IpcPrefix;
 use sim::lockstep::{PHYSICS_STEP_NS, Simulator};
 
@@ -116,7 +116,8 @@ impl Autopilot {
             if n == 0 {
                 break;
             }
-            self.decoder.push(&self.buf[..n], &mut msgs);
+            self.decoder
+                .push(&self.buf[..n], 0, &mut Guard::open(), &mut msgs);
         }
         for (h, m) in &msgs {
             self.sim.handle_mavlink(h, m);

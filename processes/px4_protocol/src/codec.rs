@@ -2,27 +2,137 @@
 //! the simulator's autopilot).
 
 use mavlink::dialects::common::MavMessage;
-use mavlink::error::MessageReadError;
 use mavlink::{MavHeader, MavlinkReader};
 
-/// Decodes every MAVLink (1 or 2) frame in one datagram into `out`; returns how many
-/// frames failed to parse. Bytes that are not a frame are skipped.
+use crate::signing::{Refused, Signer};
+
+/// Decodes every MAVLink (1 or 2) frame in one datagram into `out`, with no checks but
+/// the checksum (a tool's reading); returns how many runs of bytes failed to parse.
 pub fn decode_datagram(data: &[u8], out: &mut Vec<(MavHeader, MavMessage)>) -> u64 {
-    let mut reader = MavlinkReader::new(data);
-    let mut errors = 0;
-    // Each iteration consumes at least one frame or ends the datagram; the bound only
-    // guards against a decoder that would not advance.
-    for _ in 0..=data.len() {
-        match reader.read_any_message::<MavMessage>() {
-            Ok(m) => out.push(m),
-            Err(MessageReadError::Parse(e)) => {
-                errors += 1;
-                tracing::debug!(error = %e, "MAVLink parse error");
-            }
-            Err(_) => break,
+    let mut d = StreamDecoder::new();
+    d.push_datagram(data, 0, &mut Guard::open(), out)
+}
+
+/// Frames refused, by reason: what a link shows of the traffic it did not act on.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Rejections {
+    /// From a system or component other than the peer's.
+    pub wrong_source: u64,
+    /// Of a message id this dialect does not know.
+    pub unknown_id: u64,
+    /// Unsigned on a signed link.
+    pub unsigned: u64,
+    /// A signature that does not match.
+    pub bad_signature: u64,
+    /// A signed frame played again (not newer than its stream's last).
+    pub replayed: u64,
+}
+
+/// What a link accepts: frames from one peer (system and component), and, with a
+/// signer, only frames signed with its key. Everything else is counted and dropped.
+#[derive(Debug, Clone, Default)]
+pub struct Guard {
+    peer: Option<(u8, u8)>,
+    signer: Option<Signer>,
+    rejected: Rejections,
+}
+
+impl Guard {
+    /// Accepts every frame with a good checksum.
+    pub fn open() -> Self {
+        Self::default()
+    }
+
+    /// Accepts frames from `peer` (system, component) only, signed by `signer` when
+    /// there is one.
+    pub fn new(peer: Option<(u8, u8)>, signer: Option<Signer>) -> Self {
+        Self {
+            peer,
+            signer,
+            rejected: Rejections::default(),
         }
     }
-    errors
+
+    /// Frames refused so far.
+    pub fn rejected(&self) -> Rejections {
+        self.rejected
+    }
+
+    /// The signer, when the link is signed.
+    pub fn signer(&self) -> Option<&Signer> {
+        self.signer.as_ref()
+    }
+
+    /// Turns signing on with `signer` (a key installed by SETUP_SIGNING).
+    pub fn set_signer(&mut self, signer: Signer) {
+        self.signer = Some(signer);
+    }
+
+    /// Encodes `msg` from `header` as one MAVLink 2 frame appended to `buf`, signed when
+    /// the link is.
+    pub fn encode(
+        &mut self,
+        buf: &mut Vec<u8>,
+        header: MavHeader,
+        msg: &MavMessage,
+        now_ns: u64,
+    ) -> Result<(), mavlink::error::MessageWriteError> {
+        let start = buf.len();
+        encode(buf, header, msg)?;
+        if let Some(s) = self.signer.as_mut() {
+            let mut frame = buf.split_off(start);
+            let extra =
+                <MavMessage as mavlink::Message>::extra_crc(mavlink::Message::message_id(msg));
+            s.sign(&mut frame, extra, now_ns);
+            buf.extend_from_slice(&frame);
+        }
+        Ok(())
+    }
+
+    /// Signs a raw unsigned MAVLink 2 frame (one the dialect cannot express, see
+    /// [`crate::raw`]) whose message has `crc_extra`, when the link is signed.
+    pub fn sign_raw(&mut self, frame: &mut Vec<u8>, crc_extra: u8, now_ns: u64) {
+        if let Some(s) = self.signer.as_mut() {
+            s.sign(frame, crc_extra, now_ns);
+        }
+    }
+
+    /// Turns signing off (SETUP_SIGNING with a blank key, itself signed).
+    pub fn clear_signer(&mut self) {
+        self.signer = None;
+    }
+
+    /// Whether the whole frame `frame` (checksum good, message `id`) may be acted on.
+    fn admit(&mut self, frame: &[u8], id: u32, now_ns: u64) -> bool {
+        if let Some(s) = self.signer.as_mut() {
+            match s.verify(frame, id, now_ns) {
+                Ok(()) => {}
+                Err(Refused::Unsigned) => {
+                    self.rejected.unsigned += 1;
+                    return false;
+                }
+                Err(Refused::BadSignature) => {
+                    self.rejected.bad_signature += 1;
+                    return false;
+                }
+                Err(Refused::Replayed) => {
+                    self.rejected.replayed += 1;
+                    return false;
+                }
+            }
+        }
+        let source = match frame.first() {
+            Some(&STX_V2) => (frame.get(5), frame.get(6)),
+            _ => (frame.get(3), frame.get(4)),
+        };
+        if let (Some(peer), (Some(&sys), Some(&comp))) = (self.peer, source)
+            && (sys, comp) != peer
+        {
+            self.rejected.wrong_source += 1;
+            return false;
+        }
+        true
+    }
 }
 
 /// One MAVLink 2 frame of `msg` from `header`, appended to `buf`.
@@ -54,6 +164,9 @@ pub struct StreamDecoder {
     skipping: bool,
     parse_errors: u64,
     unknown: u64,
+    /// Admitted frames of a known id the dialect could not read (a command number it
+    /// lacks), for the caller's raw reading.
+    undecoded: Vec<Vec<u8>>,
 }
 
 impl StreamDecoder {
@@ -74,10 +187,43 @@ impl StreamDecoder {
         self.unknown
     }
 
-    /// Appends `bytes` and decodes every complete frame into `out`, oldest first;
-    /// returns how many parse errors this call found. An incomplete frame waits for the
-    /// next call.
-    pub fn push(&mut self, bytes: &[u8], out: &mut Vec<(MavHeader, MavMessage)>) -> u64 {
+    /// Admitted frames the dialect could not read since the last call (a COMMAND_LONG
+    /// with a command number it lacks), whole.
+    pub fn take_undecoded(&mut self) -> Vec<Vec<u8>> {
+        std::mem::take(&mut self.undecoded)
+    }
+
+    /// Decodes one datagram of whole frames: [`Self::push`], then whatever is left
+    /// over (a frame cut short) is an error, not the start of the next datagram.
+    pub fn push_datagram(
+        &mut self,
+        bytes: &[u8],
+        now_ns: u64,
+        guard: &mut Guard,
+        out: &mut Vec<(MavHeader, MavMessage)>,
+    ) -> u64 {
+        let mut errors = self.push(bytes, now_ns, guard, out);
+        if !self.buf.is_empty() {
+            self.buf.clear();
+            if !self.skipping {
+                self.parse_errors += 1;
+                errors += 1;
+            }
+        }
+        self.skipping = false;
+        errors
+    }
+
+    /// Appends `bytes` and decodes every complete frame `guard` admits into `out`,
+    /// oldest first; returns how many parse errors this call found. An incomplete frame
+    /// waits for the next call.
+    pub fn push(
+        &mut self,
+        bytes: &[u8],
+        now_ns: u64,
+        guard: &mut Guard,
+        out: &mut Vec<(MavHeader, MavMessage)>,
+    ) -> u64 {
         self.buf.extend_from_slice(bytes);
         let before = self.parse_errors;
         let mut start = 0;
@@ -101,21 +247,26 @@ impl StreamDecoder {
                 }
                 Candidate::Unknown(len) => {
                     self.unknown += 1;
+                    guard.rejected.unknown_id += 1;
                     self.skipping = false;
                     start += len;
                 }
-                Candidate::Frame(len) => {
+                Candidate::Frame(len, id) => {
                     let frame = &self.buf[start..start + len];
+                    self.skipping = false;
+                    start += len;
+                    if !guard.admit(frame, id, now_ns) {
+                        continue;
+                    }
                     match MavlinkReader::new(frame).read_any_message::<MavMessage>() {
-                        Ok(m) => {
-                            out.push(m);
-                            self.skipping = false;
-                            start += len;
-                        }
+                        Ok(m) => out.push(m),
                         Err(e) => {
-                            tracing::debug!(error = %e, "MAVLink frame rejected");
-                            self.skip();
-                            start += 1;
+                            // Checksum good, fields not: a value the dialect lacks.
+                            tracing::debug!(error = %e, "MAVLink frame not readable");
+                            self.parse_errors += 1;
+                            if self.undecoded.len() < 64 {
+                                self.undecoded.push(frame.to_vec());
+                            }
                         }
                     }
                 }
@@ -168,7 +319,7 @@ impl StreamDecoder {
             let extra = <MavMessage as mavlink::Message>::extra_crc(id);
             let crc = mavlink::calculate_crc(&b[1..crc_at], extra);
             return if crc.to_le_bytes() == [b[crc_at], b[crc_at + 1]] {
-                Candidate::Frame(len_needed)
+                Candidate::Frame(len_needed, id)
             } else {
                 Candidate::Garbage
             };
@@ -188,8 +339,8 @@ enum Candidate {
     Incomplete,
     /// Not a frame start.
     Garbage,
-    /// A complete frame of a known message with a good CRC, this long.
-    Frame(usize),
+    /// A complete frame of a known message with a good CRC, this long, of this id.
+    Frame(usize, u32),
     /// A frame of a message the dialect does not know, this long.
     Unknown(usize),
 }

@@ -9,6 +9,7 @@
 //! - [`command`]: the one COMMAND_LONG builder.
 //! - [`raw`]: the COMMAND_LONG/ACK frames the `mavlink` crate cannot express (a command
 //!   number the dialect lacks) and MAVLink's checksum.
+//! - [`signing`]: MAVLink 2 message signing, keys and replay checks.
 //!
 //! No I/O, no clock, no IPC.
 
@@ -17,5 +18,6 @@ pub mod command;
 pub mod frames;
 pub mod mode;
 pub mod raw;
+pub mod signing;
 
 pub use command::{command_long, command_long_confirmation};

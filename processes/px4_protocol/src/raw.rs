@@ -20,7 +20,8 @@ const COMMAND_LONG_LEN: usize = 33;
 const COMMAND_LONG_CRC_EXTRA: u8 = 152;
 /// COMMAND_ACK's id and CRC_EXTRA.
 const COMMAND_ACK_ID: u32 = 77;
-const COMMAND_ACK_CRC_EXTRA: u8 = 143;
+/// COMMAND_ACK's CRC_EXTRA (to sign a raw ACK frame).
+pub const COMMAND_ACK_CRC_EXTRA: u8 = 143;
 
 /// A COMMAND_LONG whose command number the dialect does not know.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

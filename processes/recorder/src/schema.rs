@@ -55,7 +55,7 @@ macro_rules! recordable {
 
 recordable!(
     PadObservation => "landing::PadObservation/v1",
-    VehicleState => "landing::VehicleState/v1",
+    VehicleState => "landing::VehicleState/v2",
     Trajectory => "landing::Trajectory/v1",
     PlannerStats => "landing::PlannerStats/v1",
     PlannerGoal => "landing::PlannerGoal/v1",

@@ -285,7 +285,7 @@ fn info_reports_topics_counts_and_time_range() {
     assert_eq!(got, want);
     let text = i.to_string();
     assert!(text.contains("/vehicle/state"), "{text}");
-    assert!(text.contains("landing::VehicleState/v1"), "{text}");
+    assert!(text.contains("landing::VehicleState/v2"), "{text}");
     assert!(text.contains("2.500 s"), "{text}");
 }
 

@@ -129,7 +129,7 @@ fn a_ground_station_subscribes_to_the_live_view_and_gets_each_state_as_it_is_pub
                             for c in v["channels"].as_array().unwrap() {
                                 if c["topic"] == "/vehicle/state" {
                                     assert_eq!(c["encoding"], "json");
-                                    assert_eq!(c["schemaName"], "landing::VehicleState/v1");
+                                    assert_eq!(c["schemaName"], "landing::VehicleState/v2");
                                     channel = c["id"].as_u64();
                                 }
                             }

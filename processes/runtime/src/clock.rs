@@ -74,3 +74,13 @@ impl Clock for SimClock {
 #[cfg(test)]
 #[path = "clock_test.rs"]
 mod tests;
+
+/// The Unix time (ns) at CLOCK_MONOTONIC's zero: read once at start, it turns the
+/// monotonic times stages get into wall-clock times where a protocol needs one (MAVLink
+/// signing timestamps), without a stage reading a clock.
+pub fn unix_ns_at_monotonic_zero() -> u64 {
+    let unix = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX));
+    unix.saturating_sub(monotonic_ns())
+}

@@ -23,7 +23,7 @@ pub mod udp;
 /// (a sample, the `ZeroCopySend` bound of a generic port helper).
 pub use iceoryx2;
 
-pub use clock::{Clock, MonotonicClock, SimClock, monotonic_ns};
+pub use clock::{Clock, MonotonicClock, SimClock, monotonic_ns, unix_ns_at_monotonic_zero};
 pub use driver::{Beat, DriverError};
 pub use ipc::{
     Heartbeat, HeartbeatError, Ipc, IpcPrefix, ListedNode, LoanError, LoopExit, MessageHeader,

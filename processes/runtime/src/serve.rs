@@ -62,6 +62,18 @@ impl StageArgs {
         self.deploy_dir.clone().unwrap_or_else(deploy_dir)
     }
 
+    /// The directory files named in the config are relative to: the config file's, else
+    /// (no `--config`) the deploy directory's `config/`.
+    pub fn config_dir(&self) -> PathBuf {
+        match &self.config {
+            Some(file) => file
+                .parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .map_or_else(|| PathBuf::from("."), PathBuf::from),
+            None => self.deploy().join("config"),
+        }
+    }
+
     /// `[ipc]` of the config (defaults without `--config`), for a binary with no section
     /// of its own.
     pub fn ipc(&self) -> Result<IpcConfig, ConfigError> {

@@ -15,12 +15,12 @@ const DATAGRAM_MAX: usize = 65_536;
 /// Whom a datagram goes to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Reply {
-    /// The first peer heard from, kept, else the configured remote (px4-link toward the
-    /// autopilot): once the autopilot has spoken, datagrams from any other sender are
-    /// counted (`foreign_datagrams`) and dropped, never delivered, and never take the
-    /// link over. (Which system and component may speak is issue 20's signing and
-    /// source checks.)
-    FirstPeerElseRemote,
+    /// The configured remote only, both ways (px4-link toward the autopilot, the
+    /// simulated autopilot toward px4-link): a datagram from any other address is
+    /// counted (`foreign_datagrams`), handed over on the `foreign` topic when one is
+    /// set (so the stage can count it where it reports), never on the input topic, and
+    /// never takes the link over.
+    OnlyRemote,
     /// The peer last heard from and the configured remote (PX4 SITL's onboard link keeps
     /// sending to its configured companion port even after another peer spoke).
     PeerAndRemote,
@@ -57,11 +57,14 @@ pub struct UdpLink {
     peer: Option<SocketAddr>,
     remote: Option<SocketAddr>,
     reply: Reply,
-    topics: [&'static str; 2],
+    /// The input, output and (when set) foreign topics.
+    topics: [&'static str; 3],
     buf: Vec<u8>,
     stats: UdpStats,
     /// Descriptors that end a wait early (the stage's iceoryx2 inputs).
     wake: Vec<i32>,
+    /// Where datagrams from a foreign address are handed over, if anywhere.
+    foreign: Option<&'static str>,
 }
 
 impl UdpLink {
@@ -87,11 +90,20 @@ impl UdpLink {
             peer: None,
             remote,
             reply,
-            topics: [input, output],
+            topics: [input, output, input],
             buf: vec![0; DATAGRAM_MAX],
             stats: UdpStats::default(),
             wake: Vec::new(),
+            foreign: None,
         })
+    }
+
+    /// Hands datagrams from a foreign address over on `topic` (their bytes, for
+    /// counting: a stage must not act on them) instead of dropping them silently.
+    pub fn with_foreign_topic(mut self, topic: &'static str) -> Self {
+        self.foreign = Some(topic);
+        self.topics[2] = topic;
+        self
     }
 
     /// The bound address (the port, when 0 was asked for).
@@ -122,7 +134,8 @@ impl UdpLink {
 
 impl External for UdpLink {
     fn topics(&self) -> &[&'static str] {
-        &self.topics
+        let n = if self.foreign.is_some() { 3 } else { 2 };
+        self.topics.get(..n).unwrap_or(&[])
     }
 
     fn wait(
@@ -147,13 +160,18 @@ impl External for UdpLink {
             match self.socket.recv_from(&mut self.buf) {
                 Ok((n, from)) => {
                     self.stats.datagrams_in += 1;
-                    match (self.reply, self.peer) {
-                        (Reply::FirstPeerElseRemote, Some(kept)) if kept != from => {
-                            self.stats.foreign_datagrams += 1;
-                            continue;
+                    if self.reply == Reply::OnlyRemote && self.remote != Some(from) {
+                        self.stats.foreign_datagrams += 1;
+                        if let Some(topic) = self.foreign {
+                            let input = Input {
+                                topic,
+                                msg: Message::Mavlink(self.buf.get(..n).unwrap_or(&[])),
+                            };
+                            deliver(input, clock())?;
                         }
-                        _ => self.peer = Some(from),
+                        continue;
                     }
+                    self.peer = Some(from);
                     let input = Input {
                         topic: self.topics[0],
                         msg: Message::Mavlink(self.buf.get(..n).unwrap_or(&[])),
@@ -189,10 +207,7 @@ impl External for UdpLink {
             });
         };
         match (self.reply, self.peer, self.remote) {
-            (Reply::FirstPeerElseRemote, Some(to), _)
-            | (Reply::FirstPeerElseRemote, None, Some(to)) => {
-                self.send_to(to, frame);
-            }
+            (Reply::OnlyRemote, _, Some(to)) => self.send_to(to, frame),
             (Reply::PeerAndRemote, peer, remote) => {
                 if let Some(to) = peer {
                     self.send_to(to, frame);
@@ -201,7 +216,7 @@ impl External for UdpLink {
                     self.send_to(to, frame);
                 }
             }
-            (Reply::FirstPeerElseRemote, None, None) => {}
+            (Reply::OnlyRemote, _, None) => {}
         }
         Ok(())
     }

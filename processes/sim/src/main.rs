@@ -5,11 +5,13 @@
 //! paced by the wall clock; this file binds the UDP socket and hands both to the driver.
 
 use std::net::SocketAddr;
+use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::Result;
 use clap::Parser;
 use ipc_types::topics;
+use px4_protocol::signing::SigningKey;
 use runtime::{Reply, StageArgs, UdpLink};
 use sim::stage::SimFlags;
 
@@ -24,9 +26,14 @@ struct Args {
     /// Where the simulated autopilot listens for MAVLink.
     #[arg(long, default_value = "127.0.0.1:14580")]
     mavlink_listen: SocketAddr,
-    /// Where it also sends MAVLink (PX4 SITL's companion port, px4-link's default).
+    /// The companion's MAVLink address (px4-link's, default 127.0.0.1:14540): where the
+    /// autopilot sends, and the only address it takes datagrams from.
     #[arg(long, default_value = "127.0.0.1:14540")]
     mavlink_remote: SocketAddr,
+    /// The autopilot's MAVLink signing key file (as PX4 keeps one on its SD card):
+    /// signing on from the start. Empty or absent: off until SETUP_SIGNING installs one.
+    #[arg(long, default_value = "")]
+    signing_key: String,
 }
 
 fn main() -> ExitCode {
@@ -35,14 +42,23 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<()> {
     let ipc = args.stage.ipc()?;
-    let mut stage = args.sim.stage(&args.stage.deploy())?;
+    let key = if args.signing_key.is_empty() {
+        None
+    } else {
+        Some(SigningKey::load(Path::new(&args.signing_key))?)
+    };
+    let mut stage = args
+        .sim
+        .stage(&args.stage.deploy())?
+        .with_signing(key, runtime::unix_ns_at_monotonic_zero());
     let mut link = UdpLink::bind(
         args.mavlink_listen,
         Some(args.mavlink_remote),
-        Reply::PeerAndRemote,
+        Reply::OnlyRemote,
         topics::MAVLINK_TO_PX4,
         topics::MAVLINK_FROM_PX4,
-    )?;
+    )?
+    .with_foreign_topic(topics::MAVLINK_FOREIGN);
     tracing::info!(mavlink = %link.local_addr(), "sim");
     runtime::serve(&args.stage, &ipc, &mut stage, Some(&mut link), None)?;
     Ok(())

@@ -19,8 +19,9 @@ use ipc_types::topics;
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
 use mavlink::dialects::common::MavResult;
-use px4_protocol::codec::{decode_datagram, encode};
-use px4_protocol::raw::{command_ack_frame, unknown_commands};
+use px4_protocol::codec::{Guard, StreamDecoder};
+use px4_protocol::raw::{COMMAND_ACK_CRC_EXTRA, command_ack_frame, unknown_commands};
+use px4_protocol::signing::{Signer, SigningKey};
 use stage::{Counter, Input, Message, Outbox, SliceHeader, SliceMut, Stage, StageError};
 
 use crate::camera::PixelFormat;
@@ -200,6 +201,13 @@ pub struct SimStage {
     /// The autopilot's own MAVLink sequence.
     sequence: u8,
     wire: Vec<u8>,
+    decoder: StreamDecoder,
+    /// MAVLink 2 signing as PX4's `MavlinkSignControl`: off until a key is installed
+    /// (at start, or by SETUP_SIGNING); then what goes out is signed and what comes in
+    /// must be, but for the messages PX4 lets through unsigned.
+    guard: Guard,
+    /// The Unix time at the driver's time 0, ns (signing timestamps).
+    unix_ns_at_zero: u64,
     decoded: Vec<(MavHeader, MavMessage)>,
     camera: VecDeque<Held<u8>>,
     depth: VecDeque<Held<u16>>,
@@ -219,6 +227,10 @@ struct Counts {
     mavlink_out: u64,
     parse_errors: u64,
     unsupported: u64,
+    /// Datagrams from an address other than the companion's (never read).
+    wrong_address: u64,
+    /// Keys installed by SETUP_SIGNING.
+    keys_installed: u64,
     dropped: u64,
     /// Camera and depth renders (at capture; a frame goes out after its latency).
     renders: u64,
@@ -234,6 +246,9 @@ impl SimStage {
             end_ns: None,
             sequence: 0,
             wire: Vec::with_capacity(280),
+            decoder: StreamDecoder::new(),
+            guard: Guard::open(),
+            unix_ns_at_zero: 0,
             decoded: Vec::with_capacity(8),
             camera: VecDeque::new(),
             depth: VecDeque::new(),
@@ -253,11 +268,63 @@ impl SimStage {
         }
     }
 
+    /// Signing on with `key` from the start (a key PX4 already holds on its SD card);
+    /// `unix_ns_at_zero` is the Unix time at the driver's time 0, ns.
+    pub fn with_signing(mut self, key: Option<SigningKey>, unix_ns_at_zero: u64) -> Self {
+        self.unix_ns_at_zero = unix_ns_at_zero;
+        if let Some(key) = key {
+            self.guard.set_signer(Signer::new(key, 0, unix_ns_at_zero));
+        }
+        self
+    }
+
+    /// Whether the autopilot signs (a key installed).
+    pub fn signing(&self) -> bool {
+        self.guard.signer().is_some()
+    }
+
+    /// Frames refused so far, by reason.
+    pub fn rejected(&self) -> px4_protocol::codec::Rejections {
+        self.guard.rejected()
+    }
+
+    /// SETUP_SIGNING (addressed to this system) installs its key and initial timestamp,
+    /// as PX4's `MavlinkSignControl::check_for_signing` does; a blank key turns signing
+    /// off. On a signed link it arrives here only signed with the current key.
+    fn setup_signing(&mut self, msg: &MavMessage) -> bool {
+        let MavMessage::SETUP_SIGNING(s) = msg else {
+            return false;
+        };
+        if s.target_system != SYSTEM_ID {
+            return true;
+        }
+        if s.secret_key == [0; 32] && s.initial_timestamp == 0 {
+            self.guard.clear_signer();
+            tracing::info!("MAVLink signing turned off by SETUP_SIGNING");
+        } else {
+            let mut signer = Signer::new(
+                SigningKey::from_bytes(s.secret_key),
+                0,
+                self.unix_ns_at_zero,
+            );
+            signer.advance_to(s.initial_timestamp);
+            self.guard.set_signer(signer);
+            self.counts.keys_installed += 1;
+            tracing::info!("MAVLink signing key installed by SETUP_SIGNING");
+        }
+        true
+    }
+
     /// Answers each COMMAND_LONG of `datagram` whose number the dialect lacks and
     /// that is addressed to this autopilot (its system, component its own or 0)
     /// MAV_RESULT_UNSUPPORTED, as PX4's commander does; others are ignored, as PX4's
     /// receiver does.
-    fn answer_unknown(&mut self, datagram: &[u8], out: &mut dyn Outbox) -> Result<(), StageError> {
+    fn answer_unknown(
+        &mut self,
+        datagram: &[u8],
+        now_ns: u64,
+        out: &mut dyn Outbox,
+    ) -> Result<(), StageError> {
         if self.sim.autopilot_silent() {
             return Ok(());
         }
@@ -267,13 +334,15 @@ impl SimStage {
             if !ours {
                 continue;
             }
-            let frame = command_ack_frame(
+            let mut frame = command_ack_frame(
                 self.sequence,
                 SYSTEM_ID,
                 COMPONENT_ID,
                 &cmd,
                 MavResult::MAV_RESULT_UNSUPPORTED as u8,
             );
+            self.guard
+                .sign_raw(&mut frame, COMMAND_ACK_CRC_EXTRA, now_ns);
             self.sequence = self.sequence.wrapping_add(1);
             self.counts.unsupported += 1;
             out.publish(topics::MAVLINK_FROM_PX4, Message::Mavlink(&frame))?;
@@ -422,24 +491,30 @@ impl Stage for SimStage {
 
     fn on_input(
         &mut self,
-        _now_ns: u64,
+        now_ns: u64,
         input: Input<'_>,
         out: &mut dyn Outbox,
     ) -> Result<(), StageError> {
         if let Message::Mavlink(bytes) = input.msg {
-            self.decoded.clear();
-            let errors = decode_datagram(bytes, &mut self.decoded);
-            for (h, m) in &self.decoded {
-                self.sim.handle_mavlink(h, m);
+            if input.topic == topics::MAVLINK_FOREIGN {
+                self.counts.wrong_address += 1;
+                return Ok(());
+            }
+            let mut decoded = std::mem::take(&mut self.decoded);
+            decoded.clear();
+            let errors = self
+                .decoder
+                .push_datagram(bytes, now_ns, &mut self.guard, &mut decoded);
+            for (h, m) in &decoded {
+                if !self.setup_signing(m) {
+                    self.sim.handle_mavlink(h, m);
+                }
                 self.counts.mavlink_in += 1;
             }
+            self.decoded = decoded;
             self.counts.parse_errors += errors;
-            if self.decoded.is_empty() && errors == 0 && !bytes.is_empty() {
-                // Not a single frame start in it.
-                self.counts.parse_errors += 1;
-            }
-            if errors > 0 {
-                self.answer_unknown(bytes, out)?;
+            for frame in self.decoder.take_undecoded() {
+                self.answer_unknown(&frame, now_ns, out)?;
             }
         }
         Ok(())
@@ -478,7 +553,9 @@ impl Stage for SimStage {
             };
             self.sequence = self.sequence.wrapping_add(1);
             self.wire.clear();
-            encode(&mut self.wire, header, &m).map_err(|e| StageError::Transport(e.to_string()))?;
+            self.guard
+                .encode(&mut self.wire, header, &m, now_ns)
+                .map_err(|e| StageError::Transport(e.to_string()))?;
             out.publish(topics::MAVLINK_FROM_PX4, Message::Mavlink(&self.wire))?;
             self.counts.mavlink_out += 1;
         }
@@ -514,6 +591,13 @@ impl Stage for SimStage {
             ("mavlink_out", c.mavlink_out),
             ("parse_errors", c.parse_errors),
             ("unsupported", c.unsupported),
+            ("wrong_address", c.wrong_address),
+            ("wrong_source", self.guard.rejected().wrong_source),
+            ("unknown_id", self.guard.rejected().unknown_id),
+            ("unsigned", self.guard.rejected().unsigned),
+            ("bad_signature", self.guard.rejected().bad_signature),
+            ("replayed", self.guard.rejected().replayed),
+            ("keys_installed", c.keys_installed),
             ("dropped", c.dropped),
             ("renders", c.renders),
             ("depth_renders", c.depth_renders),

@@ -159,7 +159,12 @@ impl Companion {
     }
 
     fn connect_to(addr: SocketAddr) -> Self {
-        let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+        Self::connect_from(UdpSocket::bind("127.0.0.1:0").unwrap(), addr)
+    }
+
+    /// A companion on `sock` (bound already: a simulator that takes datagrams from its
+    /// companion's address only must be told it first).
+    fn connect_from(sock: UdpSocket, addr: SocketAddr) -> Self {
         sock.set_read_timeout(Some(Duration::from_millis(20)))
             .unwrap();
         let mut c = Self {
@@ -1014,16 +1019,20 @@ fn the_sim_process_flies_over_mavlink_and_publishes_camera_depth_and_ground_trut
         .slice_subscriber::<u16, ipc_types::msg::DepthFrameHeader>(ipc_types::services::SIM_DEPTH)
         .unwrap();
     let started = Instant::now();
+    let companion = UdpSocket::bind("127.0.0.1:0").unwrap();
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sim"))
         .args(["--scenario", "indoor-static", "--duration-s", "60"])
         .args(["--mavlink-listen", &addr.to_string()])
-        .args(["--mavlink-remote", "127.0.0.1:9"])
+        .args([
+            "--mavlink-remote",
+            &companion.local_addr().unwrap().to_string(),
+        ])
         .args(["--ipc-prefix", prefix.as_str()])
         .env("LANDING_LOG", "warn")
         .spawn()
         .unwrap();
     std::thread::sleep(Duration::from_millis(500));
-    let mut c = Companion::connect_to(addr);
+    let mut c = Companion::connect_from(companion, addr);
     assert!(
         c.heartbeat(|_| true, secs(5)),
         "no heartbeat from the sim process"

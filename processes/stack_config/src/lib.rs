@@ -306,3 +306,15 @@ pub fn deploy_dir() -> PathBuf {
 #[cfg(test)]
 #[path = "lib_test.rs"]
 mod tests;
+
+/// A file named in the configuration at `config_dir` (the directory of the config file):
+/// an absolute path as it is, a relative one from that directory, so a config means the
+/// same files whoever reads it and from wherever it is run.
+pub fn resolve_path(config_dir: &Path, value: &str) -> PathBuf {
+    let p = Path::new(value);
+    if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        config_dir.join(p)
+    }
+}

@@ -106,7 +106,7 @@ fn topics(raw: &[TopicFile], path: &Path) -> Result<Vec<Topic>, GraphError> {
             Some(ty) if !ty.trim().is_empty() => ty.to_string(),
             _ => {
                 return Err(err(
-                    "no type (allowed: the payload's versioned type name, e.g. landing::VehicleState/v1)",
+                    "no type (allowed: the payload's versioned type name, e.g. landing::VehicleState/v2)",
                 ));
             }
         };

@@ -54,6 +54,7 @@ pub const PLACEHOLDERS: &[&str] = &[
     "link_addr",
     "preset",
     "commit_height",
+    "signing_key",
 ];
 
 /// How a process waits for the input that triggers it.
@@ -315,6 +316,10 @@ pub struct RunValues {
     pub preset: String,
     /// `{commit_height}`: the mission's commit height, m.
     pub commit_height: String,
+    /// `{signing_key}`: the MAVLink signing key file (`[px4_link] signing_key`,
+    /// resolved), empty for an unsigned link; the simulated autopilot holds it as PX4
+    /// holds a key installed before the flight.
+    pub signing_key: String,
 }
 
 impl RunValues {
@@ -332,6 +337,7 @@ impl RunValues {
             "link_addr" => &self.link_addr,
             "preset" => &self.preset,
             "commit_height" => &self.commit_height,
+            "signing_key" => &self.signing_key,
             _ => return None,
         })
     }

@@ -212,6 +212,7 @@ fn landing_run_processes_starts_the_stack_as_it_did_before_the_graph() {
         link_addr: "127.0.0.1:40002".into(),
         preset: "-4,-2,4.5".into(),
         commit_height: "0.6".into(),
+        signing_key: "/d/config/mavlink.key".into(),
     };
     // The list `landing run --processes` had hard-coded (tools/landing/src/run_processes.rs
     // before the graph), with the same values; the watchdog came later.
@@ -283,6 +284,9 @@ fn landing_run_processes_starts_the_stack_as_it_did_before_the_graph() {
                 &v.sim_addr,
                 "--mavlink-remote",
                 &v.link_addr,
+                // Added with MAVLink signing: the simulated autopilot holds the key.
+                "--signing-key",
+                &v.signing_key,
             ],
         ),
     ];

@@ -69,6 +69,7 @@ pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
         &deploy.join("config").join("landing.toml"),
         &deploy,
         (free_udp_port()?, free_udp_port()?),
+        "",
     );
     let ipc = Ipc::open("bench-perception", &prefix)?;
     let observations = ipc.subscriber::<PadObservation>(services::PAD_OBSERVATION)?;

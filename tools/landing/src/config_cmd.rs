@@ -2,6 +2,8 @@
 
 use std::path::Path;
 
+use px4_protocol::signing::SigningKey;
+
 use anyhow::Result;
 use camera_ingest::CameraIngestConfig;
 use serde::Deserialize;
@@ -61,9 +63,37 @@ impl Validate for StackConfig {
     }
 }
 
-/// Loads and validates `file`; prints `ok` on success.
+impl StackConfig {
+    /// Loads and validates `file`, every file it names resolved against the file's
+    /// directory (here, once), and the signing key read (a key others may read, or a
+    /// missing one, is an error now rather than at the first flight).
+    pub fn load(file: &Path) -> Result<Self> {
+        let mut cfg: Self = config::load(file)?;
+        let dir = file
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        if let Some(key) = cfg.px4_link.signing_key_path(dir) {
+            cfg.px4_link.signing_key = key.display().to_string();
+        }
+        cfg.signing_key()?;
+        Ok(cfg)
+    }
+
+    /// The MAVLink signing key (`[px4_link] signing_key`), `None` for an unsigned link.
+    pub fn signing_key(&self) -> Result<Option<SigningKey>> {
+        if self.px4_link.signing_key.is_empty() {
+            return Ok(None);
+        }
+        let key = SigningKey::load(Path::new(&self.px4_link.signing_key))
+            .map_err(|e| anyhow::anyhow!("px4_link.signing_key: {e}"))?;
+        Ok(Some(key))
+    }
+}
+
+/// Loads and validates `file` and the files it names; prints `ok` on success.
 pub fn check(file: &Path) -> Result<()> {
-    let _cfg: StackConfig = config::load(file)?;
+    let _cfg = StackConfig::load(file)?;
     println!("{}: ok", file.display());
     Ok(())
 }

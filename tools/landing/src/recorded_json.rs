@@ -87,6 +87,17 @@ pub(crate) fn vehicle_state(v: &Value) -> Result<VehicleState> {
             last_heartbeat_ns: u64_of(&l["last_heartbeat_ns"])?,
             last_telemetry_ns: u64_of(&l["last_telemetry_ns"])?,
             messages_lost: u64_of(&l["messages_lost"])?,
+            // Recordings before VehicleState/v2 have no rejection counts.
+            signed: l["signed"]
+                .as_u64()
+                .map_or(0, |v| u32::try_from(v).unwrap_or(0)),
+            reserved: 0,
+            wrong_address: l["wrong_address"].as_u64().unwrap_or(0),
+            wrong_source: l["wrong_source"].as_u64().unwrap_or(0),
+            unknown_id: l["unknown_id"].as_u64().unwrap_or(0),
+            unsigned: l["unsigned"].as_u64().unwrap_or(0),
+            bad_signature: l["bad_signature"].as_u64().unwrap_or(0),
+            replayed: l["replayed"].as_u64().unwrap_or(0),
         },
     })
 }

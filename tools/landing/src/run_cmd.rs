@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::Args;
 use ipc_types::msg::MissionState;
-use stack_config::{self as cfgload, deploy_dir};
+use stack_config::deploy_dir;
 
 use crate::config_cmd::StackConfig;
 use crate::flight_log::{
@@ -158,7 +158,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         .config
         .clone()
         .unwrap_or_else(|| deploy.join("config").join("landing.toml"));
-    let cfg: StackConfig = cfgload::load(&cfg_path)?;
+    let cfg = StackConfig::load(&cfg_path)?;
     let scn = sim::scenario::load(&args.scenario, &deploy)?;
     // Both modes run what the graph declares; checked before anything starts.
     let graph_path = args
@@ -280,6 +280,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
                 raw_images: args.raw_images,
                 live: args.live,
             },
+            signing_key: &cfg.px4_link.signing_key,
             realtime: args.realtime,
         };
         let r = run_processes::run(&launch, &mut rec.truth, progress)?;

@@ -18,6 +18,7 @@ use optics::mount::down_camera_from_body;
 use optics::{CameraCalibration, PadModel};
 use planner::PlannerStage;
 use px4_link::{Framing, LinkStage};
+use px4_protocol::signing::Signer;
 use sim::lockstep::Simulator;
 use sim::scenario::LoadedScenario;
 use sim::stage::SimStage;
@@ -27,6 +28,10 @@ use stage::{Message, Stage};
 use crate::config_cmd::StackConfig;
 use crate::run_eval::{End, Referee};
 use recorder::Recorder;
+
+/// The Unix time at a lockstep run's time 0 (2026-09-15T00:00:00Z): signing timestamps
+/// without a wall clock, the same on every run.
+pub const LOCKSTEP_UNIX_NS_AT_ZERO: u64 = 1_789_430_400_000_000_000;
 
 /// What the lockstep run needs to build its stages.
 pub struct Setup<'a> {
@@ -63,10 +68,16 @@ pub fn stage_for(node: &Node, setup: &Setup<'_>) -> Result<Option<Box<dyn Stage>
     let cfg = setup.config;
     let scn = setup.scenario;
     Ok(Some(match node.name.as_str() {
-        "sim" => Box::new(SimStage::new(
-            Simulator::new(scn, setup.seed).context("building the simulator")?,
+        "sim" => Box::new(
+            SimStage::new(Simulator::new(scn, setup.seed).context("building the simulator")?)
+                .with_signing(cfg.signing_key()?, LOCKSTEP_UNIX_NS_AT_ZERO),
+        ),
+        "px4-link" => Box::new(LinkStage::new(
+            cfg.px4_link.settings(),
+            Framing::Datagram,
+            cfg.signing_key()?
+                .map(|k| Signer::new(k, 1, LOCKSTEP_UNIX_NS_AT_ZERO)),
         )),
-        "px4-link" => Box::new(LinkStage::new(cfg.px4_link.settings(), Framing::Datagram)),
         "camera-ingest" => {
             let calibration = CameraCalibration::load(scn.calibration_path())?;
             let undistort = cfg.camera_ingest.as_ref().is_some_and(|c| c.undistort);

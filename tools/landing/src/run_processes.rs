@@ -50,6 +50,9 @@ pub struct Launch<'a> {
     pub injections: &'a [Injection],
     /// The `recorder` process: `--record` and `--live`.
     pub recorder: RecorderLaunch<'a>,
+    /// The MAVLink signing key file (`[px4_link] signing_key`, resolved), empty for an
+    /// unsigned link: the simulated autopilot gets it too.
+    pub signing_key: &'a str,
     /// `--realtime`: the deployment's SCHED_FIFO priorities on the processes that have
     /// them (deploy/systemd drop-ins).
     pub realtime: bool,
@@ -87,6 +90,7 @@ pub fn run_values(
     config: &Path,
     deploy: &Path,
     (sim_port, link_port): (u16, u16),
+    signing_key: &str,
 ) -> RunValues {
     let preset = scn.scenario.mission.preset_m;
     RunValues {
@@ -103,6 +107,7 @@ pub fn run_values(
         // with a minus sign.
         preset: format!("{},{},{}", preset[0], preset[1], preset[2]),
         commit_height: scn.scenario.mission.commit_height_m.to_string(),
+        signing_key: signing_key.to_string(),
     }
 }
 
@@ -182,6 +187,7 @@ pub fn run(
         launch.config,
         launch.deploy,
         (free_udp_port()?, free_udp_port()?),
+        launch.signing_key,
     );
     std::fs::create_dir_all(launch.log_dir)
         .with_context(|| format!("creating {}", launch.log_dir.display()))?;
