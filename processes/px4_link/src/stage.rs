@@ -206,3 +206,7 @@ impl Stage for LinkStage {
         ]
     }
 }
+
+#[cfg(test)]
+#[path = "stage_test.rs"]
+mod tests;

@@ -1,0 +1,190 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use ipc_types::msg::VehicleState;
+use mavlink::dialects::common::{
+    ATTITUDE_QUATERNION_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavModeFlag,
+    MavState, MavType,
+};
+use px4_protocol::signing::SigningKey;
+use stage::{SliceHeader, SliceMut};
+
+use super::*;
+
+/// What the stage published: its vehicle states and the frames it sent.
+#[derive(Default)]
+struct Out {
+    states: Vec<VehicleState>,
+    frames: Vec<Vec<u8>>,
+}
+
+impl Outbox for Out {
+    fn publish(&mut self, _topic: &str, msg: Message<'_>) -> Result<(), StageError> {
+        match msg {
+            Message::VehicleState(s) => self.states.push(*s),
+            Message::Mavlink(b) => self.frames.push(b.to_vec()),
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn publish_slice(
+        &mut self,
+        _topic: &str,
+        _len: usize,
+        _fill: &mut dyn FnMut(SliceMut<'_>) -> Option<SliceHeader>,
+    ) -> Result<bool, StageError> {
+        Ok(false)
+    }
+}
+
+const UNIX: u64 = 1_795_000_000_000_000_000;
+
+/// A heartbeat and a position (40 m east, 10 m up) from the autopilot (1, 1), signed by
+/// `guard` when it signs.
+fn telemetry(guard: &mut Guard, seq: u8, now_ns: u64) -> Vec<u8> {
+    let h = |sequence| MavHeader {
+        system_id: 1,
+        component_id: 1,
+        sequence,
+    };
+    let mut buf = Vec::new();
+    let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: MavType::MAV_TYPE_QUADROTOR,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+        base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+        system_status: MavState::MAV_STATE_STANDBY,
+        mavlink_version: 3,
+    });
+    guard.encode(&mut buf, h(seq), &hb, now_ns).unwrap();
+    let pos = MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
+        time_boot_ms: (now_ns / 1_000_000) as u32,
+        x: 0.0,
+        y: 40.0,
+        z: -10.0,
+        ..LOCAL_POSITION_NED_DATA::default()
+    });
+    guard
+        .encode(&mut buf, h(seq.wrapping_add(1)), &pos, now_ns)
+        .unwrap();
+    let att = MavMessage::ATTITUDE_QUATERNION(ATTITUDE_QUATERNION_DATA {
+        time_boot_ms: (now_ns / 1_000_000) as u32,
+        q1: 1.0,
+        ..ATTITUDE_QUATERNION_DATA::default()
+    });
+    guard
+        .encode(&mut buf, h(seq.wrapping_add(2)), &att, now_ns)
+        .unwrap();
+    buf
+}
+
+fn feed(stage: &mut LinkStage, bytes: &[u8], now_ns: u64, out: &mut Out) {
+    let input = Input {
+        topic: topics::MAVLINK_FROM_PX4,
+        msg: Message::Mavlink(bytes),
+    };
+    stage.on_input(now_ns, input, out).unwrap();
+    stage.on_inputs_done(now_ns, out).unwrap();
+}
+
+#[test]
+fn a_signed_link_takes_no_telemetry_but_the_autopilots_signed_frames_and_counts_the_rest() {
+    let key = SigningKey::from_bytes([0x42; 32]);
+    let signer = Signer::new(key.clone(), 1, UNIX);
+    let mut stage = LinkStage::new(LinkSettings::default(), Framing::Datagram, Some(signer));
+    let mut out = Out::default();
+    let ms = 1_000_000;
+
+    // A spoofer: unsigned, then signed with another key, then as another system.
+    let mut unsigned = Guard::open();
+    let mut forger = Guard::new(
+        None,
+        Some(Signer::new(SigningKey::from_bytes([1; 32]), 1, UNIX)),
+    );
+    for i in 0..10u64 {
+        feed(
+            &mut stage,
+            &telemetry(&mut unsigned, i as u8 * 3, i * 10 * ms),
+            i * 10 * ms,
+            &mut out,
+        );
+        feed(
+            &mut stage,
+            &telemetry(&mut forger, i as u8 * 3, i * 10 * ms + ms),
+            i * 10 * ms + ms,
+            &mut out,
+        );
+    }
+    stage
+        .on_input(
+            101 * ms,
+            Input {
+                topic: topics::MAVLINK_FOREIGN,
+                msg: Message::Mavlink(&[1, 2, 3]),
+            },
+            &mut out,
+        )
+        .unwrap();
+    assert!(
+        out.states.is_empty(),
+        "a vehicle state from spoofed telemetry"
+    );
+    // What px4-link sends on a signed link is signed.
+    assert!(!out.frames.is_empty());
+    for f in &out.frames {
+        assert_eq!(f[2] & 1, 1, "an unsigned frame sent on a signed link");
+    }
+
+    // The autopilot, with the key: taken, and the state shows what was dropped.
+    let mut autopilot = Guard::new(None, Some(Signer::new(key, 0, UNIX)));
+    feed(
+        &mut stage,
+        &telemetry(&mut autopilot, 100, 200 * ms),
+        200 * ms,
+        &mut out,
+    );
+    let s = out
+        .states
+        .last()
+        .copied()
+        .expect("a state from the signed telemetry");
+    assert_eq!(s.link.connected, 1);
+    assert!((s.world_from_body.translation[0] - 40.0).abs() < 1e-6);
+    assert_eq!(s.link.signed, 1);
+    assert_eq!(s.link.unsigned, 30);
+    assert_eq!(s.link.bad_signature, 30);
+    assert_eq!(s.link.wrong_address, 1);
+    assert_eq!(s.link.replayed, 0);
+}
+
+#[test]
+fn an_unsigned_link_acts_on_the_autopilot_only() {
+    let mut stage = LinkStage::new(LinkSettings::default(), Framing::Datagram, None);
+    let mut out = Out::default();
+    let mut g = Guard::open();
+    // A system 7 claiming to be the autopilot's: counted, not acted on.
+    let mut other = Vec::new();
+    let h = MavHeader {
+        system_id: 7,
+        component_id: 1,
+        sequence: 0,
+    };
+    let pos = MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
+        x: 100.0,
+        ..LOCAL_POSITION_NED_DATA::default()
+    });
+    g.encode(&mut other, h, &pos, 0).unwrap();
+    feed(&mut stage, &other, 1_000_000, &mut out);
+    feed(
+        &mut stage,
+        &telemetry(&mut g, 0, 2_000_000),
+        2_000_000,
+        &mut out,
+    );
+    let s = out.states.last().copied().unwrap();
+    assert!(
+        (s.world_from_body.translation[0] - 40.0).abs() < 1e-6,
+        "{s:?}"
+    );
+    assert_eq!((s.link.signed, s.link.wrong_source), (0, 1));
+}
