@@ -46,12 +46,12 @@ impl std::fmt::Debug for SigningKey {
 #[derive(Debug, thiserror::Error)]
 pub enum KeyError {
     /// It cannot be read.
-    #[error("signing key {path}: {source}")]
+    #[error("signing key {path}: {error}")]
     Read {
         /// The file.
         path: PathBuf,
         /// What the system said.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// Others than its owner may read or write it.
     #[error(
@@ -94,9 +94,9 @@ impl SigningKey {
     /// in a file only its owner may read or write.
     pub fn load(path: &Path) -> Result<Self, KeyError> {
         use std::os::unix::fs::PermissionsExt;
-        let read = |source| KeyError::Read {
+        let read = |error| KeyError::Read {
             path: path.to_path_buf(),
-            source,
+            error,
         };
         let mode = std::fs::metadata(path).map_err(read)?.permissions().mode() & 0o777;
         if mode & 0o077 != 0 {

@@ -19,6 +19,7 @@ pub mod inject;
 pub mod inject_cmd;
 pub mod latency_cmd;
 pub mod latency_live;
+pub mod link_cmd;
 pub mod map_cmd;
 pub mod map_pilot;
 pub mod pad_detect;

@@ -3,7 +3,7 @@
 use landing::{
     bench_aruco, bench_depth, bench_faults, bench_ipc, bench_latency, bench_perception,
     bench_planner, bench_recorder, bench_sim, config_cmd, graph_cmd, inject_cmd, latency_cmd,
-    map_cmd, pad_detect, pad_print, plan_cmd, plot_cmd, replay_cmd, run_cmd, status_cmd,
+    link_cmd, map_cmd, pad_detect, pad_print, plan_cmd, plot_cmd, replay_cmd, run_cmd, status_cmd,
 };
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -23,6 +23,14 @@ struct Cli {
 }
 
 #[derive(Debug, Subcommand)]
+enum LinkCommand {
+    /// Install `[px4_link] signing_key` on the autopilot (MAVLink SETUP_SIGNING) from
+    /// px4-link's address, and check that its heartbeats then come signed with it. Run
+    /// with the stack stopped.
+    SetupSigning(link_cmd::SetupSigningArgs),
+}
+
+#[derive(Debug, Subcommand)]
 enum Command {
     /// Measure parts of the stack on this machine.
     #[command(subcommand)]
@@ -30,6 +38,9 @@ enum Command {
     /// Work with configuration files.
     #[command(subcommand)]
     Config(ConfigCommand),
+    /// The MAVLink link to the autopilot.
+    #[command(subcommand)]
+    Link(LinkCommand),
     /// The landing pad: print it, find it in an image.
     #[command(subcommand)]
     Pad(PadCommand),
@@ -227,6 +238,7 @@ fn main() -> ExitCode {
             other => other.map(|_| ()),
         },
         Command::Config(ConfigCommand::Check { file }) => config_cmd::check(&file),
+        Command::Link(LinkCommand::SetupSigning(args)) => link_cmd::setup_signing(&args),
         Command::Pad(PadCommand::Detect(args)) => match pad_detect::run(&args) {
             Ok(false) => return ExitCode::from(pad_detect::NOT_FOUND),
             other => other.map(|_| ()),

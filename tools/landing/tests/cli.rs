@@ -33,6 +33,8 @@ fn every_subcommand_has_help() {
         vec!["mcap"],
         vec!["mcap", "info"],
         vec!["graph"],
+        vec!["link"],
+        vec!["link", "setup-signing"],
     ] {
         let mut a = args.clone();
         a.push("--help");
