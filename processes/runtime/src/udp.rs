@@ -35,8 +35,11 @@ pub struct UdpStats {
     pub datagrams_out: u64,
     /// Receives or sends that failed (the link goes on).
     pub io_errors: u64,
-    /// Datagrams from a sender other than the kept peer, dropped.
+    /// Datagrams from a sender other than the configured peer, not delivered as input.
     pub foreign_datagrams: u64,
+    /// Datagrams the kernel dropped because the socket's receive buffer was full (any
+    /// sender): with `datagrams_in`, every datagram that reached the socket is counted.
+    pub kernel_drops: u64,
 }
 
 /// Why the link could not be opened.
@@ -118,7 +121,35 @@ impl UdpLink {
 
     /// What went over the link.
     pub fn stats(&self) -> UdpStats {
-        self.stats
+        UdpStats {
+            kernel_drops: self.kernel_drops(),
+            ..self.stats
+        }
+    }
+
+    /// The socket's drop count (SO_MEMINFO's SK_MEMINFO_DROPS): datagrams that found
+    /// its receive buffer full. 0 when the kernel does not say.
+    fn kernel_drops(&self) -> u64 {
+        use std::os::fd::AsRawFd;
+        /// SO_MEMINFO (asm-generic/socket.h; the libc crate lacks it).
+        const SO_MEMINFO: libc::c_int = 55;
+        let mut info = [0u32; libc::SK_MEMINFO_DROPS as usize + 1];
+        let mut len = std::mem::size_of_val(&info) as libc::socklen_t;
+        // SAFETY: the socket is open while `self` lives; `info` is writable for `len`
+        // bytes, and the kernel writes at most `len` bytes and says how many in `len`.
+        let rc = unsafe {
+            libc::getsockopt(
+                self.socket.as_raw_fd(),
+                libc::SOL_SOCKET,
+                SO_MEMINFO,
+                info.as_mut_ptr().cast(),
+                &mut len,
+            )
+        };
+        if rc != 0 || (len as usize) < std::mem::size_of_val(&info) {
+            return 0;
+        }
+        u64::from(info[libc::SK_MEMINFO_DROPS as usize])
     }
 
     fn send_to(&mut self, to: SocketAddr, frame: &[u8]) {
@@ -227,6 +258,7 @@ impl External for UdpLink {
             ("datagrams_out", self.stats.datagrams_out),
             ("io_errors", self.stats.io_errors),
             ("foreign_datagrams", self.stats.foreign_datagrams),
+            ("kernel_drops", self.kernel_drops()),
         ]
     }
 }

@@ -42,6 +42,32 @@ pub enum Fault {
     /// A world fault: this many datagrams of random bytes at the process's MAVLink UDP
     /// port, from another port, as fast as they go.
     Garbage(u32),
+    /// A world fault: datagrams of this kind at the process's MAVLink UDP port, from
+    /// another port, this many per second, from the injection to the end of the run.
+    Flood(FloodKind, f64),
+}
+
+/// What a flood sends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FloodKind {
+    /// Random bytes, 1 to 280 of them.
+    Random,
+    /// Valid autopilot frames with bytes flipped, cut short or glued together.
+    Mutated,
+    /// Valid autopilot heartbeats and positions (system 1, component 1, good
+    /// checksums) saying something else than the autopilot: spoofing from another port.
+    Spoofed,
+}
+
+impl FloodKind {
+    /// Its name in `--inject`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Random => "random",
+            Self::Mutated => "mutated",
+            Self::Spoofed => "spoofed",
+        }
+    }
 }
 
 impl Fault {
@@ -57,6 +83,7 @@ impl Fault {
             Self::Cut(s) => format!("cut:{s}"),
             Self::Blank(s) => format!("blank:{s}"),
             Self::Garbage(n) => format!("garbage:{n}"),
+            Self::Flood(kind, rate) => format!("flood:{}:{rate}", kind.name()),
         }
     }
 
@@ -108,7 +135,7 @@ pub struct Injection {
 /// Why an `--inject` value was refused.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 #[error(
-    "--inject {value}: {why} (FAULT:PROCESS@WHEN, FAULT kill, stop or restart, delay:MS (0-10000), drop:FRACTION (0-1) or corrupt, or a world fault cut:SECONDS:TOPIC (0-600), blank:SECONDS:TOPIC (0-600, images) or garbage:DATAGRAMS:px4-link (1-1000000), WHEN takeoff, track, descend, land or seconds, e.g. kill:fsm@track, stop:planner@12.5, drop:0.5:aruco-pnp@descend, cut:2:sim/camera@track)"
+    "--inject {value}: {why} (FAULT:PROCESS@WHEN, FAULT kill, stop or restart, delay:MS (0-10000), drop:FRACTION (0-1) or corrupt, or a world fault cut:SECONDS:TOPIC (0-600), blank:SECONDS:TOPIC (0-600, images) garbage:DATAGRAMS:px4-link (1-1000000) or flood:random|mutated|spoofed:PER_SECOND:px4-link (1-100000, until the end), WHEN takeoff, track, descend, land or seconds, e.g. kill:fsm@track, stop:planner@12.5, drop:0.5:aruco-pnp@descend, cut:2:sim/camera@track)"
 )]
 pub struct InjectionError {
     value: String,
@@ -154,6 +181,15 @@ impl FromStr for Injection {
                     return Err(err("value out of range"));
                 }
                 (Fault::Garbage(n as u32), p)
+            }
+            ["flood", kind, rate, p] => {
+                let kind = match kind {
+                    "random" => FloodKind::Random,
+                    "mutated" => FloodKind::Mutated,
+                    "spoofed" => FloodKind::Spoofed,
+                    _ => return Err(err("unknown flood (random, mutated or spoofed)")),
+                };
+                (Fault::Flood(kind, number(rate, 100_000.0)?), p)
             }
             _ => return Err(err("unknown fault")),
         };
@@ -219,9 +255,10 @@ impl Injection {
                 "--inject {self}: blank paints images; {t} carries none (allowed: sim/camera, camera/frame)"
             ));
         }
-        if matches!(self.fault, Fault::Garbage(_)) && self.process != "px4-link" {
+        if matches!(self.fault, Fault::Garbage(_) | Fault::Flood(..)) && self.process != "px4-link"
+        {
             return Err(format!(
-                "--inject {self}: garbage goes to px4-link's MAVLink port (allowed: garbage:N:px4-link)"
+                "--inject {self}: garbage and floods go to px4-link's MAVLink port (allowed: garbage:N:px4-link, flood:KIND:RATE:px4-link)"
             ));
         }
         Ok(())
@@ -254,6 +291,8 @@ pub struct FaultRecord {
     /// How long until the watchdog's safe-land (or hold) order went out, ms; `null` when
     /// none followed this fault.
     pub ordered_after_ms: Option<f64>,
+    /// Datagrams sent at px4-link's port (`garbage`, `flood`), else `null`.
+    pub datagrams_sent: Option<u64>,
     /// Monotonic time of the fault, ns (not in the summary).
     #[serde(skip)]
     pub at_ns: u64,

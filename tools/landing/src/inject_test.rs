@@ -84,10 +84,17 @@ fn world_faults_parse_with_their_topic_or_count() {
         (Fault::Garbage(5000), "px4-link")
     );
     assert_eq!((i.fault.signal(), i.fault.order()), (None, None));
+    let i: Injection = "flood:spoofed:1000:px4-link@0".parse().unwrap();
+    assert_eq!(i.fault, Fault::Flood(FloodKind::Spoofed, 1000.0));
+    assert_eq!(i.to_string(), "flood:spoofed:1000:px4-link@0");
+    assert_eq!((i.fault.signal(), i.fault.order()), (None, None));
     for bad in [
         "cut:0:sim/camera@track",
         "garbage:1.5:px4-link@track",
         "cut:2:camera@track",
+        "flood:loud:1000:px4-link@0",
+        "flood:random:0:px4-link@0",
+        "flood:random:1e9:px4-link@0",
     ] {
         assert!(bad.parse::<Injection>().is_err(), "{bad}");
     }

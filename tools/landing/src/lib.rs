@@ -14,6 +14,7 @@ pub mod bench_recorder;
 pub mod bench_sim;
 pub mod config_cmd;
 pub mod flight_log;
+pub mod flood;
 pub mod graph_cmd;
 pub mod inject;
 pub mod inject_cmd;

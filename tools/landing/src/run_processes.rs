@@ -247,6 +247,8 @@ pub fn run(
     let mut faults: Vec<FaultRecord> = Vec::new();
     let mut done = vec![false; launch.injections.len()];
     let mut exits_seen: Vec<String> = Vec::new();
+    // Floods running, with the index of their record.
+    let mut floods: Vec<(usize, crate::flood::Flood)> = Vec::new();
     let mut next_progress = 0.0f64;
     let wall_limit = Instant::now() + Duration::from_secs_f64(scn.scenario.duration_s + 15.0);
     // A recording wakes on every recorded topic: subscriber queues are short.
@@ -347,9 +349,20 @@ pub fn run(
                         }
                     }
                 } else if let Fault::Garbage(n) = inj.fault {
-                    if let Err(e) = garbage(&values.link_addr, n) {
-                        failure = Some(e);
-                        return false;
+                    match crate::flood::burst(&values.link_addr, n) {
+                        Ok(sent) => record.datagrams_sent = Some(sent),
+                        Err(e) => {
+                            failure = Some(e);
+                            return false;
+                        }
+                    }
+                } else if let Fault::Flood(kind, rate) = inj.fault {
+                    match crate::flood::Flood::start(&values.link_addr, kind, rate) {
+                        Ok(f) => floods.push((faults.len(), f)),
+                        Err(e) => {
+                            failure = Some(e);
+                            return false;
+                        }
                     }
                 } else if let Some((fault, value)) = inj.fault.order() {
                     let order = FaultOrder {
@@ -402,6 +415,14 @@ pub fn run(
     if exit == LoopExit::Signal {
         result = Some(End::Interrupted);
     }
+    // Floods stop before the processes do: px4-link's last counts include them all.
+    for (i, f) in floods {
+        let sent = f.stop();
+        if let Some(r) = faults.get_mut(i) {
+            r.datagrams_sent = Some(sent);
+        }
+    }
+    std::thread::sleep(Duration::from_millis(50));
     drop(children);
     if let Some(e) = failure {
         return Err(e);
@@ -445,29 +466,6 @@ fn start(
     Ok(child)
 }
 
-/// `n` datagrams of random bytes (1 to 280 bytes, the MAVLink frame sizes) at `to`, from
-/// a port of their own, as fast as they go: a radio's noise, a peer gone mad.
-fn garbage(to: &str, n: u32) -> Result<()> {
-    let socket = std::net::UdpSocket::bind("127.0.0.1:0")?;
-    let mut rng = monotonic_ns() | 1;
-    let mut buf = [0u8; 280];
-    for _ in 0..n {
-        let mut next = || {
-            rng ^= rng << 13;
-            rng ^= rng >> 7;
-            rng ^= rng << 17;
-            rng
-        };
-        let len = 1 + (next() % buf.len() as u64) as usize;
-        for b in buf.iter_mut().take(len) {
-            *b = next() as u8;
-        }
-        // A full socket buffer drops the datagram, as a network would.
-        let _ = socket.send_to(&buf[..len], to);
-    }
-    Ok(())
-}
-
 fn fault_record(fault: &str, process: &str, at_s: f64) -> FaultRecord {
     FaultRecord {
         fault: fault.to_string(),
@@ -476,6 +474,7 @@ fn fault_record(fault: &str, process: &str, at_s: f64) -> FaultRecord {
         detected_after_ms: None,
         action: None,
         ordered_after_ms: None,
+        datagrams_sent: None,
         outcome: String::new(),
         at_ns: monotonic_ns(),
     }
@@ -488,7 +487,7 @@ fn note_detection(f: &mut FaultRecord, view: &WatchdogView) {
     let after_ms = |t: u64| (t >= f.at_ns).then(|| (t - f.at_ns) as f64 * 1e-6);
     let n = (view.count as usize).min(view.processes.len());
     let whole_process = ["kill", "stop", "restart", "exited"].contains(&f.fault.as_str());
-    if f.fault.starts_with("garbage") {
+    if f.fault.starts_with("garbage") || f.fault.starts_with("flood") {
         // Noise on the link is px4-link's to drop (its stop line counts it), not a fault
         // of the stack's.
         return;
