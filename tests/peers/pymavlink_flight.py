@@ -21,16 +21,17 @@ def fail(msg):
 def main():
     if len(sys.argv) != 2:
         fail("usage: pymavlink_flight.py PATH_TO_SIM")
-    port = free_port()
-    # Nothing listens at port 9: the simulator's unsolicited messages go nowhere.
-    with running_sim(sys.argv[1], port, 9):
-        fly(port)
+    port, companion = free_port(), free_port()
+    # The simulator takes datagrams from its companion's address only (as px4-link takes
+    # them from the autopilot's): pymavlink listens there and answers from there.
+    with running_sim(sys.argv[1], port, companion):
+        fly(companion)
     print("pymavlink peer: 1 passed, 0 failed")
 
 
-def fly(port):
+def fly(companion):
     time.sleep(0.5)
-    m = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1,
+    m = mavutil.mavlink_connection(f"udpin:127.0.0.1:{companion}", source_system=1,
                                    source_component=191)
     deadline = time.time() + 10
     hb = None
