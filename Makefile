@@ -7,7 +7,7 @@ APT_PACKAGES := libopencv-dev libopencv-contrib-dev clang libclang-dev pkg-confi
 CARGO ?= cargo
 export CARGO_TERM_COLOR ?= never
 
-.PHONY: demo test bootstrap build lint bench help peers
+.PHONY: demo test bootstrap build lint bench help peers fuzz
 
 help:
 	@echo "make demo   install what is missing, build (release), run the simulated mission"
@@ -43,6 +43,15 @@ lint: bootstrap
 test: lint
 	$(CARGO) test --release --workspace
 	$(MAKE) --no-print-directory peers
+	$(MAKE) --no-print-directory fuzz
+
+# Every parser of untrusted input (MAVLink, config, scenario, graph, pad layout,
+# calibration, MCAP, camera and depth frames) fuzzed for FUZZ_SECONDS each on stable
+# Rust: executions per target are printed; a panic, hang or unbounded allocation fails.
+FUZZ_SECONDS ?= 8
+fuzz:
+	$(CARGO) build --release -p fuzz
+	./target/release/landing-fuzz --seconds $(FUZZ_SECONDS)
 
 # Independent MAVLink peers fly the simulator as they fly PX4 SITL: pymavlink, and
 # MAVSDK (PyPI `mavsdk` 4.x, the native library, no server to download). An independent

@@ -20,6 +20,184 @@ const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
 const OP_FOOTER: u8 = 0x02;
 /// The highest opcode the MCAP specification defines.
 const OP_MAX: u8 = 0x0F;
+/// Record opcodes the reader parses; every other record is skipped unread (indexes,
+/// statistics, attachments: nothing the messages need).
+const OP_SCHEMA: u8 = 0x03;
+const OP_CHANNEL: u8 = 0x04;
+const OP_MESSAGE: u8 = 0x05;
+const OP_CHUNK: u8 = 0x06;
+const OP_METADATA: u8 = 0x0C;
+/// The largest chunk the reader unpacks, bytes: a header may claim any size, and
+/// memory is given only to what the file can hold (the recorder's chunks are a few MB).
+const CHUNK_MAX: u64 = 256 << 20;
+
+/// Walks the length-prefixed fields of a record body (MCAP's layout), so that no field
+/// claims more bytes than the record holds: the parser allocates what a length says
+/// before it reads, and a crafted 4 kB file must not ask for gigabytes.
+struct Fields<'a> {
+    body: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Fields<'a> {
+    fn new(body: &'a [u8]) -> Self {
+        Self { body, at: 0 }
+    }
+
+    fn take(&mut self, n: u64, what: &str) -> Result<&'a [u8], String> {
+        let end = usize::try_from(n)
+            .ok()
+            .and_then(|n| self.at.checked_add(n))
+            .filter(|&e| e <= self.body.len())
+            .ok_or_else(|| {
+                format!(
+                    "corrupted: {what} of {n} bytes in a record with {} left",
+                    self.body.len() - self.at
+                )
+            })?;
+        let s = &self.body[self.at..end];
+        self.at = end;
+        Ok(s)
+    }
+
+    fn fixed(&mut self, n: u64) -> Result<(), String> {
+        self.take(n, "a field").map(|_| ())
+    }
+
+    fn u32(&mut self) -> Result<u64, String> {
+        let b = self.take(4, "a length")?;
+        Ok(u64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]])))
+    }
+
+    fn u64(&mut self) -> Result<u64, String> {
+        let b = self.take(8, "a length")?;
+        let mut a = [0u8; 8];
+        a.copy_from_slice(b);
+        Ok(u64::from_le_bytes(a))
+    }
+
+    /// A string or byte array with a u32 length.
+    fn prefixed(&mut self, what: &str) -> Result<&'a [u8], String> {
+        let n = self.u32()?;
+        self.take(n, what)
+    }
+
+    /// A map of strings to strings (u32 byte length, then pairs).
+    fn string_map(&mut self) -> Result<(), String> {
+        let bytes = self.prefixed("a map")?;
+        let mut m = Fields::new(bytes);
+        while m.at < bytes.len() {
+            m.prefixed("a map key")?;
+            m.prefixed("a map value")?;
+        }
+        Ok(())
+    }
+}
+
+/// Checks that every length in a record the reader parses fits in it.
+fn fields_fit(opcode: u8, body: &[u8]) -> Result<(), String> {
+    let mut f = Fields::new(body);
+    match opcode {
+        OP_SCHEMA => {
+            f.fixed(2)?;
+            f.prefixed("a schema name")?;
+            f.prefixed("a schema encoding")?;
+            f.prefixed("schema data")?;
+        }
+        OP_CHANNEL => {
+            f.fixed(4)?;
+            f.prefixed("a topic")?;
+            f.prefixed("a message encoding")?;
+            f.string_map()?;
+        }
+        OP_MESSAGE => f.fixed(2 + 4 + 8 + 8)?,
+        OP_METADATA => {
+            f.prefixed("a metadata name")?;
+            f.string_map()?;
+        }
+        OP_CHUNK => {
+            f.fixed(16)?;
+            let size = f.u64()?;
+            if size > CHUNK_MAX {
+                return Err(format!(
+                    "corrupted: a chunk claims {size} bytes unpacked (at most {CHUNK_MAX} read)"
+                ));
+            }
+            f.fixed(4)?;
+            f.prefixed("a compression name")?;
+            let n = f.u64()?;
+            f.take(n, "chunk records")?;
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
+/// A chunk's records, unpacked (at most its declared size, itself bounded) and checked
+/// against its CRC (0: none written).
+fn unpack(compression: &str, data: &[u8], size: u64, crc: u32) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let mut out = Vec::with_capacity(usize::try_from(size.min(16 << 20)).unwrap_or(0));
+    let limit = size.saturating_add(1);
+    let read = match compression {
+        "" => {
+            out.extend_from_slice(data);
+            Ok(out.len())
+        }
+        "zstd" => {
+            zstd::stream::read::Decoder::new(data).and_then(|d| d.take(limit).read_to_end(&mut out))
+        }
+        "lz4" => lz4::Decoder::new(data).and_then(|d| d.take(limit).read_to_end(&mut out)),
+        other => {
+            return Err(format!(
+                "corrupted chunk: compression `{other}` (allowed: zstd, lz4, none)"
+            ));
+        }
+    };
+    read.map_err(|e| format!("corrupted chunk: {e}"))?;
+    if out.len() as u64 != size {
+        return Err(format!(
+            "corrupted chunk: {} bytes unpacked, {size} declared",
+            out.len()
+        ));
+    }
+    if crc != 0 && crc32fast::hash(&out) != crc {
+        return Err("corrupted chunk: its records do not match its CRC".into());
+    }
+    Ok(out)
+}
+
+/// The records of an unpacked chunk into `channels`, each checked as at the top level.
+fn chunk_records(
+    records: &[u8],
+    channels: &mut Channels,
+    summary: &mut ReadSummary,
+    f: &mut dyn FnMut(&RecordedMessage<'_>),
+) -> Result<(), String> {
+    let mut pos = 0;
+    while pos < records.len() {
+        let Some(head) = records.get(pos..pos + 9) else {
+            return Err("corrupted chunk: a record cut short".into());
+        };
+        let opcode = head[0];
+        let mut n = [0u8; 8];
+        n.copy_from_slice(&head[1..9]);
+        let len = u64::from_le_bytes(n);
+        let body = usize::try_from(len)
+            .ok()
+            .and_then(|l| (pos + 9).checked_add(l))
+            .and_then(|end| records.get(pos + 9..end))
+            .ok_or_else(|| format!("corrupted chunk: a record of {len} bytes past its end"))?;
+        if matches!(opcode, OP_SCHEMA | OP_CHANNEL | OP_MESSAGE | OP_METADATA) {
+            fields_fit(opcode, body)?;
+            let r = mcap::parse_record(opcode, body)
+                .map_err(|e| format!("corrupted record in a chunk (opcode 0x{opcode:02x}): {e}"))?;
+            channels.take(r, summary, f)?;
+        }
+        pos += 9 + body.len();
+    }
+    Ok(())
+}
 
 /// Why a recording could not be read at all.
 #[derive(Debug, thiserror::Error)]
@@ -226,18 +404,26 @@ pub fn read_buffer(buf: &[u8], f: &mut dyn FnMut(&RecordedMessage<'_>)) -> Optio
             break;
         };
         let body = &buf[body_start..end];
-        let result = match mcap::parse_record(opcode, body) {
-            Err(e) => Err(format!("corrupted record (opcode 0x{opcode:02x}): {e}")),
-            Ok(Record::Chunk { header, data }) => (|| {
-                let reader = mcap::read::ChunkReader::new(header, &data)
-                    .map_err(|e| format!("corrupted chunk: {e}"))?;
-                for r in reader {
-                    let r = r.map_err(|e| format!("corrupted chunk: {e}"))?;
-                    channels.take(r, &mut summary, f)?;
-                }
-                Ok(())
-            })(),
-            Ok(r) => channels.take(r, &mut summary, f),
+        let parsed = matches!(
+            opcode,
+            OP_SCHEMA | OP_CHANNEL | OP_MESSAGE | OP_METADATA | OP_CHUNK
+        );
+        let result = if !parsed {
+            Ok(())
+        } else if let Err(e) = fields_fit(opcode, body) {
+            Err(e)
+        } else {
+            match mcap::parse_record(opcode, body) {
+                Err(e) => Err(format!("corrupted record (opcode 0x{opcode:02x}): {e}")),
+                Ok(Record::Chunk { header, data }) => unpack(
+                    &header.compression,
+                    &data,
+                    header.uncompressed_size,
+                    header.uncompressed_crc,
+                )
+                .and_then(|records| chunk_records(&records, &mut channels, &mut summary, f)),
+                Ok(r) => channels.take(r, &mut summary, f),
+            }
         };
         if let Err(reason) = result {
             summary.broken = Some(broken(pos, reason));
