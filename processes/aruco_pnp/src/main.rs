@@ -18,11 +18,11 @@ use runtime::StageArgs;
 struct Args {
     #[command(flatten)]
     stage: StageArgs,
-    /// Camera calibration, OpenCV YAML (default: [aruco_pnp] camera, in the deploy
-    /// config directory).
+    /// Camera calibration, OpenCV YAML (default: [aruco_pnp] camera, relative to the
+    /// config file).
     #[arg(long)]
     camera: Option<PathBuf>,
-    /// Pad layout (default: [aruco_pnp] pad, in the deploy config directory).
+    /// Pad layout (default: [aruco_pnp] pad, relative to the config file).
     #[arg(long)]
     pad: Option<PathBuf>,
 }
@@ -33,7 +33,9 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<()> {
     let (ipc, cfg): (_, ArucoConfig) = args.stage.load("aruco_pnp")?;
-    let in_config = |name: &str| args.stage.deploy().join("config").join(name);
+    // Relative to the config file, as every process and `landing config check` read it.
+    let dir = args.stage.config_dir();
+    let in_config = |name: &str| stack_config::resolve_path(&dir, name);
     let camera = args
         .camera
         .clone()

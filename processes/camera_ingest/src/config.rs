@@ -35,11 +35,7 @@ impl CameraIngestConfig {
     /// The calibration file, resolved against `config_dir` (the directory of the file this
     /// section came from) when relative.
     pub fn camera_path(&self, config_dir: &Path) -> PathBuf {
-        if self.camera.is_absolute() {
-            self.camera.clone()
-        } else {
-            config_dir.join(&self.camera)
-        }
+        stack_config::resolve_path(config_dir, &self.camera.to_string_lossy())
     }
 }
 

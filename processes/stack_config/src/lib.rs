@@ -212,6 +212,20 @@ impl Validate for IpcConfig {
     }
 }
 
+/// The sections a stack config may hold: a process refuses a file with another one (a
+/// misspelt section would otherwise leave its process on defaults without a word).
+pub const SECTIONS: &[&str] = &[
+    "ipc",
+    "aruco_pnp",
+    "px4_link",
+    "planner",
+    "camera_ingest",
+    "depth_map",
+    "fsm",
+    "watchdog",
+    "recorder",
+];
+
 /// What a process reads from the stack file: `[ipc]` and its own section, each strictly
 /// (unknown keys are errors) and each defaulted when absent; the other processes'
 /// sections are not its business. Errors name the key with its section (`aruco_pnp.x`).
@@ -224,6 +238,23 @@ where
         source,
     })?;
     let table: toml::Table = toml::from_str(&text).map_err(|e| syntax_error(&text, path, &e))?;
+    if table.is_empty() {
+        return Err(ConfigError::Invalid {
+            path: path.to_path_buf(),
+            key: "(top level)".into(),
+            message: format!(
+                "the file sets nothing (allowed: a stack config with its sections: {}; deploy/config/landing.toml is one)",
+                SECTIONS.join(", ")
+            ),
+        });
+    }
+    if let Some(unknown) = table.keys().find(|k| !SECTIONS.contains(&k.as_str())) {
+        return Err(ConfigError::Key {
+            path: path.to_path_buf(),
+            key: unknown.clone(),
+            message: format!("unknown section (allowed: {})", SECTIONS.join(", ")),
+        });
+    }
     let ipc = section_of(&table, "ipc", path)?;
     let own = section_of(&table, section, path)?;
     Ok((ipc, own))

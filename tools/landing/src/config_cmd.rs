@@ -65,8 +65,9 @@ impl Validate for StackConfig {
 
 impl StackConfig {
     /// Loads and validates `file`, every file it names resolved against the file's
-    /// directory (here, once), and the signing key read (a key others may read, or a
-    /// missing one, is an error now rather than at the first flight).
+    /// directory (here, once, as each process resolves them) and read: the calibrations,
+    /// the pad layout and the signing key. A missing or broken one is an error now, in
+    /// one line naming the key, rather than at the first flight.
     pub fn load(file: &Path) -> Result<Self> {
         let mut cfg: Self = config::load(file)?;
         let dir = file
@@ -77,6 +78,18 @@ impl StackConfig {
             cfg.px4_link.signing_key = key.display().to_string();
         }
         cfg.signing_key()?;
+        let resolved = |v: &str| config::resolve_path(dir, v).display().to_string();
+        cfg.aruco_pnp.camera = resolved(&cfg.aruco_pnp.camera);
+        cfg.aruco_pnp.pad = resolved(&cfg.aruco_pnp.pad);
+        optics::CameraCalibration::load(&cfg.aruco_pnp.camera)
+            .map_err(|e| anyhow::anyhow!("{}: aruco_pnp.camera: {e}", file.display()))?;
+        optics::PadModel::load(&cfg.aruco_pnp.pad)
+            .map_err(|e| anyhow::anyhow!("{}: aruco_pnp.pad: {e}", file.display()))?;
+        if let Some(c) = cfg.camera_ingest.as_mut() {
+            c.camera = c.camera_path(dir);
+            optics::CameraCalibration::load(&c.camera)
+                .map_err(|e| anyhow::anyhow!("{}: camera_ingest.camera: {e}", file.display()))?;
+        }
         Ok(cfg)
     }
 

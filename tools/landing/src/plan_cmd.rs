@@ -78,8 +78,9 @@ struct MapFile {
     inflation: Option<f64>,
 }
 
-/// Reads a map file into an inflated grid; errors name the file and the problem.
-pub fn load_map(path: &Path, cfg: &PlannerConfig) -> Result<GridMap> {
+/// Reads a map file into an inflated grid and its bounds (min, max); errors name the
+/// file and the problem.
+pub fn load_map(path: &Path, cfg: &PlannerConfig) -> Result<(GridMap, [Vector3<f64>; 2])> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("map {}: cannot read", path.display()))?;
     let file: MapFile =
@@ -102,8 +103,39 @@ pub fn load_map(path: &Path, cfg: &PlannerConfig) -> Result<GridMap> {
     }
     let res = file.resolution.unwrap_or(cfg.resolution);
     let infl = file.inflation.unwrap_or(cfg.inflation);
-    GridMap::from_boxes(v(file.bounds.min), v(file.bounds.max), res, infl, &boxes)
-        .map_err(|e| anyhow::anyhow!("map {}: {e}", path.display()))
+    let bounds = [v(file.bounds.min), v(file.bounds.max)];
+    let map = GridMap::from_boxes(bounds[0], bounds[1], res, infl, &boxes)
+        .map_err(|e| anyhow::anyhow!("map {}: {e}", path.display()))?;
+    Ok((map, bounds))
+}
+
+/// An error unless `p` (flag `--flag`) lies inside the map's `bounds`: the planner would
+/// move such a point inside and plan to somewhere else than asked.
+fn inside(flag: &str, raw: &str, p: &Vector3<f64>, bounds: &[Vector3<f64>; 2]) -> Result<()> {
+    let [lo, hi] = bounds;
+    if (0..3).all(|k| p[k] >= lo[k] && p[k] <= hi[k]) {
+        return Ok(());
+    }
+    bail!(
+        "--{flag} {raw}: outside the map (allowed: {:.2},{:.2},{:.2} to {:.2},{:.2},{:.2})",
+        lo.x,
+        lo.y,
+        lo.z,
+        hi.x,
+        hi.y,
+        hi.z
+    )
+}
+
+/// An error unless the speed of `v` (flag `--flag`) is within `max` m/s.
+fn within_speed(flag: &str, raw: &str, v: &Vector3<f64>, max: f64) -> Result<()> {
+    if v.norm() <= max {
+        return Ok(());
+    }
+    bail!(
+        "--{flag} {raw}: {:.2} m/s (allowed: at most [planner] max_vel, {max} m/s)",
+        v.norm()
+    )
 }
 
 /// Loads the [planner] section, or the defaults.
@@ -137,7 +169,22 @@ pub fn run(args: &PlanArgs) -> Result<bool> {
         },
         moving: false,
     };
-    let map = load_map(&args.map, &cfg)?;
+    let (map, bounds) = load_map(&args.map, &cfg)?;
+    inside("start", &args.start, &start.p, &bounds)?;
+    inside("goal", &args.goal, &goal.state.p, &bounds)?;
+    let raw = |v: Option<&String>| v.cloned().unwrap_or_default();
+    within_speed(
+        "start-vel",
+        &raw(args.start_vel.as_ref()),
+        &start.v,
+        cfg.max_vel,
+    )?;
+    within_speed(
+        "goal-vel",
+        &raw(args.goal_vel.as_ref()),
+        &goal.state.v,
+        cfg.max_vel,
+    )?;
     let mut planner = Planner::new(cfg);
     let t0 = Instant::now();
     let result = planner.plan(&map, &start, &goal);

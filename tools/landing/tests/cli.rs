@@ -122,6 +122,65 @@ fn a_depth_map_value_out_of_range_is_one_line_naming_the_key() {
 }
 
 #[test]
+fn an_empty_config_or_a_misspelt_section_is_refused_by_config_check_and_by_a_process() {
+    let dir = std::env::temp_dir().join(format!("landing-cli-empty-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let empty = dir.join("empty.toml");
+    std::fs::write(&empty, "# nothing set\n").unwrap();
+    let o = landing(&["config", "check", empty.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let px4_link = std::path::Path::new(env!("CARGO_BIN_EXE_landing")).with_file_name("px4-link");
+    let o = std::process::Command::new(&px4_link)
+        .arg("--config")
+        .arg(&empty)
+        .output()
+        .unwrap();
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    assert!(err.contains("the file sets nothing"), "{err}");
+    let typo = dir.join("typo.toml");
+    std::fs::write(&typo, "[px4link]\nlink = \"udp:127.0.0.1:14540\"\n").unwrap();
+    let o = std::process::Command::new(&px4_link)
+        .arg("--config")
+        .arg(&typo)
+        .output()
+        .unwrap();
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("`px4link`: unknown section (allowed: ipc,"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap_or_default();
+}
+
+#[test]
+fn config_check_loads_the_files_a_config_names_relative_to_it() {
+    let dir = std::env::temp_dir().join(format!("landing-cli-files-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let text = common::shipped_config();
+    // Alone in a directory, without its calibration and pad beside it.
+    let alone = dir.join("landing.toml");
+    std::fs::write(&alone, &text).unwrap();
+    let o = landing(&["config", "check", alone.to_str().unwrap()]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("aruco_pnp.camera") && err.contains(dir.to_str().unwrap()),
+        "{err}"
+    );
+    // With them: ok. A broken pad layout beside it is named.
+    let with = common::write_config(&dir.join("with"), "landing.toml", &text);
+    let o = landing(&["config", "check", with.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    std::fs::write(dir.join("with/pad.toml"), "[board]\n").unwrap();
+    let o = landing(&["config", "check", with.to_str().unwrap()]);
+    assert!(stderr(&o).contains("aruco_pnp.pad"), "{}", stderr(&o));
+    std::fs::remove_dir_all(&dir).unwrap_or_default();
+}
+
+#[test]
 fn the_shipped_config_is_valid() {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),

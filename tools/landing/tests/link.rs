@@ -48,9 +48,7 @@ fn config(dir: &Path, name: &str, link: u16, sim: u16, key: &str) -> PathBuf {
             &format!("remote = \"127.0.0.1:{sim}\"\nsigning_key = \"{key}\""),
         );
     assert_ne!(text, shipped);
-    let path = dir.join(name);
-    std::fs::write(&path, text).unwrap();
-    path
+    common::write_config(dir, name, &text)
 }
 
 #[test]

@@ -2,6 +2,8 @@
 //! `landing run --live`: a Foxglove client (here a plain WebSocket client speaking the
 //! protocol) watches the mission as it flies, paced to the wall clock.
 
+mod common;
+
 use std::io::{BufRead, BufReader};
 use std::net::TcpStream;
 use std::process::{Command, Stdio};
@@ -31,18 +33,13 @@ fn connect(addr: &str) -> WebSocket<MaybeTlsStream<TcpStream>> {
 fn a_foxglove_client_watches_the_mission_live_as_it_flies() {
     let dir = std::env::temp_dir().join(format!("landing-live-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let deploy = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../deploy/config/landing.toml"
-    );
-    let text = std::fs::read_to_string(deploy).unwrap();
+    let text = common::shipped_config();
     let any_port = text.replace(
         "live_address = \"127.0.0.1:8765\"",
         "live_address = \"127.0.0.1:0\"",
     );
     assert_ne!(text, any_port);
-    let cfg = dir.join("live.toml");
-    std::fs::write(&cfg, any_port).unwrap();
+    let cfg = common::write_config(&dir, "live.toml", &any_port);
 
     let started = Instant::now();
     let mut run = Command::new(env!("CARGO_BIN_EXE_landing"))

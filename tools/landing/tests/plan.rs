@@ -150,6 +150,37 @@ fn bad_maps_and_flags_are_one_line_errors() {
 }
 
 #[test]
+fn a_goal_outside_the_map_or_a_speed_beyond_the_limit_is_an_error_not_clamped() {
+    let map = paper_map();
+    one_line_error(
+        &[
+            "plan", "--map", &map, "--start", "0,0,1", "--goal", "1e9,0,1",
+        ],
+        "--goal 1e9,0,1: outside the map (allowed:",
+    );
+    one_line_error(
+        &[
+            "plan", "--map", &map, "--start", "0,0,-5", "--goal", "6,0,1",
+        ],
+        "--start 0,0,-5: outside the map",
+    );
+    one_line_error(
+        &[
+            "plan",
+            "--map",
+            &map,
+            "--start",
+            "0,0,1",
+            "--goal",
+            "6,0,1",
+            "--start-vel",
+            "30,0,0",
+        ],
+        "max_vel",
+    );
+}
+
+#[test]
 fn a_start_inside_the_obstacle_is_no_plan_with_exit_code_three() {
     let map = paper_map();
     let o = landing(&[

@@ -18,16 +18,11 @@ fn recording() -> PathBuf {
     static ONCE: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
     ONCE.get_or_init(|| {
         let path = temp("paper-sim.mcap");
-        let deploy = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../../deploy/config/landing.toml"
-        );
-        let text = std::fs::read_to_string(deploy).unwrap();
+        let text = common::shipped_config();
         let at_once = "new_setpoints_at_once = true";
         let text = text.replace("new_setpoints_at_once = false", at_once);
         assert!(text.contains(at_once));
-        let cfg = temp("at-once.toml");
-        std::fs::write(&cfg, text).unwrap();
+        let cfg = common::write_config(temp("x").parent().unwrap(), "at-once.toml", &text);
         let o = landing(&[
             "run",
             "--scenario",
@@ -206,18 +201,13 @@ fn replaying_the_fsm_reproduces_every_transition_of_the_flight_and_its_time() {
 #[test]
 fn replaying_the_fsm_with_another_config_shows_the_transitions_it_changes() {
     // The same inputs, a tighter alignment before the descent: the fsm descends later.
-    let deploy = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../deploy/config/landing.toml"
-    );
-    let text = std::fs::read_to_string(deploy).unwrap();
+    let text = common::shipped_config();
     let tighter = text.replace("\nalign_m = 0.3\n", "\nalign_m = 0.1\n");
     assert_ne!(
         text, tighter,
         "deploy/config/landing.toml has no `align_m = 0.3`"
     );
-    let cfg = temp("tighter-align.toml");
-    std::fs::write(&cfg, tighter).unwrap();
+    let cfg = common::write_config(temp("x").parent().unwrap(), "tighter-align.toml", &tighter);
     let (ok, v) = replay_fsm(&recording(), &["--config", cfg.to_str().unwrap()]);
     assert!(!ok, "{v}");
     assert!(v["different"].as_u64().unwrap() >= 1, "{v}");

@@ -16,3 +16,31 @@ pub fn landing_env(args: &[&str], env: &[(&str, &str)]) -> Output {
         .output()
         .expect("run landing")
 }
+
+/// The shipped stack configuration's text.
+pub fn shipped_config() -> String {
+    std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../deploy/config/landing.toml"
+    ))
+    .expect("deploy/config/landing.toml")
+}
+
+/// Writes a stack configuration `text` as `dir/name` with the files it names beside
+/// it (the calibrations and the pad layout, copied from deploy/config): a config's
+/// files are found relative to it, wherever it is.
+pub fn write_config(dir: &std::path::Path, name: &str, text: &str) -> std::path::PathBuf {
+    let config = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../deploy/config"));
+    std::fs::create_dir_all(dir).expect("config dir");
+    for entry in std::fs::read_dir(config).expect("deploy/config").flatten() {
+        let p = entry.path();
+        let ext = p.extension().and_then(|e| e.to_str()).unwrap_or("");
+        let is_pad = p.file_name().is_some_and(|n| n == "pad.toml");
+        if ext == "yaml" || is_pad {
+            std::fs::copy(&p, dir.join(entry.file_name())).expect("copy a config file");
+        }
+    }
+    let path = dir.join(name);
+    std::fs::write(&path, text).expect("write config");
+    path
+}
