@@ -188,3 +188,112 @@ fn an_unsigned_link_acts_on_the_autopilot_only() {
     );
     assert_eq!((s.link.signed, s.link.wrong_source), (0, 1));
 }
+
+/// Random numbers for the property test: ordinary values, huge ones, NaN, infinities.
+struct Wild(u64);
+
+impl Wild {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+
+    fn value(&mut self) -> f64 {
+        let u = (self.next() % 1_000_000) as f64 / 1_000_000.0;
+        match self.next() % 10 {
+            0 => f64::NAN,
+            1 => f64::INFINITY * if u < 0.5 { 1.0 } else { -1.0 },
+            2 => (u - 0.5) * 2e9,
+            3 => (u - 0.5) * 1e40, // beyond f32
+            4 | 5 => (u - 0.5) * 600.0,
+            _ => (u - 0.5) * 40.0,
+        }
+    }
+}
+
+#[test]
+fn whatever_the_fsm_asks_no_setpoint_beyond_the_bounds_goes_on_the_wire() {
+    let settings = LinkSettings::default();
+    let b = settings.bounds;
+    let mut stage = LinkStage::new(settings, Framing::Datagram, None);
+    let mut out = Out::default();
+    let ms = 1_000_000u64;
+    // The autopilot reports the vehicle 40 m east, 10 m up: the take-off point.
+    let mut autopilot = Guard::open();
+    feed(&mut stage, &telemetry(&mut autopilot, 0, ms), ms, &mut out);
+    let home = [40.0f64, 0.0, 10.0];
+    let mut rng = Wild(0x9e37_79b9_7f4a_7c15);
+    let mut sent = 0;
+    for i in 0..20_000u64 {
+        let t = 2 * ms + i * 10 * ms;
+        let mut sp = ipc_types::msg::Setpoint {
+            msg: ipc_types::msg::Header::captured_at(t),
+            valid: (rng.next() % 16) as u32,
+            yaw: rng.value(),
+            ..Default::default()
+        };
+        for k in 0..3 {
+            sp.position[k] = home[k] + rng.value();
+            sp.velocity[k] = rng.value();
+            sp.acceleration[k] = rng.value();
+        }
+        out.frames.clear();
+        stage
+            .on_input(
+                t,
+                Input {
+                    topic: topics::FSM_SETPOINT,
+                    msg: Message::Setpoint(&sp),
+                },
+                &mut out,
+            )
+            .unwrap();
+        // Telemetry keeps the link up; the stream goes out at its period.
+        feed(
+            &mut stage,
+            &telemetry(&mut autopilot, (i % 200) as u8, t),
+            t,
+            &mut out,
+        );
+        stage.on_tick(t + 5 * ms, &mut out).unwrap();
+        for f in &out.frames {
+            let mut msgs = Vec::new();
+            px4_protocol::codec::decode_datagram(f, &mut msgs);
+            for (_, m) in msgs {
+                let MavMessage::SET_POSITION_TARGET_LOCAL_NED(s) = m else {
+                    continue;
+                };
+                sent += 1;
+                let mask = s.type_mask.bits();
+                let used = |bits: u16| mask & bits == 0;
+                // NED on the wire: x north, y east, z down.
+                if used(0b111) {
+                    let (e, n, u) = (f64::from(s.y), f64::from(s.x), -f64::from(s.z));
+                    assert!(e.is_finite() && n.is_finite() && u.is_finite(), "{s:?}");
+                    let d = [e - home[0], n - home[1], u - home[2]];
+                    assert!(d[0].hypot(d[1]) <= b.geofence_radius_m + 1e-3, "{s:?}");
+                    assert!(
+                        d[2] <= b.geofence_height_m + 1e-3 && d[2] >= -2.0 - 1e-3,
+                        "{s:?}"
+                    );
+                }
+                if used(0b111_000) {
+                    let (vn, ve, vd) = (f64::from(s.vx), f64::from(s.vy), f64::from(s.vz));
+                    assert!(vn.hypot(ve) <= b.max_horizontal_speed_m_s + 1e-3, "{s:?}");
+                    assert!(vd.abs() <= b.max_vertical_speed_m_s + 1e-3, "{s:?}");
+                }
+                if used(0b111_000_000) {
+                    let a = [s.afx, s.afy, s.afz].map(f64::from);
+                    let norm = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+                    assert!(norm <= b.max_acceleration_m_s2 + 1e-3, "{s:?}");
+                }
+                assert!(s.yaw.is_finite() && s.yaw_rate == 0.0, "{s:?}");
+            }
+        }
+    }
+    // Many were in bounds and went out; the others were refused and counted.
+    assert!(sent > 1_000, "{sent}");
+    assert!(stage.node().refused_setpoints().0 > 1_000);
+}
