@@ -78,7 +78,9 @@ fn another_user_can_neither_publish_into_nor_read_the_stack() {
     }
     // SAFETY: geteuid has no preconditions.
     if unsafe { libc::geteuid() } != 0 {
-        eprintln!("not root: cannot start a process as another user; the permission check below still runs");
+        eprintln!(
+            "not root: cannot start a process as another user; the permission check below still runs"
+        );
     }
     let prefix = IpcPrefix::unique("seconduser");
     let ipc = Ipc::open("owner", &prefix).unwrap();
@@ -107,7 +109,12 @@ fn another_user_can_neither_publish_into_nor_read_the_stack() {
     // segment (a node counter), which it creates world-writable.
     let mut checked = 0;
     let mut open = Vec::new();
-    for dir in ["/dev/shm", "/tmp/iceoryx2", "/tmp/iceoryx2/services", "/tmp/iceoryx2/nodes"] {
+    for dir in [
+        "/dev/shm",
+        "/tmp/iceoryx2",
+        "/tmp/iceoryx2/services",
+        "/tmp/iceoryx2/nodes",
+    ] {
         let Ok(entries) = std::fs::read_dir(dir) else {
             continue;
         };
@@ -126,7 +133,11 @@ fn another_user_can_neither_publish_into_nor_read_the_stack() {
             }
         }
     }
-    assert!(checked >= 4, "{checked} resources found for {}", prefix.as_str());
+    assert!(
+        checked >= 4,
+        "{checked} resources found for {}",
+        prefix.as_str()
+    );
     assert!(
         open.iter().all(|o| o.contains(".global_mgmt ")),
         "resources others may read or write: {open:?}"
