@@ -234,8 +234,8 @@ fn whatever_the_fsm_asks_no_setpoint_beyond_the_bounds_goes_on_the_wire() {
             yaw: rng.value(),
             ..Default::default()
         };
-        for k in 0..3 {
-            sp.position[k] = home[k] + rng.value();
+        for (k, h) in home.iter().enumerate() {
+            sp.position[k] = h + rng.value();
             sp.velocity[k] = rng.value();
             sp.acceleration[k] = rng.value();
         }
