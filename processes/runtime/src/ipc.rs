@@ -30,8 +30,14 @@ pub type Svc = ipc::Service;
 pub const PREFIX_ENV: &str = "LANDING_IPC_PREFIX";
 pub use stack_config::DEFAULT_PREFIX;
 
-/// How many samples a subscriber buffers before the oldest is overwritten.
-const SUBSCRIBER_BUFFER: usize = 4;
+/// How many fixed-size messages (states, setpoints, observations, statuses) a subscriber
+/// buffers before the oldest is overwritten: at the fastest of them (vehicle/state,
+/// about 80 Hz) 16 cover a reader held off the CPU for 200 ms. With 4, the watchdog
+/// (a 100 Hz clock) lost one state in a `--processes` flight under CI's load.
+const MESSAGE_BUFFER: usize = 16;
+/// The same for slices (frames, maps): each sample is up to megabytes, and every
+/// publisher holds `MAX_SUBSCRIBERS` times this many; their readers take the newest.
+const SLICE_BUFFER: usize = 4;
 /// How many samples a subscriber may hold at once.
 const MAX_BORROWED: usize = 2;
 /// Processes that may subscribe to one topic.
@@ -508,6 +514,7 @@ impl Ipc {
         &self,
         service: &str,
         history: usize,
+        buffer: usize,
     ) -> Result<PubSubBuilder<P, H>, ServiceError>
     where
         P: Debug + IceoryxSend + ?Sized + 'static,
@@ -519,7 +526,7 @@ impl Ipc {
             .publish_subscribe::<P>()
             .user_header::<H>()
             .enable_safe_overflow(true)
-            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+            .subscriber_max_buffer_size(buffer)
             .subscriber_max_borrowed_samples(MAX_BORROWED)
             .history_size(history)
             .max_subscribers(MAX_SUBSCRIBERS)
@@ -532,7 +539,7 @@ impl Ipc {
         T: Debug + ZeroCopySend + Copy + 'static,
     {
         let factory = self
-            .pubsub::<T, Header>(service, 1)?
+            .pubsub::<T, Header>(service, 1, MESSAGE_BUFFER)?
             .open_or_create()
             .map_err(|e| open_err(service, e))?;
         let port = factory
@@ -558,12 +565,12 @@ impl Ipc {
         T: Debug + ZeroCopySend + Copy + 'static,
     {
         let factory = self
-            .pubsub::<T, Header>(service, 1)?
+            .pubsub::<T, Header>(service, 1, MESSAGE_BUFFER)?
             .open_or_create()
             .map_err(|e| open_err(service, e))?;
         let port = factory
             .subscriber_builder()
-            .buffer_size(SUBSCRIBER_BUFFER)
+            .buffer_size(MESSAGE_BUFFER)
             .create()
             .map_err(|e| port_err(service, e))?;
         let listener = self
@@ -592,7 +599,7 @@ impl Ipc {
         H: MessageHeader,
     {
         let factory = self
-            .pubsub::<[T], H>(service, 0)?
+            .pubsub::<[T], H>(service, 0, SLICE_BUFFER)?
             .open_or_create()
             .map_err(|e| open_err(service, e))?;
         let port = factory
@@ -625,12 +632,12 @@ impl Ipc {
         H: MessageHeader,
     {
         let factory = self
-            .pubsub::<[T], H>(service, 0)?
+            .pubsub::<[T], H>(service, 0, SLICE_BUFFER)?
             .open_or_create()
             .map_err(|e| open_err(service, e))?;
         let port = factory
             .subscriber_builder()
-            .buffer_size(SUBSCRIBER_BUFFER)
+            .buffer_size(SLICE_BUFFER)
             .create()
             .map_err(|e| port_err(service, e))?;
         let listener = self
