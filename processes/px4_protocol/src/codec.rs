@@ -80,11 +80,9 @@ impl Guard {
         let start = buf.len();
         encode(buf, header, msg)?;
         if let Some(s) = self.signer.as_mut() {
-            let mut frame = buf.split_off(start);
             let extra =
                 <MavMessage as mavlink::Message>::extra_crc(mavlink::Message::message_id(msg));
-            s.sign(&mut frame, extra, now_ns);
-            buf.extend_from_slice(&frame);
+            s.sign_from(buf, start, extra, now_ns);
         }
         Ok(())
     }

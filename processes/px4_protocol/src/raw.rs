@@ -50,7 +50,7 @@ pub fn crc_accumulate(mut crc: u16, bytes: &[u8]) -> u16 {
 }
 
 /// The checksum of a frame: header (without the start byte), payload, CRC_EXTRA.
-fn frame_crc(header_and_payload: &[u8], crc_extra: u8) -> u16 {
+pub(crate) fn frame_crc(header_and_payload: &[u8], crc_extra: u8) -> u16 {
     crc_accumulate(crc_accumulate(0xffff, header_and_payload), &[crc_extra])
 }
 

@@ -230,6 +230,21 @@ impl Signer {
     /// checksum and appends the signature block. False (the frame untouched) when it
     /// is not such a frame.
     pub fn sign(&mut self, frame: &mut Vec<u8>, crc_extra: u8, now_ns: u64) -> bool {
+        self.sign_from(frame, 0, crc_extra, now_ns)
+    }
+
+    /// [`Self::sign`] for the frame that starts at `start` in `buf` (the last one
+    /// appended): signed where it lies, without a copy.
+    pub fn sign_from(
+        &mut self,
+        buf: &mut Vec<u8>,
+        start: usize,
+        crc_extra: u8,
+        now_ns: u64,
+    ) -> bool {
+        let Some(frame) = buf.get_mut(start..) else {
+            return false;
+        };
         let n = frame.len();
         let ok = n >= 12
             && frame[0] == STX_V2
@@ -239,18 +254,15 @@ impl Signer {
             return false;
         }
         frame[2] |= IFLAG_SIGNED;
-        let crc = crate::raw::crc_accumulate(
-            crate::raw::crc_accumulate(0xffff, &frame[1..n - 2]),
-            &[crc_extra],
-        );
+        let crc = crate::raw::frame_crc(&frame[1..n - 2], crc_extra);
         frame[n - 2..].copy_from_slice(&crc.to_le_bytes());
         let ts = self.timestamp(now_ns).max(self.timestamp.saturating_add(1));
         self.timestamp = ts;
         let ts_bytes = &ts.to_le_bytes()[..6];
         let sig = self.signature(frame, self.link_id, ts_bytes);
-        frame.push(self.link_id);
-        frame.extend_from_slice(ts_bytes);
-        frame.extend_from_slice(&sig);
+        buf.push(self.link_id);
+        buf.extend_from_slice(ts_bytes);
+        buf.extend_from_slice(&sig);
         true
     }
 

@@ -316,8 +316,11 @@ pub(crate) struct RecordedMaps {
 impl RecordedMaps {
     /// Takes `m` when it is part of a map; `Ok(false)` leaves it to the caller.
     pub(crate) fn take(&mut self, m: &recorder::RecordedMessage<'_>) -> Result<bool> {
-        let map = format!("/{}", ipc_types::topics::MAP_OCCUPANCY);
-        if m.topic == map && m.schema == "foxglove.VoxelGrid" {
+        let Some(short) = m.topic.strip_prefix('/') else {
+            return Ok(false);
+        };
+        let map = ipc_types::topics::MAP_OCCUPANCY;
+        if short == map && m.schema == "foxglove.VoxelGrid" {
             use foxglove::Decode;
             let grid = foxglove::schemas::VoxelGrid::decode(m.data)?;
             self.grids += 1;
@@ -329,7 +332,7 @@ impl RecordedMaps {
             }
             return Ok(true);
         }
-        if m.topic == format!("{map}/header") {
+        if short.strip_prefix(map) == Some("/header") {
             let header = map_header(&serde_json::from_slice(m.data)?)?;
             self.maps.push(RecordedMap {
                 log_time: m.log_time,
