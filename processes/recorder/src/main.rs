@@ -147,6 +147,8 @@ fn node_spec(graph: &Graph, skip: &[String]) -> NodeSpec {
             topic: t.name.clone(),
             newest: false,
             delay: false,
+            // Every message counts: the deepest buffer the topic allows.
+            depth: Some(stage::max_depth(t.elements.as_deref())),
         })
         .collect();
     NodeSpec {

@@ -137,22 +137,36 @@ struct InSpec {
     port: InPort,
 }
 
-fn open_in(ipc: &Ipc, service: &str, payload: Payload) -> Result<Option<InPort>, ServiceError> {
+/// The subscriber of `service` for `payload`, buffering `depth` (the graph's) or the
+/// default.
+fn open_in(
+    ipc: &Ipc,
+    service: &str,
+    payload: Payload,
+    depth: Option<u32>,
+) -> Result<Option<InPort>, ServiceError> {
+    let depth = depth.map_or(crate::ipc::DEFAULT_DEPTH, |d| d as usize);
     Ok(Some(match payload {
-        Payload::CameraFrame => InPort::CameraFrame(ipc.slice_subscriber(service)?),
-        Payload::DepthFrame => InPort::DepthFrame(ipc.slice_subscriber(service)?),
-        Payload::OccupancyMap => InPort::OccupancyMap(ipc.slice_subscriber(service)?),
-        Payload::VehicleState => InPort::VehicleState(ipc.subscriber(service)?),
-        Payload::PadObservation => InPort::PadObservation(ipc.subscriber(service)?),
-        Payload::PlannerGoal => InPort::PlannerGoal(ipc.subscriber(service)?),
-        Payload::Trajectory => InPort::Trajectory(ipc.subscriber(service)?),
-        Payload::PlannerStats => InPort::PlannerStats(ipc.subscriber(service)?),
-        Payload::Setpoint => InPort::Setpoint(ipc.subscriber(service)?),
-        Payload::LinkRequest => InPort::LinkRequest(ipc.subscriber(service)?),
-        Payload::LinkOutcome => InPort::LinkOutcome(ipc.subscriber(service)?),
-        Payload::SafetyCommand => InPort::SafetyCommand(ipc.subscriber(service)?),
-        Payload::FsmStatus => InPort::FsmStatus(ipc.subscriber(service)?),
-        Payload::WatchdogView => InPort::WatchdogView(ipc.subscriber(service)?),
+        Payload::CameraFrame => {
+            InPort::CameraFrame(ipc.slice_subscriber_with_depth(service, depth)?)
+        }
+        Payload::DepthFrame => InPort::DepthFrame(ipc.slice_subscriber_with_depth(service, depth)?),
+        Payload::OccupancyMap => {
+            InPort::OccupancyMap(ipc.slice_subscriber_with_depth(service, depth)?)
+        }
+        Payload::VehicleState => InPort::VehicleState(ipc.subscriber_with_depth(service, depth)?),
+        Payload::PadObservation => {
+            InPort::PadObservation(ipc.subscriber_with_depth(service, depth)?)
+        }
+        Payload::PlannerGoal => InPort::PlannerGoal(ipc.subscriber_with_depth(service, depth)?),
+        Payload::Trajectory => InPort::Trajectory(ipc.subscriber_with_depth(service, depth)?),
+        Payload::PlannerStats => InPort::PlannerStats(ipc.subscriber_with_depth(service, depth)?),
+        Payload::Setpoint => InPort::Setpoint(ipc.subscriber_with_depth(service, depth)?),
+        Payload::LinkRequest => InPort::LinkRequest(ipc.subscriber_with_depth(service, depth)?),
+        Payload::LinkOutcome => InPort::LinkOutcome(ipc.subscriber_with_depth(service, depth)?),
+        Payload::SafetyCommand => InPort::SafetyCommand(ipc.subscriber_with_depth(service, depth)?),
+        Payload::FsmStatus => InPort::FsmStatus(ipc.subscriber_with_depth(service, depth)?),
+        Payload::WatchdogView => InPort::WatchdogView(ipc.subscriber_with_depth(service, depth)?),
         Payload::TruthEvent | Payload::TruthState | Payload::Mavlink | Payload::ProcessEvent => {
             return Ok(None);
         }
@@ -577,6 +591,15 @@ impl Node<'_> {
             line.push_str(&format!(" {k}={v}"));
         }
         let mut line = format!("{line} skipped={} lost_upstream={lost}", self.skipped);
+        if lost > 0 {
+            // Which inputs lost them (topic:count), so that a gap can be traced.
+            let by_topic: Vec<String> = inputs
+                .iter()
+                .filter(|i| i.port.gaps() > 0)
+                .map(|i| format!("{}:{}", i.topic, i.port.gaps()))
+                .collect();
+            line.push_str(&format!(" lost_on={}", by_topic.join(",")));
+        }
         if self.fault_orders.is_some() {
             let f = &self.faults;
             line.push_str(&format!(
@@ -619,12 +642,12 @@ pub fn run(
             continue;
         }
         let port = match info.service {
-            Some(service) => {
-                open_in(ipc, service, info.payload).map_err(|source| DriverError::Open {
+            Some(service) => open_in(ipc, service, info.payload, i.depth).map_err(|source| {
+                DriverError::Open {
                     topic: i.topic.clone(),
                     source,
-                })?
-            }
+                }
+            })?,
             None => None,
         };
         let Some(port) = port else {

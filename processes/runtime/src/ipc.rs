@@ -31,14 +31,13 @@ pub const PREFIX_ENV: &str = "LANDING_IPC_PREFIX";
 pub use stack_config::DEFAULT_PREFIX;
 
 /// How many fixed-size messages (states, setpoints, observations, statuses) a subscriber
-/// buffers before the oldest is overwritten. 4 covers 50 ms of a reader held off the
-/// CPU at vehicle/state's ~80 Hz; the watchdog once lost a state so under CI's load. 16
-/// was tried and made the simulator's clean-stop test fail reproducibly (new worlds never
-/// took off: "telemetry lost"), cause not yet found; see issue 20's note.
-const MESSAGE_BUFFER: usize = 4;
-/// The same for slices (frames, maps): each sample is up to megabytes, and every
-/// publisher holds `MAX_SUBSCRIBERS` times this many; their readers take the newest.
-const SLICE_BUFFER: usize = 4;
+/// buffers before the oldest is overwritten, unless its node's graph input says `depth`:
+/// 4 covers 50 ms of a reader held off the CPU at vehicle/state's ~80 Hz. Services are
+/// made for up to [`stage::MAX_MESSAGE_DEPTH`], so a deeper reader can share a topic.
+/// The same for slices (frames, maps), whose services allow up to
+/// [`stage::MAX_SLICE_DEPTH`]: each sample is up to megabytes, and every publisher holds
+/// `MAX_SUBSCRIBERS` times that many; their readers take the newest.
+pub(crate) const DEFAULT_DEPTH: usize = 4;
 /// How many samples a subscriber may hold at once.
 const MAX_BORROWED: usize = 2;
 /// Processes that may subscribe to one topic.
@@ -540,7 +539,7 @@ impl Ipc {
         T: Debug + ZeroCopySend + Copy + 'static,
     {
         let factory = self
-            .pubsub::<T, Header>(service, 1, MESSAGE_BUFFER)?
+            .pubsub::<T, Header>(service, 1, stage::MAX_MESSAGE_DEPTH as usize)?
             .open_or_create()
             .map_err(|e| open_err(service, e))?;
         let port = factory
@@ -560,18 +559,31 @@ impl Ipc {
         })
     }
 
-    /// A subscriber of fixed-size messages `T` on `service`.
+    /// A subscriber of fixed-size messages `T` on `service`, buffering the default 4.
     pub fn subscriber<T>(&self, service: &str) -> Result<Subscriber<T>, ServiceError>
     where
         T: Debug + ZeroCopySend + Copy + 'static,
     {
+        self.subscriber_with_depth(service, DEFAULT_DEPTH)
+    }
+
+    /// A subscriber of fixed-size messages `T` on `service` buffering `depth` messages
+    /// (1 to [`stage::MAX_MESSAGE_DEPTH`]; iceoryx2 refuses more, naming the service).
+    pub fn subscriber_with_depth<T>(
+        &self,
+        service: &str,
+        depth: usize,
+    ) -> Result<Subscriber<T>, ServiceError>
+    where
+        T: Debug + ZeroCopySend + Copy + 'static,
+    {
         let factory = self
-            .pubsub::<T, Header>(service, 1, MESSAGE_BUFFER)?
+            .pubsub::<T, Header>(service, 1, stage::MAX_MESSAGE_DEPTH as usize)?
             .open_or_create()
             .map_err(|e| open_err(service, e))?;
         let port = factory
             .subscriber_builder()
-            .buffer_size(MESSAGE_BUFFER)
+            .buffer_size(depth.max(1))
             .create()
             .map_err(|e| port_err(service, e))?;
         let listener = self
@@ -600,7 +612,7 @@ impl Ipc {
         H: MessageHeader,
     {
         let factory = self
-            .pubsub::<[T], H>(service, 0, SLICE_BUFFER)?
+            .pubsub::<[T], H>(service, 0, stage::MAX_SLICE_DEPTH as usize)?
             .open_or_create()
             .map_err(|e| open_err(service, e))?;
         let port = factory
@@ -623,7 +635,7 @@ impl Ipc {
         })
     }
 
-    /// A subscriber of variable-length `[T]` payloads with header `H`.
+    /// A subscriber of variable-length `[T]` payloads with header `H`, buffering 4.
     pub fn slice_subscriber<T, H>(
         &self,
         service: &str,
@@ -632,13 +644,27 @@ impl Ipc {
         T: Debug + ZeroCopySend + Copy + 'static,
         H: MessageHeader,
     {
+        self.slice_subscriber_with_depth(service, DEFAULT_DEPTH)
+    }
+
+    /// A subscriber of variable-length payloads buffering `depth` samples (1 to
+    /// [`stage::MAX_SLICE_DEPTH`]).
+    pub fn slice_subscriber_with_depth<T, H>(
+        &self,
+        service: &str,
+        depth: usize,
+    ) -> Result<SliceSubscriber<T, H>, ServiceError>
+    where
+        T: Debug + ZeroCopySend + Copy + 'static,
+        H: MessageHeader,
+    {
         let factory = self
-            .pubsub::<[T], H>(service, 0, SLICE_BUFFER)?
+            .pubsub::<[T], H>(service, 0, stage::MAX_SLICE_DEPTH as usize)?
             .open_or_create()
             .map_err(|e| open_err(service, e))?;
         let port = factory
             .subscriber_builder()
-            .buffer_size(SLICE_BUFFER)
+            .buffer_size(depth.max(1))
             .create()
             .map_err(|e| port_err(service, e))?;
         let listener = self

@@ -168,3 +168,37 @@ fn a_second_process_of_a_node_on_a_prefix_in_use_is_refused_naming_the_prefix() 
     drop(first);
     let _again = Ipc::open_exclusive("fsm", &prefix).expect("free again");
 }
+
+#[test]
+fn a_deep_subscriber_keeps_sixteen_messages_where_a_default_one_keeps_four() {
+    let prefix = IpcPrefix::unique("depth");
+    let a = Ipc::open("a", &prefix).expect("node");
+    let shallow = a.subscriber::<u64>("t/depth").expect("default subscriber");
+    let deep = a
+        .subscriber_with_depth::<u64>("t/depth", stage::MAX_MESSAGE_DEPTH as usize)
+        .expect("deep subscriber");
+    let mut publisher = a.publisher::<u64>("t/depth").expect("publisher");
+    let mut send = |values: std::ops::RangeInclusive<u64>| {
+        for v in values {
+            publisher.send(Header::default(), &v).expect("send");
+        }
+    };
+    send(1..=1);
+    let drain = |s: &Subscriber<u64>| {
+        let mut got = Vec::new();
+        while let Some(m) = s.receive().expect("receive") {
+            got.push(*m.payload());
+        }
+        (got, s.gaps())
+    };
+    assert_eq!(drain(&shallow), (vec![1], 0));
+    assert_eq!(drain(&deep), (vec![1], 0));
+    // 20 at once (a reader held off the CPU): the oldest are overwritten, and counted.
+    send(2..=21);
+    assert_eq!(drain(&shallow), ((18..=21).collect(), 16));
+    assert_eq!(drain(&deep), ((6..=21).collect(), 4));
+    let Err(e) = a.subscriber_with_depth::<u64>("t/depth", 17) else {
+        panic!("a buffer deeper than the service allows must be refused")
+    };
+    assert!(e.to_string().contains("t/depth"), "{e}");
+}

@@ -14,6 +14,24 @@ mod message;
 
 pub use message::{Message, OwnedMessage, SliceHeader, SliceMut};
 
+/// The deepest subscriber buffer a topic of fixed-size messages may be declared with
+/// (`depth` in the graph): the iceoryx2 services are made for it, so a deep reader (the
+/// watchdog, which lists nodes between reads) and a shallow one can share a topic.
+pub const MAX_MESSAGE_DEPTH: u32 = 16;
+/// The same for frames and maps: each sample is up to megabytes, and each publisher
+/// holds this many per subscriber; their readers take the newest.
+pub const MAX_SLICE_DEPTH: u32 = 4;
+
+/// The deepest buffer a subscriber of a topic may ask for: `elements` is the topic's slice
+/// element type, if it carries slices.
+pub fn max_depth(elements: Option<&str>) -> u32 {
+    if elements.is_some() {
+        MAX_SLICE_DEPTH
+    } else {
+        MAX_MESSAGE_DEPTH
+    }
+}
+
 /// One input as a driver hands it over: the topic's short name (`ipc_types::topics`) and
 /// the message, borrowed from shared memory or from the driver's queue.
 #[derive(Debug, Clone, Copy)]

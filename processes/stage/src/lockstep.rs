@@ -27,6 +27,9 @@ pub struct InputSpec {
     pub newest: bool,
     /// The edge closes a cycle: delivered in a later pass of the same instant.
     pub delay: bool,
+    /// The subscriber's buffer, messages, for a driver that has one (iceoryx2); `None`
+    /// takes the driver's default. The lockstep driver delivers everything.
+    pub depth: Option<u32>,
 }
 
 /// What the driver needs to know of a node (the graph's node, without the deployment).

@@ -78,6 +78,7 @@ fn spec(name: &str, inputs: &[(&str, bool, bool)], outputs: &[&str], latency_ns:
                 topic: (*t).into(),
                 newest: *newest,
                 delay: *delay,
+                depth: None,
             })
             .collect(),
         outputs: outputs.iter().map(|o| (*o).into()).collect(),

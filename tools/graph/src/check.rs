@@ -19,8 +19,6 @@ const MAX_RATE_HZ: f64 = 10_000.0;
 const DEADLINE_MS: (u64, u64) = (20, 60_000);
 /// Highest processing latency a node may declare, ms.
 const MAX_LATENCY_MS: f64 = 10_000.0;
-/// Subscriber buffers allowed, messages.
-const DEPTH: (u32, u32) = (1, 64);
 
 /// Checks every rule of `file`; `origin` names it in errors.
 pub(crate) fn build(file: GraphFile, origin: &Path) -> Result<Graph, GraphError> {
@@ -345,14 +343,15 @@ fn input(
             "input topic {name} is evaluator-only ground truth (allowed readers: the evaluator of landing run, never a node)"
         )));
     }
-    let depths = format!("allowed: {} to {}", DEPTH.0, DEPTH.1);
+    let deepest = stage::max_depth(topic.elements.as_deref());
+    let depths = format!("allowed: 1 to {deepest}");
     match (topic.transport, i.depth) {
         (Transport::Iceoryx2, None) => {
             return Err(err(&format!(
                 "input topic {name} has no depth ({depths} messages, the subscriber's buffer)"
             )));
         }
-        (Transport::Iceoryx2, Some(d)) if !(DEPTH.0..=DEPTH.1).contains(&d) => {
+        (Transport::Iceoryx2, Some(d)) if !(1..=deepest).contains(&d) => {
             return Err(err(&format!(
                 "input topic {name}: depth {d} is out of range ({depths})"
             )));

@@ -296,7 +296,7 @@ fn an_iceoryx2_input_needs_a_depth_and_a_mavlink_input_has_none() {
     ));
     assert!(
         e.contains(
-            "node aruco-pnp: input topic fsm/setpoint has no depth (allowed: 1 to 64 messages"
+            "node aruco-pnp: input topic fsm/setpoint has no depth (allowed: 1 to 16 messages"
         ),
         "{e}"
     );
@@ -305,7 +305,7 @@ fn an_iceoryx2_input_needs_a_depth_and_a_mavlink_input_has_none() {
         "policy = \"newest\", depth = 0,",
     ));
     assert!(
-        e.contains("input topic fsm/setpoint: depth 0 is out of range (allowed: 1 to 64)"),
+        e.contains("input topic fsm/setpoint: depth 0 is out of range (allowed: 1 to 16)"),
         "{e}"
     );
     let mavlink = with(

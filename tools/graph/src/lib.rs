@@ -175,6 +175,7 @@ impl Node {
                     topic: i.topic.clone(),
                     newest: i.policy == Policy::Newest,
                     delay: i.delay,
+                    depth: i.depth,
                 })
                 .collect(),
             outputs: self.outputs.clone(),

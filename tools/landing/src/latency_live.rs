@@ -159,6 +159,8 @@ fn spec(graph: &Graph) -> NodeSpec {
                 topic: t.name.clone(),
                 newest: false,
                 delay: false,
+                // Every message counts: the deepest buffer the topic allows.
+                depth: Some(stage::max_depth(t.elements.as_deref())),
             })
             .collect(),
         outputs: vec![],

@@ -85,6 +85,7 @@ impl MapPilot {
             topic: topic.to_string(),
             newest: false,
             delay: false,
+            depth: None,
         };
         NodeSpec {
             name: NAME.to_string(),

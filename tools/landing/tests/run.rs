@@ -111,6 +111,7 @@ fn obstacle_demo_lands_without_touching_the_box() {
 
 #[test]
 fn paper_sim_lands_with_every_stage_its_own_process() {
+    let _stack = common::one_stack();
     let logs = std::env::temp_dir().join(format!("landing-run-logs-{}", std::process::id()));
     let logs = logs.to_str().unwrap();
     let s = lands(&["run", "--processes", "--json", "--log-dir", logs]);
@@ -156,6 +157,7 @@ fn no_message_lost(logs: &str) {
 
 #[test]
 fn two_minutes_of_flight_with_every_stage_its_own_process_lose_no_message() {
+    let _stack = common::one_stack();
     // A world where the pad's vehicle waits 60 s, 49 m away, then drives by: the vehicle
     // takes off, waits at the preset point for two minutes of steady state (camera and
     // depth frames, states, maps, setpoints, status, the watchdog), then tracks the pad

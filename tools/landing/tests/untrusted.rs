@@ -31,6 +31,7 @@ fn counter(log: &str, name: &str) -> u64 {
 /// Flies paper-sim with every stage a process and `injections`; returns the summary and
 /// px4-link's log.
 fn fly(name: &str, injections: &[&str]) -> (Value, String) {
+    let _stack = common::one_stack();
     let logs =
         std::env::temp_dir().join(format!("landing-untrusted-{}-{name}", std::process::id()));
     let mut args = vec![

@@ -2,6 +2,19 @@
 #![allow(dead_code)] // each test file uses a part
 
 use std::process::{Command, Output};
+use std::sync::{Mutex, MutexGuard, PoisonError};
+
+/// One stack of OS processes flying in real time at once within a test file. Each takes
+/// about a core; the harness runs two tests at a time on CI's two cores, and two stacks
+/// beside each other starved both (measured: aruco-pnp lost 22-25 states held off the
+/// CPU, and paper-sim touched down at 1.03 m/s). A vehicle's computer runs one stack; a
+/// lockstep flight beside it stays as the load.
+static ONE_STACK: Mutex<()> = Mutex::new(());
+
+/// Holds the machine for one real-time stack until dropped.
+pub fn one_stack() -> MutexGuard<'static, ()> {
+    ONE_STACK.lock().unwrap_or_else(PoisonError::into_inner)
+}
 
 /// Runs the `landing` binary with `args` and waits for it.
 pub fn landing(args: &[&str]) -> Output {
