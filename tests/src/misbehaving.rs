@@ -1,5 +1,5 @@
 //! Misbehaving stages for fault tests, as dora-rs keeps in its own: a stage that panics,
-//! one that hangs, one that fails with an error, one that publishes NaN. Each stands in
+//! one that hangs, one that fails with an error, one that publishes NaN, one that publishes in bursts. Each stands in
 //! for a node of the shipped graph (aruco-pnp: its inputs and its one output), so the
 //! runtime serves it and the watchdog watches it as the real one; the tests check what
 //! the runtime and the watchdog make of it (`tests/misbehaving.rs`).
@@ -19,6 +19,9 @@ pub enum Misbehaviour {
     Fail,
     /// Every tick publishes a pad observation full of NaN.
     Nan,
+    /// Every tick publishes three good observations at once (with a delay fault on its
+    /// output, one round waits three delays).
+    Burst,
 }
 
 impl std::str::FromStr for Misbehaviour {
@@ -30,7 +33,8 @@ impl std::str::FromStr for Misbehaviour {
             "hang" => Self::Hang,
             "fail" => Self::Fail,
             "nan" => Self::Nan,
-            _ => return Err(format!("`{s}` (allowed: panic, hang, fail, nan)")),
+            "burst" => Self::Burst,
+            _ => return Err(format!("`{s}` (allowed: panic, hang, fail, nan, burst)")),
         })
     }
 }
@@ -101,6 +105,17 @@ impl Stage for Misbehaving {
                     ..PadObservation::default()
                 };
                 out.publish(topics::PAD_OBSERVATION, Message::PadObservation(&obs))
+            }
+            Misbehaviour::Burst => {
+                let obs = PadObservation {
+                    msg: Header::captured_at(now_ns),
+                    marker_count: 1,
+                    ..PadObservation::default()
+                };
+                for _ in 0..3 {
+                    out.publish(topics::PAD_OBSERVATION, Message::PadObservation(&obs))?;
+                }
+                Ok(())
             }
         }
     }

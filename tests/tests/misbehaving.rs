@@ -9,7 +9,7 @@
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use ipc_types::msg::{Liveness, WatchdogView};
+use ipc_types::msg::{FaultOrder, Liveness, PortFault, Text, WatchdogView};
 use ipc_types::services;
 use landing_tests::stack::{deploy_dir, stack_binary};
 use runtime::{Ipc, IpcPrefix, Subscriber};
@@ -17,6 +17,7 @@ use runtime::{Ipc, IpcPrefix, Subscriber};
 fn start(bin: &std::path::Path, prefix: &str, extra: &[&str]) -> Child {
     let deploy = deploy_dir();
     Command::new(bin)
+        .env("LANDING_FAULT_INJECTION", "1")
         .arg("--config")
         .arg(deploy.join("config/landing.toml"))
         .arg("--deploy-dir")
@@ -55,7 +56,7 @@ fn liveness(v: &WatchdogView, process: &str) -> Option<Liveness> {
 
 /// The watchdog and a stage misbehaving by `mode`; `check` on the watchdog's views.
 /// Returns the stage's exit code and stderr (it is stopped if it still runs).
-fn misbehave(mode: &str, check: impl Fn(&Subscriber<WatchdogView>)) -> (Option<i32>, String) {
+fn misbehave(mode: &str, check: impl Fn(&Ipc, &Subscriber<WatchdogView>)) -> (Option<i32>, String) {
     let tag = format!("mis{}{}", &mode[..1], std::process::id());
     let prefix = IpcPrefix::new(&format!("{tag}_")).unwrap();
     let ipc = Ipc::open("misbehaving-test", &prefix).unwrap();
@@ -71,7 +72,7 @@ fn misbehave(mode: &str, check: impl Fn(&Subscriber<WatchdogView>)) -> (Option<i
     wait_for(&views, "aruco-pnp alive", |v| {
         liveness(v, "aruco-pnp") == Some(Liveness::Alive)
     });
-    check(&views);
+    check(&ipc, &views);
     for c in [&stage, &watchdog] {
         // SAFETY: signalling our own children.
         unsafe { libc::kill(c.id() as i32, libc::SIGTERM) };
@@ -94,7 +95,7 @@ fn misbehave(mode: &str, check: impl Fn(&Subscriber<WatchdogView>)) -> (Option<i
 
 #[test]
 fn a_stage_that_panics_ends_its_process_and_is_reported_dead() {
-    let (code, err) = misbehave("panic", |views| {
+    let (code, err) = misbehave("panic", |_, views| {
         wait_for(views, "aruco-pnp dead", |v| {
             liveness(v, "aruco-pnp") == Some(Liveness::Dead)
         });
@@ -105,7 +106,7 @@ fn a_stage_that_panics_ends_its_process_and_is_reported_dead() {
 
 #[test]
 fn a_stage_that_fails_ends_its_process_with_one_line_and_is_reported_dead() {
-    let (code, err) = misbehave("fail", |views| {
+    let (code, err) = misbehave("fail", |_, views| {
         wait_for(views, "aruco-pnp dead", |v| {
             liveness(v, "aruco-pnp") == Some(Liveness::Dead)
         });
@@ -118,7 +119,7 @@ fn a_stage_that_fails_ends_its_process_with_one_line_and_is_reported_dead() {
 
 #[test]
 fn a_stage_that_never_returns_stops_beating_and_is_reported_hung() {
-    misbehave("hang", |views| {
+    misbehave("hang", |_, views| {
         wait_for(views, "aruco-pnp hung", |v| {
             liveness(v, "aruco-pnp") == Some(Liveness::Hung)
         });
@@ -127,9 +128,45 @@ fn a_stage_that_never_returns_stops_beating_and_is_reported_hung() {
 
 #[test]
 fn a_stage_that_publishes_nan_is_reported_as_garbage_on_its_path() {
-    misbehave("nan", |views| {
+    misbehave("nan", |_, views| {
         wait_for(views, "garbage on pad/observation", |v| {
             v.last_fault.as_str().contains("garbage on pad/observation")
         });
+    });
+}
+
+#[test]
+fn a_delay_fault_makes_data_late_but_never_makes_the_process_look_hung() {
+    // Three outputs per round, each held 100 ms: a round lasts over 300 ms, beyond the
+    // 250 ms heartbeat deadline, yet the process is alive and must be seen so.
+    misbehave("burst", |ipc, views| {
+        let observations = ipc
+            .subscriber_with_depth::<ipc_types::msg::PadObservation>(services::PAD_OBSERVATION, 16)
+            .unwrap();
+        let mut orders = ipc.publisher::<FaultOrder>(services::FAULT_INJECT).unwrap();
+        let order = FaultOrder {
+            process: Text::new("aruco-pnp"),
+            fault: PortFault::Delay as u32,
+            value: 100.0,
+            ..FaultOrder::default()
+        };
+        orders.send(order.msg, &order).unwrap();
+        let end = Instant::now() + Duration::from_secs(4);
+        let mut views_seen = 0;
+        let mut published = 0;
+        while Instant::now() < end {
+            while observations.receive().unwrap().is_some() {
+                published += 1;
+            }
+            while let Some(v) = views.receive().unwrap() {
+                views_seen += 1;
+                let l = liveness(v.payload(), "aruco-pnp");
+                assert_ne!(l, Some(Liveness::Hung), "{:?}", v.payload().last_fault);
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        assert!(views_seen > 5, "{views_seen} views");
+        // The delay held: 150 in 4 s without it, at most 40 with it.
+        assert!((1..=45).contains(&published), "{published} observations");
     });
 }

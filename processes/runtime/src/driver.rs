@@ -340,6 +340,30 @@ struct Ports<'a, 'e> {
     deferred: Option<&'a mut Vec<(&'static str, OwnedMessage)>>,
     /// Injected faults (fault tests only).
     faults: &'a mut PortFaults,
+    /// The process's heartbeat, beaten while an injected delay is waited.
+    heartbeat: &'a mut crate::Heartbeat,
+}
+
+/// How often the heartbeat beats while an injected delay is waited.
+const DELAY_BEAT: Duration = Duration::from_millis(20);
+
+/// Whether a message on `topic` goes out, after waiting any injected delay. The wait
+/// beats the heartbeat: a delay fault makes data late, it does not hang the process (a
+/// 100 ms delay on two messages of one round made aruco-pnp look hung).
+fn pass(faults: &mut PortFaults, heartbeat: &mut crate::Heartbeat, topic: &str) -> bool {
+    let Some(delay_ns) = faults.admit(topic) else {
+        return false;
+    };
+    let end = monotonic_ns().saturating_add(delay_ns);
+    loop {
+        let left = end.saturating_sub(monotonic_ns());
+        if left == 0 {
+            return true;
+        }
+        std::thread::sleep(Duration::from_nanos(left).min(DELAY_BEAT));
+        // A failed beat is reported by the round's own beat, which comes next.
+        let _ = heartbeat.beat();
+    }
 }
 
 fn transport(e: impl std::fmt::Display) -> StageError {
@@ -347,9 +371,9 @@ fn transport(e: impl std::fmt::Display) -> StageError {
 }
 
 macro_rules! send_plain {
-    ($faults:expr, $topic:expr, $port:expr, $m:expr) => {{
+    ($faults:expr, $heartbeat:expr, $topic:expr, $port:expr, $m:expr) => {{
         let mut v = *$m;
-        if !$faults.pass($topic) {
+        if !pass($faults, $heartbeat, $topic) {
             return Ok(());
         }
         $faults.corrupt($topic, &mut v);
@@ -377,7 +401,7 @@ impl Outbox for Ports<'_, '_> {
         };
         let name: &'static str = name;
         match (port, msg) {
-            (OutPort::External, _) if !self.faults.pass(name) => Ok(()),
+            (OutPort::External, _) if !pass(self.faults, self.heartbeat, name) => Ok(()),
             (OutPort::External, m) => match (self.external.as_deref_mut(), &mut self.deferred) {
                 (Some(ext), _) => ext.send(topic, m),
                 (None, Some(later)) => {
@@ -387,33 +411,37 @@ impl Outbox for Ports<'_, '_> {
                 (None, None) => Err(StageError::Transport(format!("nothing serves `{topic}`"))),
             },
             (OutPort::VehicleState(p), Message::VehicleState(m)) => {
-                send_plain!(self.faults, name, p, m)
+                send_plain!(self.faults, self.heartbeat, name, p, m)
             }
             (OutPort::PadObservation(p), Message::PadObservation(m)) => {
-                send_plain!(self.faults, name, p, m)
+                send_plain!(self.faults, self.heartbeat, name, p, m)
             }
             (OutPort::PlannerGoal(p), Message::PlannerGoal(m)) => {
-                send_plain!(self.faults, name, p, m)
+                send_plain!(self.faults, self.heartbeat, name, p, m)
             }
             (OutPort::Trajectory(p), Message::Trajectory(m)) => {
-                send_plain!(self.faults, name, p, m)
+                send_plain!(self.faults, self.heartbeat, name, p, m)
             }
             (OutPort::PlannerStats(p), Message::PlannerStats(m)) => {
-                send_plain!(self.faults, name, p, m)
+                send_plain!(self.faults, self.heartbeat, name, p, m)
             }
-            (OutPort::Setpoint(p), Message::Setpoint(m)) => send_plain!(self.faults, name, p, m),
+            (OutPort::Setpoint(p), Message::Setpoint(m)) => {
+                send_plain!(self.faults, self.heartbeat, name, p, m)
+            }
             (OutPort::LinkRequest(p), Message::LinkRequest(m)) => {
-                send_plain!(self.faults, name, p, m)
+                send_plain!(self.faults, self.heartbeat, name, p, m)
             }
             (OutPort::LinkOutcome(p), Message::LinkOutcome(m)) => {
-                send_plain!(self.faults, name, p, m)
+                send_plain!(self.faults, self.heartbeat, name, p, m)
             }
             (OutPort::SafetyCommand(p), Message::SafetyCommand(m)) => {
-                send_plain!(self.faults, name, p, m)
+                send_plain!(self.faults, self.heartbeat, name, p, m)
             }
-            (OutPort::FsmStatus(p), Message::FsmStatus(m)) => send_plain!(self.faults, name, p, m),
+            (OutPort::FsmStatus(p), Message::FsmStatus(m)) => {
+                send_plain!(self.faults, self.heartbeat, name, p, m)
+            }
             (OutPort::WatchdogView(p), Message::WatchdogView(m)) => {
-                send_plain!(self.faults, name, p, m)
+                send_plain!(self.faults, self.heartbeat, name, p, m)
             }
             (OutPort::TruthEvent(p), Message::TruthEvent(m)) => send_truth!(p, m),
             (OutPort::TruthState(p), Message::TruthState(m)) => send_truth!(p, m),
@@ -437,7 +465,7 @@ impl Outbox for Ports<'_, '_> {
                 topic: topic.to_string(),
             });
         };
-        if !self.faults.pass(topic) {
+        if !pass(self.faults, self.heartbeat, topic) {
             return Ok(false);
         }
         // A loan that fails (every sample held by subscribers) drops this message: the
@@ -538,6 +566,7 @@ impl Node<'_> {
             external: self.external.as_deref_mut(),
             deferred: None,
             faults: &mut self.faults,
+            heartbeat: &mut self.heartbeat,
         };
         for i in inputs {
             taken += i
@@ -825,6 +854,7 @@ fn run_external(
                     external: None,
                     deferred: Some(&mut deferred),
                     faults: &mut node.faults,
+                    heartbeat: &mut node.heartbeat,
                 };
                 ext.wait(timeout, &monotonic_ns, &mut |input, at| {
                     delivered += 1;

@@ -110,11 +110,12 @@ impl PortFaults {
             })
     }
 
-    /// Called before a message on `topic` goes out: `false` when it is to be dropped;
-    /// otherwise waits the delay first.
-    pub fn pass(&mut self, topic: &str) -> bool {
+    /// Called before a message on `topic` goes out: `None` when it is to be dropped,
+    /// otherwise how long it is to be held first, ns (the caller waits: it keeps the
+    /// process's heartbeat going meanwhile, for late data is not a hung process).
+    pub fn admit(&mut self, topic: &str) -> Option<u64> {
         if self.rules.is_empty() {
-            return true;
+            return Some(0);
         }
         let Rule { delay_ns, drop, .. } = self.standing(topic, crate::monotonic_ns());
         if drop > 0.0 {
@@ -129,14 +130,13 @@ impl PortFaults {
                 (self.rng.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64;
             if r < drop {
                 self.dropped += 1;
-                return false;
+                return None;
             }
         }
         if delay_ns > 0 {
             self.delayed += 1;
-            std::thread::sleep(std::time::Duration::from_nanos(delay_ns));
         }
-        true
+        Some(delay_ns)
     }
 
     /// Paints `pixels` (an image on `topic`) one mid-grey, when blanking `topic`.
