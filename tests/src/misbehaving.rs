@@ -1,8 +1,9 @@
 //! Misbehaving stages for fault tests, as dora-rs keeps in its own: a stage that panics,
-//! one that hangs, one that fails with an error, one that publishes NaN, one that publishes in bursts. Each stands in
-//! for a node of the shipped graph (aruco-pnp: its inputs and its one output), so the
-//! runtime serves it and the watchdog watches it as the real one; the tests check what
-//! the runtime and the watchdog make of it (`tests/misbehaving.rs`).
+//! one that hangs, one that fails with an error, one that publishes NaN, one that
+//! publishes in bursts. Each stands in for a node of the shipped graph (aruco-pnp: its
+//! inputs and its one output), so the runtime serves it and the watchdog watches it as
+//! the real one; the tests check what the runtime and the watchdog make of it
+//! (`tests/misbehaving.rs`).
 
 use ipc_types::msg::{Header, PadObservation, Pose};
 use ipc_types::topics;

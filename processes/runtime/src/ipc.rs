@@ -30,13 +30,11 @@ pub type Svc = ipc::Service;
 pub const PREFIX_ENV: &str = "LANDING_IPC_PREFIX";
 pub use stack_config::DEFAULT_PREFIX;
 
-/// How many fixed-size messages (states, setpoints, observations, statuses) a subscriber
-/// buffers before the oldest is overwritten, unless its node's graph input says `depth`:
-/// 4 covers 50 ms of a reader held off the CPU at vehicle/state's ~80 Hz. Services are
-/// made for up to [`stage::MAX_MESSAGE_DEPTH`], so a deeper reader can share a topic.
-/// The same for slices (frames, maps), whose services allow up to
-/// [`stage::MAX_SLICE_DEPTH`]: each sample is up to megabytes, and every publisher holds
-/// `MAX_SUBSCRIBERS` times that many; their readers take the newest.
+/// How many messages or slices a subscriber buffers before the oldest is overwritten,
+/// when its node's graph input gives no `depth`: 4 covers 50 ms of a reader held off the
+/// CPU at vehicle/state's ~80 Hz. Services are made for up to [`stage::MAX_MESSAGE_DEPTH`]
+/// messages or [`stage::MAX_SLICE_DEPTH`] slices (each up to megabytes, held per
+/// subscriber by every publisher), so deeper and shallower readers share a topic.
 pub(crate) const DEFAULT_DEPTH: usize = 4;
 /// How many samples a subscriber may hold at once.
 const MAX_BORROWED: usize = 2;
