@@ -6,9 +6,11 @@
 use std::path::{Path, PathBuf};
 
 use nalgebra::{Point2, Point3, Vector2};
-use opencv::core::{FileNode, FileStorage, FileStorage_Mode, Mat, MatTraitConst};
+use opencv::core::{FileStorage, FileStorage_Mode, Mat};
 use opencv::prelude::*;
 use thiserror::Error;
+
+use crate::calibration_yaml;
 
 /// Why a calibration could not be loaded, saved or used.
 #[derive(Debug, Error)]
@@ -19,12 +21,22 @@ pub enum CalibrationError {
         /// The path that was tried.
         path: PathBuf,
     },
-    /// The file exists but OpenCV could not open or parse it.
+    /// The file exists but cannot be read as text.
     #[error("calibration file {path}: cannot be read: {message}")]
     Unreadable {
         /// The file.
         path: PathBuf,
-        /// OpenCV's message.
+        /// Why.
+        message: String,
+    },
+    /// The file is not a calibration YAML the stack reads.
+    #[error("calibration file {path}: line {line}: {message}")]
+    Syntax {
+        /// The file.
+        path: PathBuf,
+        /// The line of the fault (1-based; 0: the file as a whole).
+        line: usize,
+        /// What is wrong and what is allowed.
         message: String,
     },
     /// A required key is absent.
@@ -69,6 +81,33 @@ pub enum CalibrationError {
         /// OpenCV's message.
         message: String,
     },
+}
+
+/// The file as text, reading at most one byte past the reader's limit (a huge or
+/// endless file, `/dev/zero` say, is refused without being read whole).
+fn read_text(path: &Path) -> Result<String, CalibrationError> {
+    use std::io::Read;
+    let unreadable = |message: String| CalibrationError::Unreadable {
+        path: path.to_path_buf(),
+        message,
+    };
+    let file = std::fs::File::open(path).map_err(|e| unreadable(e.to_string()))?;
+    let mut bytes = Vec::new();
+    file.take(calibration_yaml::MAX_FILE_BYTES as u64 + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| unreadable(e.to_string()))?;
+    if bytes.len() > calibration_yaml::MAX_FILE_BYTES {
+        return Err(unreadable(format!(
+            "larger than {} bytes; a calibration file is well under that",
+            calibration_yaml::MAX_FILE_BYTES
+        )));
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        unreadable(format!(
+            "not UTF-8 text (byte {})",
+            e.utf8_error().valid_up_to()
+        ))
+    })
 }
 
 /// A calibrated camera: image size, pinhole intrinsics and OpenCV's 5-term
@@ -171,9 +210,11 @@ impl CameraCalibration {
         Ok(())
     }
 
-    /// Loads an OpenCV calibration YAML (`image_width`, `image_height`,
-    /// `camera_matrix` 3x3, `distortion_coefficients` with 4, 5 or more terms;
-    /// only the first five are used and the rest must be zero).
+    /// Loads a calibration YAML as OpenCV's calibration tools or ROS's
+    /// `camera_calibration` write it (`image_width`, `image_height`, `camera_matrix`
+    /// 3x3, `distortion_coefficients` with 4, 5 or more terms; only the first five are
+    /// used and the rest must be zero). Read by the stack's own bounded reader, not
+    /// OpenCV's, which can hang on a malformed file (see `calibration_yaml`).
     pub fn load(path: impl AsRef<Path>) -> Result<Self, CalibrationError> {
         let path = path.as_ref();
         if !path.is_file() {
@@ -181,31 +222,48 @@ impl CameraCalibration {
                 path: path.to_path_buf(),
             });
         }
-        let unreadable = |e: opencv::Error| CalibrationError::Unreadable {
+        let text = read_text(path)?;
+        let doc = calibration_yaml::parse(&text).map_err(|e| CalibrationError::Syntax {
             path: path.to_path_buf(),
+            line: e.line,
             message: e.message,
+        })?;
+        let model = match doc.get("distortion_model") {
+            Some(calibration_yaml::Value::Scalar { text, .. }) => text.as_str(),
+            _ => "plumb_bob",
         };
-        let fs = FileStorage::new_def(path, FileStorage_Mode::READ as i32).map_err(unreadable)?;
-        if !fs.is_opened().map_err(unreadable)? {
-            return Err(CalibrationError::Unreadable {
+        if !["plumb_bob", "rational_polynomial"].contains(&model) {
+            return Err(CalibrationError::Syntax {
                 path: path.to_path_buf(),
-                message: "OpenCV could not open it".into(),
+                line: 0,
+                message: format!(
+                    "distortion_model `{model}`: allowed plumb_bob or rational_polynomial \
+                     (OpenCV's radial-tangential model)"
+                ),
             });
         }
-        let node = |key: &'static str| -> Result<FileNode, CalibrationError> {
-            let n = fs.get(key).map_err(unreadable)?;
-            if n.empty().map_err(unreadable)? || n.is_none().map_err(unreadable)? {
-                Err(CalibrationError::MissingKey {
-                    path: path.to_path_buf(),
-                    key,
-                })
-            } else {
-                Ok(n)
-            }
-        };
         let int = |key: &'static str| -> Result<u32, CalibrationError> {
-            let n = node(key)?;
-            let v = n.real().map_err(unreadable)?;
+            let (line, text) = match doc.get(key) {
+                None => {
+                    return Err(CalibrationError::MissingKey {
+                        path: path.to_path_buf(),
+                        key,
+                    });
+                }
+                Some(calibration_yaml::Value::Scalar { line, text }) => (*line, text),
+                Some(calibration_yaml::Value::Matrix { line, .. }) => {
+                    return Err(CalibrationError::Syntax {
+                        path: path.to_path_buf(),
+                        line: *line,
+                        message: format!("`{key}` is a matrix; expected a positive integer"),
+                    });
+                }
+            };
+            let v = text.parse::<f64>().map_err(|_| CalibrationError::Syntax {
+                path: path.to_path_buf(),
+                line,
+                message: format!("`{key}`: `{text}` is not a number"),
+            })?;
             if v.is_finite() && v >= 1.0 && v.fract() == 0.0 && v <= f64::from(u32::MAX) {
                 Ok(v as u32)
             } else {
@@ -218,24 +276,24 @@ impl CameraCalibration {
             }
         };
         let matrix = |key: &'static str| -> Result<(i32, i32, Vec<f64>), CalibrationError> {
-            let m = node(key)?.mat().map_err(unreadable)?;
-            if m.empty() {
-                return Err(CalibrationError::Unreadable {
+            match doc.get(key) {
+                None => Err(CalibrationError::MissingKey {
                     path: path.to_path_buf(),
-                    message: format!("`{key}` is not an !!opencv-matrix"),
-                });
-            }
-            let mut f = Mat::default();
-            m.convert_to_def(&mut f, opencv::core::CV_64F)
-                .map_err(unreadable)?;
-            let (rows, cols) = (f.rows(), f.cols());
-            let mut v = Vec::with_capacity((rows * cols).max(0) as usize);
-            for r in 0..rows {
-                for c in 0..cols {
-                    v.push(*f.at_2d::<f64>(r, c).map_err(unreadable)?);
+                    key,
+                }),
+                Some(calibration_yaml::Value::Matrix {
+                    rows, cols, data, ..
+                }) => Ok((*rows, *cols, data.clone())),
+                Some(calibration_yaml::Value::Scalar { line, .. }) => {
+                    Err(CalibrationError::Syntax {
+                        path: path.to_path_buf(),
+                        line: *line,
+                        message: format!(
+                            "`{key}` is not a matrix (rows, cols and data indented under it)"
+                        ),
+                    })
                 }
             }
-            Ok((rows, cols, v))
         };
         let width = int("image_width")?;
         let height = int("image_height")?;

@@ -8,6 +8,7 @@
 //! asked to load one.
 
 pub mod calibration;
+mod calibration_yaml;
 pub mod mount;
 pub mod pad;
 

@@ -384,3 +384,102 @@ fn a_pad_file_that_does_not_parse_is_one_line_naming_the_file_and_the_line() {
     let line = text.lines().position(|l| l == "size_m = 0.064").unwrap() + 1;
     assert!(err.contains(&format!("line {line}: ")), "{err}");
 }
+
+#[test]
+fn a_file_that_hangs_opencvs_yaml_parser_is_refused_at_once_naming_the_line() {
+    // OpenCV 4.6's FileStorage loops forever on this (found by landing-fuzz); the
+    // stack's own reader refuses it.
+    let p = temp_file("hang.yaml", "%YAML:1.\n t:d\nncv-\n");
+    let err = CameraCalibration::load(&p).unwrap_err();
+    assert!(
+        matches!(err, CalibrationError::Syntax { line: 2, .. }),
+        "{err}"
+    );
+    assert!(err.to_string().contains("hang.yaml: line 2:"), "{err}");
+}
+
+#[test]
+fn a_ros_camera_calibration_file_loads_like_opencvs() {
+    // What ROS's camera_calibration writes (ost.yaml): untagged matrices, extra keys.
+    let ros = "image_width: 640\nimage_height: 480\ncamera_name: narrow_stereo\n\
+        camera_matrix:\n  rows: 3\n  cols: 3\n  data: [184.75, 0, 320, 0, 184.75, 240, 0, 0, 1]\n\
+        distortion_model: plumb_bob\n\
+        distortion_coefficients:\n  rows: 1\n  cols: 5\n  data: [-0.05, 0.01, 0.0005, 0.0005, 0]\n\
+        rectification_matrix:\n  rows: 3\n  cols: 3\n  data: [1, 0, 0,\n         0, 1, 0,\n         0, 0, 1]\n";
+    let from_ros = CameraCalibration::load(temp_file("ost.yaml", ros)).unwrap();
+    let from_opencv = CameraCalibration::load(temp_file("good.yaml", GOOD_YAML)).unwrap();
+    assert_eq!(from_ros, from_opencv);
+    let fisheye = ros.replace("plumb_bob", "equidistant");
+    let err = CameraCalibration::load(temp_file("fisheye.yaml", &fisheye)).unwrap_err();
+    assert!(err.to_string().contains("equidistant"), "{err}");
+}
+
+#[test]
+fn opencvs_multi_line_data_comments_and_extra_keys_are_read() {
+    let text = "%YAML:1.0\n---\ncalibration_time: \"Fri 27 Nov # not a comment\"\nnframes: 20\n\
+        image_width: 640 # px\nimage_height: 480\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n\
+        \x20  data: [ 1.8475000000000000e+02, 0., 320., 0.,\n       1.8475000000000000e+02, 240., 0., 0., 1. ]\n\
+        distortion_coefficients: !!opencv-matrix\n   rows: 5\n   cols: 1\n   dt: d\n   data: [ -0.05, 0.01, 0.0005, 0.0005, 0. ]\n\
+        avg_reprojection_error: 0.21\n";
+    let c = CameraCalibration::load(temp_file("multi.yaml", text)).unwrap();
+    assert_eq!(
+        c,
+        CameraCalibration::load(temp_file("good2.yaml", GOOD_YAML)).unwrap()
+    );
+}
+
+#[test]
+fn malformed_calibrations_are_refused_naming_the_line_and_what_is_allowed() {
+    for (name, text, says) in [
+        (
+            "twice.yaml",
+            GOOD_YAML.replace("image_height: 480", "image_width: 480"),
+            "line 4: `image_width` is given twice",
+        ),
+        (
+            "count.yaml",
+            GOOD_YAML.replace("1. ]", "]"),
+            "3x3 needs 9 values, data has 8",
+        ),
+        (
+            "unclosed.yaml",
+            GOOD_YAML.replace("1. ]", "1."),
+            "data is not one list",
+        ),
+        (
+            "nan.yaml",
+            GOOD_YAML.replace("320.", "three-twenty"),
+            "`three-twenty` is not a number",
+        ),
+        (
+            "tab.yaml",
+            GOOD_YAML.replace("   rows: 1", "\trows: 1"),
+            "a tab in the indentation",
+        ),
+        (
+            "huge.yaml",
+            GOOD_YAML.replace("rows: 3", "rows: 100000"),
+            "rows 100000: allowed 1 to 64",
+        ),
+        (
+            "twochannel.yaml",
+            GOOD_YAML.replace("dt: d\n   data: [ 184", "dt: 2d\n   data: [ 184"),
+            "allowed one channel",
+        ),
+        (
+            "big.yaml",
+            format!("{GOOD_YAML}# {}\n", "x".repeat(70_000)),
+            "larger than 65536 bytes",
+        ),
+    ] {
+        let err = CameraCalibration::load(temp_file(name, &text)).unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.contains(name) && msg.contains(says), "{name}: {msg}");
+    }
+    let mut bytes = GOOD_YAML.as_bytes().to_vec();
+    bytes[40] = 0xff;
+    let p = temp_file("latin.yaml", "");
+    std::fs::write(&p, bytes).unwrap();
+    let msg = CameraCalibration::load(&p).unwrap_err().to_string();
+    assert!(msg.contains("not UTF-8 text (byte 40)"), "{msg}");
+}

@@ -96,7 +96,7 @@ pub const TARGETS: &[Target] = &[
     },
     Target {
         name: "calibration",
-        about: "an OpenCV calibration YAML, through OpenCV's FileStorage",
+        about: "a calibration YAML (OpenCV's or ROS's), through the stack's own reader",
         run: calibration,
         seeds: calibration_seeds,
         text: true,
@@ -360,7 +360,7 @@ fn calibration_seeds(deploy: &Path) -> Vec<Vec<u8>> {
     dir_files(deploy.join("config"), "yaml")
 }
 
-/// Through a file, as the stack reads it: OpenCV's FileStorage parses the YAML.
+/// Through a file, as the stack reads it (`CameraCalibration::load`).
 fn calibration(state: &mut State, data: &[u8]) -> u64 {
     // OpenCV's reader is C++ on text: a NUL ends its string early, and a file it
     // cannot tell the format of is refused. Both are the stack's path too.
