@@ -7,11 +7,12 @@ APT_PACKAGES := libopencv-dev libopencv-contrib-dev clang libclang-dev pkg-confi
 CARGO ?= cargo
 export CARGO_TERM_COLOR ?= never
 
-.PHONY: demo test bootstrap build lint bench help peers fuzz
+.PHONY: demo test bootstrap build lint bench help peers fuzz faults
 
 help:
 	@echo "make demo   install what is missing, build (release), run the simulated mission"
 	@echo "make test   install what is missing, then run every check and test"
+	@echo "make faults the whole fault matrix (make test flies half of it per run)"
 
 bootstrap:
 	@missing=""; \
@@ -72,6 +73,11 @@ peers:
 	./target/release/landing run --scenario paper-sim --processes --record target/peers/processes.mcap >/dev/null
 	python3 tests/peers/foxglove_reader.py target/peers/processes.mcap
 	@rm -rf target/peers
+
+# The whole fault matrix (44 flights, about 16 minutes); make test flies one half of
+# it per run (tools/landing/tests/faults.rs).
+faults: build
+	FAULT_MATRIX=full $(CARGO) test --release -p landing --test faults -- --nocapture
 
 bench: build
 	./target/release/landing bench ipc

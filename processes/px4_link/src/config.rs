@@ -72,7 +72,11 @@ pub struct Px4LinkConfig {
     pub command_timeout_ms: u64,
     /// Sends of one command before it counts as timed out.
     pub command_attempts: u32,
-    /// The autopilot counts as disconnected without a heartbeat this long, ms.
+    /// The autopilot counts as disconnected without a heartbeat this long, ms. PX4 beats
+    /// at 1 Hz over a link that loses datagrams: the default lets two in a row go
+    /// missing (a 5000-datagram flood at px4-link's port made the kernel drop one, and
+    /// 1.5 s turned that into a safe landing). Silence is found sooner anyway: the fsm
+    /// lands when the telemetry stream stops for `telemetry_timeout_s`.
     pub heartbeat_timeout_ms: u64,
     /// Setpoints asking more horizontal speed than this are refused, m/s.
     pub max_horizontal_speed_m_s: f64,
@@ -99,7 +103,7 @@ impl Default for Px4LinkConfig {
             new_setpoints_at_once: false,
             command_timeout_ms: 500,
             command_attempts: 4,
-            heartbeat_timeout_ms: 1500,
+            heartbeat_timeout_ms: 3500,
             max_horizontal_speed_m_s: SetpointBounds::default().max_horizontal_speed_m_s,
             max_vertical_speed_m_s: SetpointBounds::default().max_vertical_speed_m_s,
             max_acceleration_m_s2: SetpointBounds::default().max_acceleration_m_s2,

@@ -192,7 +192,7 @@ impl Default for LinkSettings {
             offboard_stream_ns: 300_000_000,
             command_timeout_ns: 500_000_000,
             command_attempts: 4,
-            heartbeat_timeout_ns: 1_500_000_000,
+            heartbeat_timeout_ns: 3_500_000_000,
             telemetry_hz: [30.0, 50.0, 5.0],
             bounds: SetpointBounds::default(),
         }

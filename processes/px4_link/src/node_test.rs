@@ -532,3 +532,24 @@ fn each_new_setpoint_is_reported_sent_once_with_when_it_was_taken_in() {
     node.poll(2_500_000 + LinkSettings::default().setpoint_period_ns);
     assert!(node.take_sent_setpoint().is_none());
 }
+
+#[test]
+fn two_lost_heartbeats_in_a_row_keep_the_link_connected_and_a_third_does_not() {
+    // PX4 beats at 1 Hz over UDP: one datagram lost in a flood must not read as a lost
+    // autopilot (the fsm would land at once).
+    let mut node = LinkNode::new(LinkSettings::default());
+    node.on_message(0, &PX4, &heartbeat());
+    let s = 1_000_000_000;
+    // The beats at 1 s and 2 s are lost; telemetry still flows.
+    for t in (10_000_000..3 * s).step_by(10_000_000) {
+        telemetry(&mut node, t);
+    }
+    assert!(node.status(3 * s).connected, "two beats lost");
+    node.on_message(3 * s, &PX4, &heartbeat());
+    // Then three lost: 3.5 s of silence is a lost link.
+    assert!(node.status(6 * s).connected);
+    assert!(
+        !node.status(6 * s + s / 2 + 1).connected,
+        "three beats lost"
+    );
+}

@@ -232,6 +232,11 @@ fn a_silent_autopilot_times_the_command_out_after_its_retries_and_drops_the_link
     f.link.request(Request::Arm);
     let got = f.wait_outcome(5.0);
     assert_eq!(got, vec![(Request::Arm, Outcome::TimedOut)]);
+    // No heartbeat for the link's timeout: disconnected.
+    f.run(
+        LinkSettings::default().heartbeat_timeout_ns as f64 * 1e-9,
+        |_, _| {},
+    );
     assert!(!f.link.status(f.now()).connected);
 }
 

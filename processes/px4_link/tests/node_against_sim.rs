@@ -358,7 +358,7 @@ fn when_telemetry_stops_the_state_shows_disconnected_with_stale_stamps() {
     assert!(last.msg.capture_ns <= stop_ns);
     assert!(b.now() - last.msg.capture_ns >= 190_000_000);
     // Past the heartbeat timeout (heartbeats come at 1 Hz): disconnected.
-    b.run(1.4);
+    b.run(timeout as f64 * 1e-9 - 0.1);
     assert!(!b.node.status(b.now()).connected);
     assert_eq!(b.latest().link.connected, 0);
     let silent_since = b.latest().link.last_heartbeat_ns;
