@@ -20,6 +20,9 @@ pub struct PlannerStage {
     map_header: Option<OccupancyMapHeader>,
     cells: Vec<u8>,
     counts: Counts,
+    /// Emergency stops published in a row: logged at the first and when they end, not
+    /// each (the policy republishes one every step while the collision stays ahead).
+    emergency_run: u64,
 }
 
 #[derive(Debug, Default, Clone, Copy)]
@@ -32,6 +35,7 @@ struct Counts {
     plans: u64,
     failed: u64,
     trajectories: u64,
+    emergency_stops: u64,
 }
 
 impl PlannerStage {
@@ -44,6 +48,7 @@ impl PlannerStage {
             map_header: None,
             cells: Vec::new(),
             counts: Counts::default(),
+            emergency_run: 0,
         }
     }
 }
@@ -105,7 +110,14 @@ impl Stage for PlannerStage {
             self.counts.trajectories += 1;
             out.publish(topics::PLANNER_TRAJECTORY, Message::Trajectory(t))?;
             if t.emergency != 0 {
-                tracing::warn!(id = t.id, "emergency stop published");
+                self.counts.emergency_stops += 1;
+                if self.emergency_run == 0 {
+                    tracing::warn!(id = t.id, "emergency stop published");
+                }
+                self.emergency_run += 1;
+            } else if self.emergency_run > 0 {
+                tracing::info!(in_a_row = self.emergency_run, "emergency stops ended");
+                self.emergency_run = 0;
             }
         }
         if let Some(mut s) = o.stats {
@@ -132,6 +144,7 @@ impl Stage for PlannerStage {
             ("plans", c.plans),
             ("failed", c.failed),
             ("trajectories", c.trajectories),
+            ("emergency_stops", c.emergency_stops),
         ]
     }
 }
