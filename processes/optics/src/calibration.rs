@@ -223,47 +223,44 @@ impl CameraCalibration {
             });
         }
         let text = read_text(path)?;
-        let doc = calibration_yaml::parse(&text).map_err(|e| CalibrationError::Syntax {
+        let syntax = |e: calibration_yaml::SyntaxError| CalibrationError::Syntax {
             path: path.to_path_buf(),
             line: e.line,
             message: e.message,
-        })?;
+        };
+        let at =
+            |line: usize, message: String| syntax(calibration_yaml::SyntaxError { line, message });
+        let doc = calibration_yaml::parse(&text).map_err(syntax)?;
         let model = match doc.get("distortion_model") {
             Some(calibration_yaml::Value::Scalar { text, .. }) => text.as_str(),
             _ => "plumb_bob",
         };
         if !["plumb_bob", "rational_polynomial"].contains(&model) {
-            return Err(CalibrationError::Syntax {
-                path: path.to_path_buf(),
-                line: 0,
-                message: format!(
+            return Err(at(
+                0,
+                format!(
                     "distortion_model `{model}`: allowed plumb_bob or rational_polynomial \
                      (OpenCV's radial-tangential model)"
                 ),
-            });
+            ));
         }
+        let missing = |key| CalibrationError::MissingKey {
+            path: path.to_path_buf(),
+            key,
+        };
         let int = |key: &'static str| -> Result<u32, CalibrationError> {
-            let (line, text) = match doc.get(key) {
-                None => {
-                    return Err(CalibrationError::MissingKey {
-                        path: path.to_path_buf(),
-                        key,
-                    });
+            let v = match doc.get(key) {
+                None => return Err(missing(key)),
+                Some(calibration_yaml::Value::Scalar { line, text }) => {
+                    calibration_yaml::number(*line, key, text).map_err(syntax)?
                 }
-                Some(calibration_yaml::Value::Scalar { line, text }) => (*line, text),
                 Some(calibration_yaml::Value::Matrix { line, .. }) => {
-                    return Err(CalibrationError::Syntax {
-                        path: path.to_path_buf(),
-                        line: *line,
-                        message: format!("`{key}` is a matrix; expected a positive integer"),
-                    });
+                    return Err(at(
+                        *line,
+                        format!("`{key}` is a matrix; expected a positive integer"),
+                    ));
                 }
             };
-            let v = text.parse::<f64>().map_err(|_| CalibrationError::Syntax {
-                path: path.to_path_buf(),
-                line,
-                message: format!("`{key}`: `{text}` is not a number"),
-            })?;
             if v.is_finite() && v >= 1.0 && v.fract() == 0.0 && v <= f64::from(u32::MAX) {
                 Ok(v as u32)
             } else {
@@ -275,24 +272,16 @@ impl CameraCalibration {
                 })
             }
         };
-        let matrix = |key: &'static str| -> Result<(i32, i32, Vec<f64>), CalibrationError> {
+        let matrix = |key: &'static str| -> Result<(i32, i32, &[f64]), CalibrationError> {
             match doc.get(key) {
-                None => Err(CalibrationError::MissingKey {
-                    path: path.to_path_buf(),
-                    key,
-                }),
+                None => Err(missing(key)),
                 Some(calibration_yaml::Value::Matrix {
                     rows, cols, data, ..
-                }) => Ok((*rows, *cols, data.clone())),
-                Some(calibration_yaml::Value::Scalar { line, .. }) => {
-                    Err(CalibrationError::Syntax {
-                        path: path.to_path_buf(),
-                        line: *line,
-                        message: format!(
-                            "`{key}` is not a matrix (rows, cols and data indented under it)"
-                        ),
-                    })
-                }
+                }) => Ok((*rows, *cols, data.as_slice())),
+                Some(calibration_yaml::Value::Scalar { line, .. }) => Err(at(
+                    *line,
+                    format!("`{key}` is not a matrix (rows, cols and data indented under it)"),
+                )),
             }
         };
         let width = int("image_width")?;
@@ -326,7 +315,7 @@ impl CameraCalibration {
             });
         }
         let mut distortion = [0.0; 5];
-        for (dst, src) in distortion.iter_mut().zip(&d) {
+        for (dst, src) in distortion.iter_mut().zip(d) {
             *dst = *src;
         }
         let calibration = Self {

@@ -2,8 +2,8 @@
 //! and ROS's `camera_calibration` write. It replaces OpenCV's `FileStorage` on the
 //! read path because OpenCV 4.6's YAML parser loops forever on some malformed files
 //! (found by `landing-fuzz`: `%YAML:1.0\n t:d\nncv-\n`), and a calibration file is
-//! user input a flight process reads at start. This reader is one pass over at most
-//! [`MAX_FILE_BYTES`], so it ends on any input.
+//! user input a flight process reads at start. This reader is one pass over the text
+//! (`CameraCalibration::load` reads at most [`MAX_FILE_BYTES`]), so it ends on any input.
 //!
 //! What it reads: top-level `key: scalar` lines and top-level keys whose value is an
 //! indented mapping (OpenCV's `!!opencv-matrix` or ROS's untagged one) with `rows`,
@@ -100,22 +100,14 @@ fn unquote(s: &str) -> &str {
     s
 }
 
-fn number(line: usize, key: &str, text: &str) -> Result<f64, SyntaxError> {
+/// `text` as a number, or an error naming `key` and the line.
+pub(crate) fn number(line: usize, key: &str, text: &str) -> Result<f64, SyntaxError> {
     text.parse::<f64>()
         .map_err(|_| err(line, format!("`{key}`: `{text}` is not a number")))
 }
 
-/// Reads a calibration document.
+/// Reads a calibration document; the caller bounds its size ([`MAX_FILE_BYTES`]).
 pub(crate) fn parse(text: &str) -> Result<Document, SyntaxError> {
-    if text.len() > MAX_FILE_BYTES {
-        return Err(err(
-            0,
-            format!(
-                "{} bytes; a calibration file is at most {MAX_FILE_BYTES}",
-                text.len()
-            ),
-        ));
-    }
     let mut doc = Document::default();
     let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l)).peekable();
     let mut started = false;

@@ -360,10 +360,9 @@ fn calibration_seeds(deploy: &Path) -> Vec<Vec<u8>> {
     dir_files(deploy.join("config"), "yaml")
 }
 
-/// Through a file, as the stack reads it (`CameraCalibration::load`).
+/// Through a file, as the stack reads it (`CameraCalibration::load`, the stack's own
+/// bounded reader: OpenCV's FileStorage hung on `regressions/calibration/`).
 fn calibration(state: &mut State, data: &[u8]) -> u64 {
-    // OpenCV's reader is C++ on text: a NUL ends its string early, and a file it
-    // cannot tell the format of is refused. Both are the stack's path too.
     let dir = state.dir.get_or_insert_with(|| {
         let d = std::env::temp_dir().join(format!("landing-fuzz-{}", std::process::id()));
         let _ = std::fs::create_dir_all(&d);

@@ -34,15 +34,16 @@ fn every_fault_of_the_matrix_ends_on_the_ground_without_a_crash() {
         });
     let rotation_arg = rotation.to_string();
     let mut args = vec!["bench", "faults", "--json"];
-    if full {
-        eprintln!("fault matrix: all 44 flights (FAULT_MATRIX=full)");
+    let which = if full {
+        "FAULT_MATRIX=full (all 44 flights)".to_string()
     } else {
-        eprintln!(
-            "fault matrix: the half FAULT_MATRIX_ROTATION={rotation} (the other: FAULT_MATRIX_ROTATION={}; all: FAULT_MATRIX=full)",
-            (rotation + 1) % 2
-        );
         args.extend(["--one-phase-each", &rotation_arg]);
-    }
+        format!(
+            "FAULT_MATRIX_ROTATION={rotation} (the other half: FAULT_MATRIX_ROTATION={}; all: FAULT_MATRIX=full)",
+            (rotation + 1) % 2
+        )
+    };
+    eprintln!("fault matrix: {which}");
     let out = common::landing(&args);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stderr}");
@@ -142,12 +143,7 @@ fn every_fault_of_the_matrix_ends_on_the_ground_without_a_crash() {
         .collect();
     assert!(
         wrong.is_empty(),
-        "fault matrix {}:\n{}\n{}\n{v}",
-        if full {
-            "FAULT_MATRIX=full".to_string()
-        } else {
-            format!("FAULT_MATRIX_ROTATION={rotation}")
-        },
+        "fault matrix {which}:\n{}\n{}\n{v}",
         wrong.join("\n"),
         short.join("\n")
     );
