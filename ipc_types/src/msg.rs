@@ -531,7 +531,7 @@ impl CellState {
 #[repr(C)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("landing::OccupancyMapHeader/v1")]
+#[type_name("landing::OccupancyMapHeader/v2")]
 pub struct OccupancyMapHeader {
     /// Sequence, capture time of the newest depth frame integrated, stage stamps.
     pub msg: Header,
@@ -545,6 +545,9 @@ pub struct OccupancyMapHeader {
     pub dims: [u32; 3],
     /// Keeps the layout free of implicit padding.
     pub reserved: u32,
+    /// Capture time of the newest vehicle state the mapper held when it integrated the
+    /// frame (0: none): which states a replay must hand it first to rebuild this map.
+    pub state_ns: u64,
 }
 
 /// What the planner is asked to do.

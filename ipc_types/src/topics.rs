@@ -51,7 +51,7 @@ impl Payload {
         match self {
             Self::CameraFrame => "landing::CameraFrameHeader/v1",
             Self::DepthFrame => "landing::DepthFrameHeader/v1",
-            Self::OccupancyMap => "landing::OccupancyMapHeader/v1",
+            Self::OccupancyMap => "landing::OccupancyMapHeader/v2",
             Self::VehicleState => "landing::VehicleState/v2",
             Self::PadObservation => "landing::PadObservation/v1",
             Self::PlannerGoal => "landing::PlannerGoal/v1",

@@ -235,6 +235,11 @@ impl DepthMapper {
         }
     }
 
+    /// Capture time of the newest vehicle state held (0: none yet).
+    pub fn newest_state_ns(&self) -> u64 {
+        self.history.latest().map_or(0, |s| s.time_ns)
+    }
+
     /// The map, for queries and publishing.
     pub fn map(&self) -> &OccupancyMap {
         &self.map

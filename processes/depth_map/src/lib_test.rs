@@ -142,3 +142,83 @@ fn non_finite_or_non_unit_states_are_refused_and_counted() {
     assert!(!m.push_state_msg(&state(4, 0.0)), "not newer");
     assert_eq!(m.counters().bad_states, 4);
 }
+
+/// Keeps the maps a stage publishes (headers only).
+#[derive(Default)]
+struct Maps(Vec<ipc_types::msg::OccupancyMapHeader>);
+
+impl ::stage::Outbox for Maps {
+    fn publish(&mut self, _: &str, _: ::stage::Message<'_>) -> Result<(), ::stage::StageError> {
+        Ok(())
+    }
+
+    fn publish_slice(
+        &mut self,
+        _: &str,
+        len: usize,
+        fill: &mut dyn FnMut(::stage::SliceMut<'_>) -> Option<::stage::SliceHeader>,
+    ) -> Result<bool, ::stage::StageError> {
+        let mut cells = vec![0u8; len];
+        if let Some(::stage::SliceHeader::OccupancyMap(h)) = fill(::stage::SliceMut::U8(&mut cells))
+        {
+            self.0.push(h);
+        }
+        Ok(true)
+    }
+}
+
+#[test]
+fn a_map_names_the_newest_state_it_was_built_with_until_the_next_frame() {
+    use ::stage::{Input, Message, Stage};
+    let mapper = DepthMapper::new(
+        small_settings(),
+        body_from_forward_camera([0.0; 3], [0.0; 3]),
+        50_000_000,
+    )
+    .unwrap();
+    let mut s = crate::stage::DepthStage::new(mapper, 100);
+    let mut out = Maps::default();
+    let state_in = |s: &mut crate::stage::DepthStage, out: &mut Maps, t: u64| {
+        let v = state(t, 0.0);
+        let input = Input {
+            topic: ipc_types::topics::VEHICLE_STATE,
+            msg: Message::VehicleState(&v),
+        };
+        s.on_input(t, input, out).unwrap();
+    };
+    let frame = |capture_ns: u64| ipc_types::msg::DepthFrameHeader {
+        msg: Header::captured_at(capture_ns),
+        width: 16,
+        height: 16,
+        depth_scale_m: 0.001,
+        intrinsics: Intrinsics {
+            fx: 16.0,
+            fy: 16.0,
+            cx: 7.5,
+            cy: 7.5,
+        },
+        camera_id: 0,
+        reserved: 0,
+    };
+    let d = [2000u16; 256];
+    state_in(&mut s, &mut out, 1_000_000_000);
+    state_in(&mut s, &mut out, 1_100_000_000);
+    let h = frame(1_050_000_000);
+    let input = Input {
+        topic: ipc_types::topics::SIM_DEPTH,
+        msg: Message::DepthFrame(&h, &d),
+    };
+    s.on_input(1_120_000_000, input, &mut out).unwrap();
+    // A newer state, then the clock: the same map again, built from the same states.
+    state_in(&mut s, &mut out, 1_200_000_000);
+    s.on_tick(1_300_000_000, &mut out).unwrap();
+    let named: Vec<_> = out.0.iter().map(|m| m.state_ns).collect();
+    assert_eq!(named, [1_100_000_000, 1_100_000_000]);
+    let h = frame(1_150_000_000);
+    let input = Input {
+        topic: ipc_types::topics::SIM_DEPTH,
+        msg: Message::DepthFrame(&h, &d),
+    };
+    s.on_input(1_310_000_000, input, &mut out).unwrap();
+    assert_eq!(out.0.last().map(|m| m.state_ns), Some(1_200_000_000));
+}

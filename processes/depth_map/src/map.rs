@@ -895,6 +895,7 @@ impl OccupancyMap {
             inflation: self.s.inflation_m,
             dims: self.dims.map(|d| d as u32),
             reserved: 0,
+            state_ns: 0,
         }
     }
 

@@ -17,6 +17,8 @@ pub struct DepthStage {
     last_publish_ns: Option<u64>,
     /// The header of the frame the map was last updated from.
     upstream: Header,
+    /// The newest state held when that frame was integrated (the map header says it).
+    state_ns: u64,
     counts: Counts,
     /// Why the last frame was not mapped (logged by the binary's drop log).
     last_error: Option<DepthError>,
@@ -36,6 +38,7 @@ impl DepthStage {
             publish_period_ns: publish_period_ms.max(1) * 1_000_000,
             last_publish_ns: None,
             upstream: Header::default(),
+            state_ns: 0,
             counts: Counts::default(),
             last_error: None,
         }
@@ -56,6 +59,7 @@ impl DepthStage {
     fn publish(&mut self, now_ns: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
         let map = self.mapper.map();
         let upstream = self.upstream;
+        let state_ns = self.state_ns;
         let sent = out.publish_slice(topics::MAP_OCCUPANCY, map.cell_count(), &mut |buf| {
             let SliceMut::U8(cells) = buf else {
                 return None;
@@ -71,6 +75,7 @@ impl DepthStage {
             msg.push_stage(StageId::DepthMap, now_ns, now_ns);
             Some(SliceHeader::OccupancyMap(OccupancyMapHeader {
                 msg,
+                state_ns,
                 ..wire
             }))
         })?;
@@ -111,6 +116,7 @@ impl Stage for DepthStage {
                 match result {
                     Ok(_) => {
                         self.upstream = h.msg;
+                        self.state_ns = self.mapper.newest_state_ns();
                         self.publish(now_ns, out)?;
                     }
                     Err(e) => self.last_error = Some(e),

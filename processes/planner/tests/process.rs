@@ -58,6 +58,7 @@ fn scene() -> (GridMap, OccupancyMapHeader, Vec<u8>) {
         inflation: 0.299,
         dims: dims.map(|d| d as u32),
         reserved: 0,
+        state_ns: 0,
     };
     (map, header, cells)
 }

@@ -67,7 +67,7 @@ recordable!(
     LinkOutcome => "landing::LinkOutcome/v1",
     SafetyCommand => "landing::SafetyCommand/v1",
     WatchdogView => "landing::WatchdogView/v3",
-    OccupancyMapHeader => "landing::OccupancyMapHeader/v1",
+    OccupancyMapHeader => "landing::OccupancyMapHeader/v2",
     CameraFrameHeader => "landing::CameraFrameHeader/v1",
     DepthFrameHeader => "landing::DepthFrameHeader/v1",
 );

@@ -191,6 +191,7 @@ fn publish(
                 inflation: 0.3,
                 dims: MAP_DIMS,
                 reserved: 0,
+                state_ns: 0,
             };
             map.send(sample.write_from_slice(&cells))?;
             let seq = count("/pad/observation");

@@ -270,6 +270,8 @@ pub(crate) fn map_header(v: &Value) -> Result<OccupancyMapHeader> {
         inflation: f64_of(&v["inflation"]),
         dims: [u32_of(&d[0])?, u32_of(&d[1])?, u32_of(&d[2])?],
         reserved: 0,
+        // Absent (0) in recordings made before the field.
+        state_ns: v["state_ns"].as_u64().unwrap_or(0),
     })
 }
 

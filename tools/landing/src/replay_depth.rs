@@ -5,8 +5,11 @@
 //! Each recorded map carries depth-map's stamp: its enter is when the flight's stage
 //! made it, either on a depth frame (the map's capture time is the frame's, made at the
 //! time it took the frame) or on its clock (the same map again when frames stop). The
-//! replay builds a new stage as `landing run` builds it, hands it every state px4-link
-//! had published by then and each depth frame at the time the flight's stage took it,
+//! replay builds a new stage as `landing run` builds it, hands it each depth frame at the
+//! time the flight's stage took it, after exactly the states the flight's stage held then
+//! (the map header names the newest: `state_ns`; recordings made before it fall back to
+//! every state px4-link had published by the stage's stamp, which a state published in
+//! the microseconds between the flight driver's clock read and its drain can defeat),
 //! ticks it at the other map times, and compares the maps in order: the header (window
 //! origin, resolution, inflation, dims, capture time) and every cell of the window
 //! (`/map/occupancy`, `foxglove.VoxelGrid`, one byte per cell).
@@ -53,8 +56,8 @@ impl Outbox for Maps {
 
 /// One input of the replay, in the order the flight's stage met them.
 enum Event {
-    State(VehicleState),
-    Frame(DepthFrameHeader, Vec<u16>),
+    /// A depth frame, and the capture time of the newest state held when it was mapped.
+    Frame(DepthFrameHeader, Vec<u16>, u64),
     Tick,
 }
 
@@ -164,28 +167,34 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
             let (Some(h), Some(d)) = (frame_headers.get(&capture), frames.remove(&capture)) else {
                 continue;
             };
-            events.push((at, 1, Event::Frame(*h, d)));
+            events.push((at, 0, Event::Frame(*h, d, m.header.state_ns)));
         } else {
-            events.push((at, 2, Event::Tick));
+            events.push((at, 1, Event::Tick));
         }
     }
-    for (at, s) in states {
-        events.push((at, 0, Event::State(s)));
-    }
-    // States first at a tie (the graph's input order), then the frame, then the clock.
+    // The frame before the clock at a tie (the driver's order).
     events.sort_by_key(|(at, kind, _)| (*at, *kind));
+    states.sort_by_key(|(at, _)| *at);
+    let mut states = states.into_iter().peekable();
     let mut out = Maps::default();
     let mut inputs = 0u64;
     for (at, _, e) in &events {
         match e {
-            Event::State(s) => {
-                let input = Input {
-                    topic: topics::VEHICLE_STATE,
-                    msg: Message::VehicleState(s),
+            Event::Frame(h, d, state_ns) => {
+                // The states the flight's stage held: up to the newest the map names, or
+                // (an older recording) every one published by the stage's stamp.
+                let held = |(published, s): &(u64, VehicleState)| match *state_ns {
+                    0 => *published <= *at,
+                    newest => s.msg.capture_ns <= newest,
                 };
-                stage.on_input(*at, input, &mut out)?;
-            }
-            Event::Frame(h, d) => {
+                while let Some((_, s)) = states.next_if(held) {
+                    let input = Input {
+                        topic: topics::VEHICLE_STATE,
+                        msg: Message::VehicleState(&s),
+                    };
+                    stage.on_input(*at, input, &mut out)?;
+                    inputs += 1;
+                }
                 let input = Input {
                     topic: topics::SIM_DEPTH,
                     msg: Message::DepthFrame(h, d),
