@@ -57,7 +57,7 @@ impl Outbox for Maps {
 /// One input of the replay, in the order the flight's stage met them.
 enum Event {
     /// A depth frame, and the capture time of the newest state held when it was mapped.
-    Frame(DepthFrameHeader, Vec<u16>, u64),
+    Frame(Box<DepthFrameHeader>, Vec<u16>, u64),
     Tick,
 }
 
@@ -167,7 +167,7 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
             let (Some(h), Some(d)) = (frame_headers.get(&capture), frames.remove(&capture)) else {
                 continue;
             };
-            events.push((at, 0, Event::Frame(*h, d, m.header.state_ns)));
+            events.push((at, 0, Event::Frame(Box::new(*h), d, m.header.state_ns)));
         } else {
             events.push((at, 1, Event::Tick));
         }
