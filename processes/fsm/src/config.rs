@@ -143,7 +143,7 @@ impl Default for FsmConfig {
             drop_rate_m_s: 0.8,
             land_max_pad_age_s: 0.4,
             relative_gain: 1.0,
-            relative_velocity_gain: 1.0,
+            relative_velocity_gain: 2.0,
             relative_accel_max_m_s2: 1.0,
             go_around_m: 0.4,
             max_go_arounds: 3,

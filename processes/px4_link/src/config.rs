@@ -66,7 +66,7 @@ pub struct Px4LinkConfig {
     pub setpoint_rate_hz: f64,
     /// A new setpoint from the fsm goes out at once rather than at the stream's next
     /// period (up to 1 / setpoint_rate_hz later); the newest is repeated every period.
-    /// Off by default: docs/recording.md.
+    /// On by default: camera -> wire p99 under 10 ms (docs/recording.md).
     pub new_setpoints_at_once: bool,
     /// Wait this long for a COMMAND_ACK before resending, ms.
     pub command_timeout_ms: u64,
@@ -100,7 +100,7 @@ impl Default for Px4LinkConfig {
             link: "udp:127.0.0.1:14540".into(),
             remote: "127.0.0.1:14580".into(),
             setpoint_rate_hz: 25.0,
-            new_setpoints_at_once: false,
+            new_setpoints_at_once: true,
             command_timeout_ms: 500,
             command_attempts: 4,
             heartbeat_timeout_ms: 3500,

@@ -187,7 +187,7 @@ impl Default for LinkSettings {
             target: (1, 1),
             heartbeat_period_ns: 1_000_000_000,
             setpoint_period_ns: 40_000_000,
-            new_setpoints_at_once: false,
+            new_setpoints_at_once: true,
             setpoint_max_age_ns: 300_000_000,
             offboard_stream_ns: 300_000_000,
             command_timeout_ns: 500_000_000,

@@ -477,11 +477,8 @@ fn hold_at(x: f64, seq: u64) -> Setpoint {
 }
 
 #[test]
-fn a_new_setpoint_goes_on_the_wire_at_once_and_the_newest_is_repeated_every_period() {
-    let settings = LinkSettings {
-        new_setpoints_at_once: true,
-        ..LinkSettings::default()
-    };
+fn by_default_a_new_setpoint_goes_on_the_wire_at_once_and_the_newest_is_repeated_every_period() {
+    let settings = LinkSettings::default();
     let mut node = LinkNode::new(settings);
     node.on_message(0, &PX4, &heartbeat());
     node.on_setpoint(1_000_000, &hold_at(1.0, 1));
@@ -496,8 +493,11 @@ fn a_new_setpoint_goes_on_the_wire_at_once_and_the_newest_is_repeated_every_peri
 }
 
 #[test]
-fn by_default_a_new_setpoint_waits_for_the_streams_period() {
-    let settings = LinkSettings::default();
+fn not_at_once_a_new_setpoint_waits_for_the_streams_period() {
+    let settings = LinkSettings {
+        new_setpoints_at_once: false,
+        ..LinkSettings::default()
+    };
     let mut node = LinkNode::new(settings);
     node.on_message(0, &PX4, &heartbeat());
     node.on_setpoint(1_000_000, &hold_at(1.0, 1));

@@ -1,8 +1,9 @@
 //! `landing bench latency`: camera frame -> setpoint on the MAVLink wire with every stage
 //! its own process and the simulator on the same machine, in one command. It flies the
 //! scenario with `--processes --record` twice, with the configuration as shipped and with
-//! `[px4_link] new_setpoints_at_once = true` (the one difference), and reads each
-//! recording with `landing latency`'s analysis. Both rows, same scenario, same seed.
+//! `[px4_link] new_setpoints_at_once` the other way (the one difference: at once, or
+//! waiting for the setpoint stream), and reads each recording with `landing latency`'s
+//! analysis. Both rows, same scenario, same seed.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -99,28 +100,30 @@ pub fn run(args: &LatencyBenchArgs) -> Result<()> {
         .unwrap_or_else(|| deploy.join("config").join("landing.toml"));
     let text = std::fs::read_to_string(&shipped)
         .with_context(|| format!("reading {}", shipped.display()))?;
-    let off = "new_setpoints_at_once = false";
-    if !text.contains(off) {
+    let (on, off) = (
+        "new_setpoints_at_once = true",
+        "new_setpoints_at_once = false",
+    );
+    let (other, other_text) = if text.contains(on) {
+        (off, text.replace(on, off))
+    } else if text.contains(off) {
+        (on, text.replace(off, on))
+    } else {
         bail!(
-            "{}: no `{off}` line under [px4_link] to turn on",
+            "{}: no `new_setpoints_at_once = true` or `= false` line under [px4_link] to turn over",
             shipped.display()
         );
-    }
+    };
     let temporary = args.out.is_none();
     let dir = args.out.clone().unwrap_or_else(|| {
         std::env::temp_dir().join(format!("landing-bench-latency-{}", std::process::id()))
     });
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let at_once = dir.join("at-once.toml");
-    std::fs::write(&at_once, text.replace(off, "new_setpoints_at_once = true"))?;
+    let turned = dir.join("turned-over.toml");
+    std::fs::write(&turned, other_text)?;
     let rows = vec![
         fly(args, &shipped, &dir.join("shipped.mcap"), "as shipped")?,
-        fly(
-            args,
-            &at_once,
-            &dir.join("at-once.mcap"),
-            "new_setpoints_at_once = true",
-        )?,
+        fly(args, &turned, &dir.join("turned-over.mcap"), other)?,
     ];
     if temporary {
         let _ = std::fs::remove_dir_all(&dir);

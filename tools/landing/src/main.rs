@@ -162,7 +162,7 @@ enum BenchCommand {
     /// other topic): drops and its CPU, JPEG + zstd and raw + lz4.
     Recorder(bench_recorder::RecorderArgs),
     /// Camera frame -> setpoint on the MAVLink wire, every stage its own process and the
-    /// simulator beside them: the shipped config and new_setpoints_at_once = true.
+    /// simulator beside them: the shipped config and new_setpoints_at_once turned over.
     Latency(bench_latency::LatencyBenchArgs),
     /// Internal: the publishing side of `bench ipc`, started by it in a second process.
     #[command(hide = true)]

@@ -12,17 +12,16 @@ fn temp(name: &str) -> PathBuf {
     dir.join(name)
 }
 
-/// One lockstep paper-sim mission recorded (shared by the tests of this file), with
-/// `[px4_link] new_setpoints_at_once` on: the latency chain without the stream's wait.
+/// One lockstep paper-sim mission recorded (shared by the tests of this file) with the
+/// shipped config, whose `[px4_link] new_setpoints_at_once` is on: the latency chain
+/// without the stream's wait.
 fn recording() -> PathBuf {
     static ONCE: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
     ONCE.get_or_init(|| {
         let path = temp("paper-sim.mcap");
         let text = common::shipped_config();
-        let at_once = "new_setpoints_at_once = true";
-        let text = text.replace("new_setpoints_at_once = false", at_once);
-        assert!(text.contains(at_once));
-        let cfg = common::write_config(temp("x").parent().unwrap(), "at-once.toml", &text);
+        assert!(text.contains("new_setpoints_at_once = true"));
+        let cfg = common::write_config(temp("x").parent().unwrap(), "shipped.toml", &text);
         let o = landing(&[
             "run",
             "--scenario",
