@@ -125,8 +125,10 @@ impl Detector {
             .set_min_marker_perimeter_rate((4.0 * self.settings.min_marker_px / longest).min(1.0));
         // ArUco3: when the smallest marker expected is large, OpenCV thresholds and
         // traces a downscaled image in which it is still `min_side_length_canonical_img`
-        // px (our edge refinement then places the corners at full resolution).
-        match smallest_px.filter(|s| *s > 2.0 * f64::from(CANONICAL_PX)) {
+        // px (our edge refinement then places the corners at full resolution). Asked for
+        // around a 40-80 px marker it found nothing in the search region (the whole frame
+        // was searched again, ten times the time: tests/tracking.rs), so only from 80 px.
+        match smallest_px.filter(|s| *s > 4.0 * f64::from(CANONICAL_PX)) {
             Some(s) => {
                 self.params.set_use_aruco3_detection(true);
                 self.params.set_min_side_length_canonical_img(CANONICAL_PX);

@@ -14,7 +14,7 @@ pub mod pose;
 pub mod stage;
 
 use ipc_types::msg::{Header, MAX_MARKERS, PadObservation, PixelEncoding, Pose};
-use nalgebra::{Isometry3, Matrix6, Point3};
+use nalgebra::{Isometry3, Matrix6, Point3, UnitQuaternion};
 use opencv::core::{Mat, Rect};
 use opencv::imgproc;
 use opencv::prelude::*;
@@ -146,6 +146,28 @@ pub fn pose_of(iso: &Isometry3<f64>) -> Pose {
 struct Track {
     camera_from_pad: Isometry3<f64>,
     capture_ns: u64,
+    /// The camera's attitude then, when the vehicle state gave it.
+    world_from_camera: Option<UnitQuaternion<f64>>,
+}
+
+impl Track {
+    /// The pad as the camera should see it now: the last pose turned by how the camera
+    /// has turned since (the vehicle's attitude, known for both frames). A few degrees of
+    /// roll move the pad tens of pixels, out of its search region; the pad's offset from
+    /// the camera changes little between frames while the vehicle follows it.
+    fn predicted(&self, world_from_camera: Option<&Isometry3<f64>>) -> Track {
+        let (Some(then), Some(now)) = (self.world_from_camera, world_from_camera) else {
+            return *self;
+        };
+        let now_from_then = now.rotation.inverse() * then;
+        Track {
+            camera_from_pad: Isometry3::from_parts(
+                (now_from_then * self.camera_from_pad.translation.vector).into(),
+                now_from_then * self.camera_from_pad.rotation,
+            ),
+            ..*self
+        }
+    }
 }
 
 /// Counters a process reports (and tests read).
@@ -272,7 +294,9 @@ impl PadEstimator {
         }) {
             self.track = None;
         }
-        let region = self.track.as_ref().and_then(|t| self.region(t));
+        let world_from_camera = world_from_body.map(|w| w * self.camera_from_body.inverse());
+        let predicted = self.track.map(|t| t.predicted(world_from_camera.as_ref()));
+        let region = predicted.as_ref().and_then(|t| self.region(t));
         // The frame's bytes as a Mat header (no copy): `stride` bytes a row, of which
         // the first `width * bpp` are pixels. Colour frames are converted to grey.
         let (w, h) = (frame.width as i32, frame.height as i32);
@@ -293,7 +317,7 @@ impl PadEstimator {
             imgproc::cvt_color_def(&colour, &mut self.gray, code)?;
         }
         let gray = &self.gray;
-        let smallest = self.track.as_ref().and_then(|t| self.smallest_active_px(t));
+        let smallest = predicted.as_ref().and_then(|t| self.smallest_active_px(t));
         let look = |detector: &mut Detector, region: Option<Rect>| {
             let hint = region.and(smallest);
             match code {
@@ -355,7 +379,6 @@ impl PadEstimator {
                 })
             })
             .collect();
-        let world_from_camera = world_from_body.map(|w| w * self.camera_from_body.inverse());
         let level = world_from_camera
             .filter(|_| self.settings.level_sigma_rad > 0.0)
             .map(|w| pose::LevelPrior {
@@ -374,6 +397,7 @@ impl PadEstimator {
         self.track = Some(Track {
             camera_from_pad: solution.camera_from_pad,
             capture_ns,
+            world_from_camera: world_from_camera.map(|w| w.rotation),
         });
         self.counters.poses += 1;
         let world_from_pad = world_from_camera.map(|w| w * solution.camera_from_pad);

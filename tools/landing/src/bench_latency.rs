@@ -119,6 +119,20 @@ pub fn run(args: &LatencyBenchArgs) -> Result<()> {
         std::env::temp_dir().join(format!("landing-bench-latency-{}", std::process::id()))
     });
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    // The files the config names (calibrations, the pad) are read beside it: copy them.
+    let config_dir = shipped.parent().unwrap_or(Path::new("."));
+    for entry in std::fs::read_dir(config_dir)
+        .with_context(|| format!("reading {}", config_dir.display()))?
+    {
+        let path = entry?.path();
+        if let Some(name) = path.file_name()
+            && path.is_file()
+            && path != shipped
+        {
+            std::fs::copy(&path, dir.join(name))
+                .with_context(|| format!("copying {}", path.display()))?;
+        }
+    }
     let turned = dir.join("turned-over.toml");
     std::fs::write(&turned, other_text)?;
     let rows = vec![
