@@ -545,8 +545,9 @@ pub struct OccupancyMapHeader {
     pub dims: [u32; 3],
     /// Keeps the layout free of implicit padding.
     pub reserved: u32,
-    /// Capture time of the newest vehicle state the mapper held when it integrated the
-    /// frame (0: none): which states a replay must hand it first to rebuild this map.
+    /// Capture time of the newest vehicle state the frame's pose came from (the first
+    /// after its capture, interpolated towards, else the newest; 0: none): the states a
+    /// replay must hand the mapper first to rebuild this map.
     pub state_ns: u64,
 }
 

@@ -235,9 +235,10 @@ impl DepthMapper {
         }
     }
 
-    /// Capture time of the newest vehicle state held (0: none yet).
-    pub fn newest_state_ns(&self) -> u64 {
-        self.history.latest().map_or(0, |s| s.time_ns)
+    /// Capture time of the newest vehicle state the pose at `capture_ns` depends on
+    /// ([`StateHistory::newest_used_ns`]; 0: none yet).
+    pub fn state_used_ns(&self, capture_ns: u64) -> u64 {
+        self.history.newest_used_ns(capture_ns).unwrap_or(0)
     }
 
     /// The map, for queries and publishing.

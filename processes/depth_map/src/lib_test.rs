@@ -168,7 +168,7 @@ impl ::stage::Outbox for Maps {
 }
 
 #[test]
-fn a_map_names_the_newest_state_it_was_built_with_until_the_next_frame() {
+fn a_map_names_the_newest_state_its_pose_came_from_until_the_next_frame() {
     use ::stage::{Input, Message, Stage};
     let mapper = DepthMapper::new(
         small_settings(),
@@ -214,6 +214,8 @@ fn a_map_names_the_newest_state_it_was_built_with_until_the_next_frame() {
     s.on_tick(1_300_000_000, &mut out).unwrap();
     let named: Vec<_> = out.0.iter().map(|m| m.state_ns).collect();
     assert_eq!(named, [1_100_000_000, 1_100_000_000]);
+    // A state after the next frame's bracket changes nothing: the map names the bracket.
+    state_in(&mut s, &mut out, 1_300_000_000);
     let h = frame(1_150_000_000);
     let input = Input {
         topic: ipc_types::topics::SIM_DEPTH,

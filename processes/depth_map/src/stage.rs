@@ -17,7 +17,7 @@ pub struct DepthStage {
     last_publish_ns: Option<u64>,
     /// The header of the frame the map was last updated from.
     upstream: Header,
-    /// The newest state held when that frame was integrated (the map header says it).
+    /// The newest state that frame's pose came from (the map header says it).
     state_ns: u64,
     counts: Counts,
     /// Why the last frame was not mapped (logged by the binary's drop log).
@@ -116,7 +116,7 @@ impl Stage for DepthStage {
                 match result {
                     Ok(_) => {
                         self.upstream = h.msg;
-                        self.state_ns = self.mapper.newest_state_ns();
+                        self.state_ns = self.mapper.state_used_ns(h.msg.capture_ns);
                         self.publish(now_ns, out)?;
                     }
                     Err(e) => self.last_error = Some(e),

@@ -127,6 +127,14 @@ impl StateHistory {
         self.states.is_empty()
     }
 
+    /// Capture time of the newest state the pose at `time_ns` depends on: the first state
+    /// after it (interpolated towards), else the newest (extrapolated from). States that
+    /// came later change nothing at `time_ns`; a replay needs only those up to this one.
+    pub fn newest_used_ns(&self, time_ns: u64) -> Option<u64> {
+        let k = self.states.partition_point(|s| s.time_ns <= time_ns);
+        self.states.get(k).or(self.states.back()).map(|s| s.time_ns)
+    }
+
     /// The pose at `time_ns`: linear in translation, spherical in rotation between the
     /// two states around it; past the newest, extrapolated with its velocity (rotation
     /// held) up to the allowance.

@@ -47,3 +47,18 @@ fn out_of_order_and_non_finite_states_are_refused() {
     assert!(!h.push(pose(20, f64::NAN, 0.0)));
     assert_eq!(h.len(), 1);
 }
+
+#[test]
+fn the_newest_state_a_pose_uses_is_the_one_after_it_or_the_newest() {
+    let mut h = StateHistory::new(8, 20_000_000);
+    assert_eq!(h.newest_used_ns(5), None);
+    h.push(pose(0, 0.0, 0.0));
+    // Extrapolated from the newest.
+    assert_eq!(h.newest_used_ns(10_000_000), Some(0));
+    h.push(pose(100_000_000, 1.0, 0.0));
+    h.push(pose(200_000_000, 2.0, 0.0));
+    // Interpolated towards the first state after it; the later one plays no part.
+    assert_eq!(h.newest_used_ns(25_000_000), Some(100_000_000));
+    assert_eq!(h.newest_used_ns(100_000_000), Some(200_000_000));
+    assert_eq!(h.newest_used_ns(250_000_000), Some(200_000_000));
+}

@@ -6,8 +6,8 @@
 //! made it, either on a depth frame (the map's capture time is the frame's, made at the
 //! time it took the frame) or on its clock (the same map again when frames stop). The
 //! replay builds a new stage as `landing run` builds it, hands it each depth frame at the
-//! time the flight's stage took it, after exactly the states the flight's stage held then
-//! (the map header names the newest: `state_ns`; recordings made before it fall back to
+//! time the flight's stage took it, after the states its pose came from (the map header
+//! names the newest: `state_ns`; later ones change nothing; recordings made before it fall back to
 //! every state px4-link had published by the stage's stamp, which a state published in
 //! the microseconds between the flight driver's clock read and its drain can defeat),
 //! ticks it at the other map times, and compares the maps in order: the header (window
@@ -56,7 +56,7 @@ impl Outbox for Maps {
 
 /// One input of the replay, in the order the flight's stage met them.
 enum Event {
-    /// A depth frame, and the capture time of the newest state held when it was mapped.
+    /// A depth frame, and the capture time of the newest state its pose came from.
     Frame(Box<DepthFrameHeader>, Vec<u16>, u64),
     Tick,
 }
@@ -181,7 +181,7 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
     for (at, _, e) in &events {
         match e {
             Event::Frame(h, d, state_ns) => {
-                // The states the flight's stage held: up to the newest the map names, or
+                // The states the pose came from: up to the newest the map names, or
                 // (an older recording) every one published by the stage's stamp.
                 let held = |(published, s): &(u64, VehicleState)| match *state_ns {
                     0 => *published <= *at,
