@@ -200,15 +200,17 @@ fn a_map_names_the_newest_state_its_pose_came_from_until_the_next_frame() {
         camera_id: 0,
         reserved: 0,
     };
-    let d = [2000u16; 256];
+    let depth_in = |s: &mut crate::stage::DepthStage, out: &mut Maps, capture: u64, now: u64| {
+        let (h, d) = (frame(capture), [2000u16; 256]);
+        let input = Input {
+            topic: ipc_types::topics::SIM_DEPTH,
+            msg: Message::DepthFrame(&h, &d),
+        };
+        s.on_input(now, input, out).unwrap();
+    };
     state_in(&mut s, &mut out, 1_000_000_000);
     state_in(&mut s, &mut out, 1_100_000_000);
-    let h = frame(1_050_000_000);
-    let input = Input {
-        topic: ipc_types::topics::SIM_DEPTH,
-        msg: Message::DepthFrame(&h, &d),
-    };
-    s.on_input(1_120_000_000, input, &mut out).unwrap();
+    depth_in(&mut s, &mut out, 1_050_000_000, 1_120_000_000);
     // A newer state, then the clock: the same map again, built from the same states.
     state_in(&mut s, &mut out, 1_200_000_000);
     s.on_tick(1_300_000_000, &mut out).unwrap();
@@ -216,11 +218,6 @@ fn a_map_names_the_newest_state_its_pose_came_from_until_the_next_frame() {
     assert_eq!(named, [1_100_000_000, 1_100_000_000]);
     // A state after the next frame's bracket changes nothing: the map names the bracket.
     state_in(&mut s, &mut out, 1_300_000_000);
-    let h = frame(1_150_000_000);
-    let input = Input {
-        topic: ipc_types::topics::SIM_DEPTH,
-        msg: Message::DepthFrame(&h, &d),
-    };
-    s.on_input(1_310_000_000, input, &mut out).unwrap();
+    depth_in(&mut s, &mut out, 1_150_000_000, 1_310_000_000);
     assert_eq!(out.0.last().map(|m| m.state_ns), Some(1_200_000_000));
 }
