@@ -73,8 +73,6 @@ struct World {
     /// From the commit to the touchdown on, each observation places the pad this much
     /// lower per second (m/s): late telemetry drags the pad's world height down.
     sinking_m_s: f64,
-    /// When the vehicle entered Land, ns.
-    land_at: Option<u64>,
     /// The vehicle's downward speed when it first met the ground or the pad, m/s.
     contact_speed_m_s: Option<f64>,
 }
@@ -117,7 +115,6 @@ impl World {
             px4_sees_landing: true,
             response_s: 0.0,
             sinking_m_s: 0.0,
-            land_at: None,
             contact_speed_m_s: None,
         }
     }
@@ -162,6 +159,12 @@ impl World {
 
     fn state(&self) -> MissionState {
         self.fsm.state()
+    }
+
+    /// When the vehicle first entered Land, ns.
+    fn land_at(&self) -> Option<u64> {
+        let mut t = self.fsm.transitions().iter();
+        t.find(|t| t.to == MissionState::Land).map(|t| t.at_ns)
     }
 
     fn ground(&self) -> f64 {
@@ -323,15 +326,12 @@ impl World {
         };
         self.pos += self.vel * dt;
         let g = self.ground();
-        if self.contact_speed_m_s.is_none() && self.land_at.is_some() && self.on_ground() {
+        if self.contact_speed_m_s.is_none() && self.land_at().is_some() && self.on_ground() {
             self.contact_speed_m_s = Some(-self.vel.z);
         }
         if self.pos.z < g {
             self.pos.z = g;
             self.vel.z = 0.0;
-        }
-        if self.land_at.is_none() && self.fsm.state() == MissionState::Land {
-            self.land_at = Some(self.t);
         }
         if self.on_ground() && self.mode == FlightMode::Land && self.armed {
             self.armed = false;
@@ -382,7 +382,7 @@ impl World {
         }
         let captured = self.t.saturating_sub(CAPTURE_AGE_NS);
         let pad_then = pad - self.pad_vel * (CAPTURE_AGE_NS as f64 * 1e-9);
-        let sunk = self.land_at.map_or(0.0, |t0| {
+        let sunk = self.land_at().map_or(0.0, |t0| {
             self.sinking_m_s * captured.saturating_sub(t0) as f64 * 1e-9
         });
         let pad_then = pad_then - Vector3::new(0.0, 0.0, sunk);
