@@ -96,6 +96,10 @@ pub struct FsmConfig {
     pub request_attempts: u32,
     /// Wait between attempts, s.
     pub request_retry_s: f64,
+    /// A mode change the autopilot accepted (LAND in a safe-land) is asked again only
+    /// when its heartbeat has not shown the mode for this long, s: PX4 beats at 1 Hz,
+    /// and px4-link answers a repeat within 2.5 s from memory.
+    pub mode_timeout_s: f64,
     /// Time limit of Takeoff (arming, climbing, entering OFFBOARD), s.
     pub takeoff_timeout_s: f64,
     /// Time limit of GoToPreset, s.
@@ -157,6 +161,7 @@ impl Default for FsmConfig {
             watchdog_timeout_s: 1.0,
             request_attempts: 3,
             request_retry_s: 1.0,
+            mode_timeout_s: 3.0,
             takeoff_timeout_s: 30.0,
             goto_timeout_s: 90.0,
             wait_timeout_s: 120.0,
@@ -295,6 +300,7 @@ impl Validate for FsmConfig {
             ("telemetry_timeout_s", self.telemetry_timeout_s, 0.05, 10.0),
             ("watchdog_timeout_s", self.watchdog_timeout_s, 0.1, 60.0),
             ("request_retry_s", self.request_retry_s, 0.0, 60.0),
+            ("mode_timeout_s", self.mode_timeout_s, 0.5, 60.0),
             ("takeoff_timeout_s", self.takeoff_timeout_s, 1.0, 3600.0),
             ("goto_timeout_s", self.goto_timeout_s, 1.0, 3600.0),
             ("wait_timeout_s", self.wait_timeout_s, 1.0, 3600.0),

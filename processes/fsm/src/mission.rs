@@ -66,11 +66,20 @@ struct Pending {
     answer: Option<(LinkOutcomeKind, u32)>,
 }
 
+/// A mode change the autopilot accepted, waited for until its heartbeat shows it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ModeWait {
+    kind: LinkRequestKind,
+    since_ns: u64,
+    attempts: u32,
+}
+
 /// Where a request stands.
 #[derive(Debug, Clone, PartialEq)]
 enum Drive {
     Waiting,
-    Accepted,
+    /// Accepted at this attempt.
+    Accepted(u32),
     Failed(String),
 }
 
@@ -103,12 +112,17 @@ pub struct Fsm {
     /// follow the pad carry its capture time and stage stamps on, so that a recording
     /// shows camera capture -> setpoint on the wire.
     pad_header: Option<Header>,
+    /// The newest vehicle state with when it was measured (its stamp).
     vehicle: Option<(u64, VehicleState)>,
+    /// When the newest state's telemetry reached px4-link (its `link.last_telemetry_ns`):
+    /// telemetry is lost when this stops advancing, whatever its stamp says.
+    telemetry_arrived_ns: u64,
     /// When the watchdog's view last came.
     watchdog_seen_ns: Option<u64>,
     trajectory: Option<(u64, BSpline, u64)>,
     takeoff: TakeoffStep,
     pending: Option<Pending>,
+    mode_wait: Option<ModeWait>,
     next_request_id: u64,
     streaming: bool,
     hold: Vector3<f64>,
@@ -156,9 +170,11 @@ impl Fsm {
             odometry: Odometry::default(),
             pad_header: None,
             vehicle: None,
+            telemetry_arrived_ns: 0,
             trajectory: None,
             takeoff: TakeoffStep::EnteringOffboard,
             pending: None,
+            mode_wait: None,
             next_request_id: 1,
             streaming: false,
             hold: Vector3::zeros(),
@@ -228,15 +244,20 @@ impl Fsm {
         self.started = true;
     }
 
-    /// The newest vehicle state, received at `now_ns`. Its age counts from its telemetry
-    /// time (`msg.capture_ns`, px4-link's receive time of the autopilot's message), so a
-    /// state px4-link repeats while the autopilot is silent does not look fresh.
+    /// The newest vehicle state, received at `now_ns`. Where it is now is carried
+    /// forward from when the autopilot measured it (`msg.capture_ns`, its clock mapped
+    /// onto ours); whether telemetry still comes is judged by when it arrived
+    /// (`link.last_telemetry_ns`, px4-link's own clock), so neither a state px4-link
+    /// repeats while the autopilot is silent nor an autopilot clock that runs slow (a
+    /// simulator behind real time) changes the verdict.
     pub fn on_vehicle_state(&mut self, now_ns: u64, v: &VehicleState) {
         if v.world_from_body.is_finite() && v.velocity.iter().all(|x| x.is_finite()) {
-            let t = match v.msg.capture_ns {
+            let stamp = |t: u64| match t {
                 0 => now_ns,
                 t => t.min(now_ns),
             };
+            let t = stamp(v.msg.capture_ns);
+            self.telemetry_arrived_ns = stamp(v.link.last_telemetry_ns);
             self.vehicle = Some((t, *v));
             let p = Vector3::from(v.world_from_body.translation);
             self.odometry.on_state(t, p, Vector3::from(v.velocity));
@@ -403,6 +424,7 @@ impl Fsm {
         self.state = to;
         self.transitioned = true;
         self.align_since = None;
+        self.mode_wait = None;
         match to {
             MissionState::SafeLand | MissionState::Abort | MissionState::Landed => {
                 self.streaming = false;
@@ -534,7 +556,7 @@ impl Fsm {
             }
             (Some(_), Some((LinkOutcomeKind::Accepted, _))) => {
                 self.pending = None;
-                return Drive::Accepted;
+                return Drive::Accepted(p.attempts);
             }
             (Some(sent), answer) => {
                 let failure = match answer {
@@ -565,11 +587,13 @@ impl Fsm {
         Drive::Waiting
     }
 
-    /// The autopilot link is up and its newest state is within `telemetry_timeout_s`.
-    fn link_fresh(&self, now_ns: u64) -> bool {
-        self.vehicle.as_ref().is_some_and(|(rx, v)| {
+    /// The autopilot link is up and its newest telemetry arrived within
+    /// `telemetry_timeout_s`.
+    pub fn link_fresh(&self, now_ns: u64) -> bool {
+        self.vehicle.as_ref().is_some_and(|(_, v)| {
             v.link.connected != 0
-                && now_ns.saturating_sub(*rx) as f64 * 1e-9 <= self.cfg.telemetry_timeout_s
+                && now_ns.saturating_sub(self.telemetry_arrived_ns) as f64 * 1e-9
+                    <= self.cfg.telemetry_timeout_s
         })
     }
 
@@ -609,7 +633,7 @@ impl Fsm {
             TakeoffStep::EnteringOffboard => {
                 out.setpoint = Some(self.hold_setpoint(now_ns, self.hold));
                 match self.drive(now_ns, LinkRequestKind::Offboard, 0.0, out) {
-                    Drive::Accepted => {
+                    Drive::Accepted(_) => {
                         self.mode_lost_since = None;
                         self.takeoff = TakeoffStep::Arming;
                     }
@@ -620,7 +644,7 @@ impl Fsm {
             TakeoffStep::Arming => {
                 out.setpoint = Some(self.hold_setpoint(now_ns, self.hold));
                 match self.drive(now_ns, LinkRequestKind::Arm, 0.0, out) {
-                    Drive::Accepted => self.takeoff = TakeoffStep::Climbing { since_ns: now_ns },
+                    Drive::Accepted(_) => self.takeoff = TakeoffStep::Climbing { since_ns: now_ns },
                     Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),
                     Drive::Waiting => {}
                 }
@@ -987,7 +1011,7 @@ impl Fsm {
     ) {
         out.setpoint = Some(self.pad_setpoint(now_ns, est, est.position.z - 0.3, -rate));
         match self.drive(now_ns, kind, 0.0, out) {
-            Drive::Accepted => self.go(now_ns, MissionState::Landed, why),
+            Drive::Accepted(_) => self.go(now_ns, MissionState::Landed, why),
             Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),
             Drive::Waiting => {}
         }
@@ -1064,11 +1088,51 @@ impl Fsm {
         }
         let mode = FlightMode::from_raw(v.flight_mode);
         if mode == FlightMode::Land {
+            self.mode_wait = None;
             return;
         }
-        if let Drive::Failed(why) = self.drive(now_ns, LinkRequestKind::Land, 0.0, out) {
+        if let Drive::Failed(why) = self.drive_mode(now_ns, LinkRequestKind::Land, out) {
             // A vehicle that must land keeps asking; each failure is logged.
             tracing::error!(why = why.as_str(), "land request failed, asking again");
+        }
+    }
+
+    /// Asks for a mode change and waits for the autopilot's heartbeat to show it: an
+    /// accepted request is not asked again until `mode_timeout_s` passes without the
+    /// mode, then it is, as its next attempt. (Asked again at every cycle until the
+    /// 1 Hz heartbeat caught up, PX4 restarted AUTO.LAND at each NAV_LAND: issue 34.)
+    /// The caller stops calling once the mode shows.
+    fn drive_mode(&mut self, now_ns: u64, kind: LinkRequestKind, out: &mut Outputs) -> Drive {
+        if let Some(w) = self.mode_wait.filter(|w| w.kind == kind) {
+            let waited_s = now_ns.saturating_sub(w.since_ns) as f64 * 1e-9;
+            if waited_s < self.cfg.mode_timeout_s {
+                return Drive::Waiting;
+            }
+            tracing::warn!(
+                ?kind,
+                waited_s,
+                "the autopilot accepted the request but does not show its mode: asking again"
+            );
+            self.mode_wait = None;
+            self.pending = Some(Pending {
+                kind,
+                id: 0,
+                attempts: w.attempts,
+                sent_ns: None,
+                retry_at_ns: now_ns,
+                answer: None,
+            });
+        }
+        match self.drive(now_ns, kind, 0.0, out) {
+            Drive::Accepted(attempts) => {
+                self.mode_wait = Some(ModeWait {
+                    kind,
+                    since_ns: now_ns,
+                    attempts,
+                });
+                Drive::Waiting
+            }
+            d => d,
         }
     }
 

@@ -75,6 +75,11 @@ struct World {
     sinking_m_s: f64,
     /// The vehicle's downward speed when it first met the ground or the pad, m/s.
     contact_speed_m_s: Option<f64>,
+    /// The autopilot's stamp on each state lags the truth by this much (its clock runs
+    /// slow and px4-link's mapping fell behind), ns.
+    stamp_lag_ns: u64,
+    /// px4-link repeats the last state without new telemetry: its arrival stays here.
+    arrival_frozen_at: Option<u64>,
 }
 
 impl World {
@@ -116,6 +121,8 @@ impl World {
             response_s: 0.0,
             sinking_m_s: 0.0,
             contact_speed_m_s: None,
+            stamp_lag_ns: 0,
+            arrival_frozen_at: None,
         }
     }
 
@@ -185,7 +192,7 @@ impl World {
             LandedState::InAir
         };
         let mut v = VehicleState {
-            msg: Header::captured_at(self.t),
+            msg: Header::captured_at(self.t.saturating_sub(self.stamp_lag_ns)),
             world_from_body: Pose {
                 translation: (self.pos + self.error_at(self.t)).into(),
                 rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
@@ -197,6 +204,7 @@ impl World {
             ..VehicleState::default()
         };
         v.link.connected = 1;
+        v.link.last_telemetry_ns = self.arrival_frozen_at.unwrap_or(self.t);
         v
     }
 
@@ -743,6 +751,30 @@ fn telemetry_that_stops_in_flight_lands_in_place() {
     let before = w.setpoints;
     w.run_for(1.0);
     assert_eq!(w.setpoints, before, "no setpoints without telemetry");
+}
+
+#[test]
+fn telemetry_that_arrives_is_not_lost_however_far_its_stamps_fall_behind() {
+    // PX4 SITL's clock ran 1.1 % slow: after 45 s the mapped stamps were 0.5 s behind
+    // while 68 states a second arrived, and the fsm called the telemetry lost.
+    let mut w = World::new(config());
+    w.pad_visible = false;
+    w.expect(MissionState::WaitForPad, 30.0);
+    w.stamp_lag_ns = 2_000_000_000;
+    w.run_for(5.0);
+    assert_eq!(w.state(), MissionState::WaitForPad, "{}", w.fsm.reason());
+}
+
+#[test]
+fn states_repeated_without_new_telemetry_are_telemetry_lost() {
+    // px4-link publishes the last state every 100 ms while the autopilot is silent, with
+    // the arrival of the telemetry it holds: that arrival is what stops.
+    let mut w = World::new(config());
+    w.pad_visible = false;
+    w.expect(MissionState::WaitForPad, 30.0);
+    w.arrival_frozen_at = Some(w.t);
+    w.expect(MissionState::SafeLand, 1.0);
+    assert_eq!(w.fsm.reason(), "telemetry lost");
 }
 
 #[test]

@@ -42,6 +42,19 @@ pub enum Request {
     Hold,
 }
 
+impl Request {
+    /// The mode this request puts the autopilot in, for a mode change.
+    pub fn mode(&self) -> Option<FlightMode> {
+        match self {
+            Self::Takeoff { .. } => Some(FlightMode::Takeoff),
+            Self::Offboard => Some(FlightMode::Offboard),
+            Self::Land => Some(FlightMode::Land),
+            Self::Hold => Some(FlightMode::Hold),
+            Self::Arm | Self::Disarm | Self::ForceDisarm => None,
+        }
+    }
+}
+
 /// How a request ended.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Outcome {
@@ -57,6 +70,14 @@ pub enum Outcome {
     /// A take-off without an altitude reference (no global position): not sent.
     NoAltitudeReference,
 }
+
+/// How long a mode change the autopilot accepted is taken as under way while its
+/// heartbeat does not show it yet, ns: PX4 beats at 1 Hz, so the mode shows within a
+/// second; two lost beats are allowed for. Asked again inside it, the request is
+/// answered accepted without going on the wire again (PX4 restarts AUTO.LAND's landing
+/// point at every NAV_LAND, and a mission or watchdog asking every cycle made a storm
+/// of them). The fsm re-asks after its own `mode_timeout_s`, which is longer.
+pub const MODE_CONFIRM_NS: u64 = 2_500_000_000;
 
 /// Timing and identity of the link.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -217,7 +238,11 @@ struct Telemetry {
     armed: bool,
     landed: Option<MavLandedState>,
     last_heartbeat_ns: Option<u64>,
+    /// When the newest telemetry arrived, on our clock: what staleness is judged by.
     last_telemetry_ns: u64,
+    /// When the newest telemetry was measured, the autopilot's stamp on our clock: what
+    /// the vehicle state is stamped with.
+    last_measured_ns: u64,
     last_seq: Option<u8>,
     lost: u64,
     /// The autopilot's boot clock on ours: telemetry is stamped when it was measured.
@@ -231,12 +256,19 @@ struct Telemetry {
 
 impl Telemetry {
     /// Telemetry measured at the autopilot's `time_boot_ms`, arrived at `now_ns`: the
-    /// newest measurement time, on our clock, never going back.
+    /// newest measurement time on our clock and the newest arrival, neither going back
+    /// (but for a jump of the autopilot's clock, which starts the mapping over).
     fn measured(&mut self, time_boot_ms: u32, now_ns: u64) {
+        let jumps = self.clock.jumps();
         let t = self
             .clock
             .local_time(u64::from(time_boot_ms) * 1_000_000, now_ns);
-        self.last_telemetry_ns = self.last_telemetry_ns.max(t);
+        self.last_measured_ns = if self.clock.jumps() == jumps {
+            self.last_measured_ns.max(t)
+        } else {
+            t
+        };
+        self.last_telemetry_ns = self.last_telemetry_ns.max(now_ns);
     }
 }
 
@@ -273,6 +305,9 @@ pub struct Px4Link {
     refused: u64,
     last_refusal: Option<Refusal>,
     stream_since_ns: Option<u64>,
+    /// A mode change the autopilot accepted, with when, until its heartbeat shows it
+    /// or [`MODE_CONFIRM_NS`] passes.
+    mode_accepted: Option<(Request, u64)>,
     last_setpoint_sent_ns: Option<u64>,
     last_heartbeat_sent_ns: Option<u64>,
     intervals_requested: bool,
@@ -297,6 +332,7 @@ impl Px4Link {
             refused: 0,
             last_refusal: None,
             stream_since_ns: None,
+            mode_accepted: None,
             last_setpoint_sent_ns: None,
             last_heartbeat_sent_ns: None,
             intervals_requested: false,
@@ -377,6 +413,11 @@ impl Px4Link {
         (self.refused, self.last_refusal)
     }
 
+    /// The autopilot's clock as mapped onto ours: its estimated rate and its jumps.
+    pub fn autopilot_clock(&self) -> &AutopilotClock {
+        &self.telemetry.clock
+    }
+
     /// The take-off point the geofence is centred on (ENU): where the vehicle was when
     /// it armed, else its first reported position.
     pub fn home(&self) -> Option<Vector3<f64>> {
@@ -403,6 +444,14 @@ impl Px4Link {
                     return;
                 }
                 self.telemetry.custom_mode = h.custom_mode;
+                // The accepted mode change showed: done (a later mode change away from
+                // it is then asked for afresh).
+                if self
+                    .mode_accepted
+                    .is_some_and(|(r, _)| r.mode() == Some(flight_mode(h.custom_mode)))
+                {
+                    self.mode_accepted = None;
+                }
                 let armed = h
                     .base_mode
                     .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
@@ -443,12 +492,12 @@ impl Px4Link {
             MavMessage::GLOBAL_POSITION_INT(g) => {
                 self.telemetry.global_alt_amsl = Some(f64::from(g.alt) * 1e-3);
             }
-            MavMessage::COMMAND_ACK(ack) => self.on_ack(ack.command, ack.result),
+            MavMessage::COMMAND_ACK(ack) => self.on_ack(now_ns, ack.command, ack.result),
             _ => {}
         }
     }
 
-    fn on_ack(&mut self, command: MavCmd, result: MavResult) {
+    fn on_ack(&mut self, now_ns: u64, command: MavCmd, result: MavResult) {
         let Some(p) = self.pending else { return };
         if p.command != command || result == MavResult::MAV_RESULT_IN_PROGRESS {
             return;
@@ -462,6 +511,9 @@ impl Px4Link {
             return;
         }
         let outcome = if result == MavResult::MAV_RESULT_ACCEPTED {
+            if p.request.mode().is_some() {
+                self.mode_accepted = Some((p.request, now_ns));
+            }
             Outcome::Accepted
         } else {
             Outcome::Rejected(result)
@@ -498,6 +550,16 @@ impl Px4Link {
         }
     }
 
+    /// Whether `request` was accepted and its mode is still on its way: asked again, it
+    /// is answered accepted without being sent (see [`MODE_CONFIRM_NS`]).
+    pub fn mode_under_way(&self, now_ns: u64, request: Request) -> bool {
+        self.mode_accepted.is_some_and(|(r, at)| {
+            r == request
+                && now_ns.saturating_sub(at) < MODE_CONFIRM_NS
+                && r.mode() != Some(flight_mode(self.telemetry.custom_mode))
+        })
+    }
+
     fn connected(&self, now_ns: u64) -> bool {
         self.telemetry
             .last_heartbeat_ns
@@ -512,7 +574,7 @@ impl Px4Link {
         Some(VehicleState {
             msg: Header {
                 seq: self.state_seq,
-                ..Header::captured_at(self.telemetry.last_telemetry_ns)
+                ..Header::captured_at(self.telemetry.last_measured_ns)
             },
             world_from_body: Pose {
                 translation: [pos.x, pos.y, pos.z],
@@ -694,6 +756,14 @@ impl Px4Link {
             }
         }
         self.queue.pop_front();
+        if self.mode_under_way(now_ns, next) {
+            tracing::debug!(
+                ?next,
+                "accepted a moment ago and the mode is on its way: not sent again"
+            );
+            self.outcomes.push((next, Outcome::Accepted));
+            return;
+        }
         let (command, params) = match next {
             Request::Arm => (
                 MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,

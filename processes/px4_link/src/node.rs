@@ -112,14 +112,17 @@ impl LinkNode {
         if self.ids.len() == 1 && self.ids.front() == Some(&key) {
             return;
         }
-        // Done already: the autopilot is in the mode the order wants and nothing else is
-        // asked. A watchdog repeats its order every 200 ms; each used to send LAND again
-        // and log it.
+        // Done already: the autopilot is in the mode the order wants (or accepted it a
+        // moment ago and its heartbeat has yet to show it) and nothing else is asked. A
+        // watchdog repeats its order every 200 ms; each used to send LAND again.
         let wanted = match request {
             Request::Hold => FlightMode::Hold,
             _ => FlightMode::Land,
         };
-        if self.ids.is_empty() && self.link.status(now_ns).mode == wanted {
+        if self.ids.is_empty()
+            && (self.link.status(now_ns).mode == wanted
+                || self.link.mode_under_way(now_ns, request))
+        {
             return;
         }
         tracing::warn!(
@@ -232,10 +235,12 @@ impl LinkNode {
 
     /// The vehicle state to publish now, if any: when new telemetry arrived since the
     /// last one handed out, when the link's connection changed, and every
-    /// [`STALE_STATE_PERIOD_NS`] otherwise. A state without new telemetry keeps its old
-    /// `capture_ns` (= `link.last_telemetry_ns`): consumers tell a stale state by that
-    /// stamp not advancing and by `link.connected == 0` once heartbeats stop. `None`
-    /// until position and attitude have both arrived.
+    /// [`STALE_STATE_PERIOD_NS`] otherwise. `capture_ns` is when the autopilot measured
+    /// the newest telemetry (its clock mapped onto ours), `link.last_telemetry_ns` when
+    /// that telemetry arrived (our clock): a state without new telemetry keeps both, and
+    /// consumers judge staleness by the arrival, never by the mapped time (a mapping
+    /// can be off; an arrival cannot), and by `link.connected == 0` once heartbeats
+    /// stop. `None` until position and attitude have both arrived.
     pub fn vehicle_state(&mut self, now_ns: u64) -> Option<VehicleState> {
         self.advance(now_ns);
         let mut state = self.link.vehicle_state(now_ns)?;
@@ -260,6 +265,11 @@ impl LinkNode {
     /// What the link knows of the autopilot now.
     pub fn status(&self, now_ns: u64) -> Status {
         self.link.status(now_ns)
+    }
+
+    /// The autopilot's clock as mapped onto ours.
+    pub fn autopilot_clock(&self) -> &crate::clock::AutopilotClock {
+        self.link.autopilot_clock()
     }
 }
 

@@ -197,6 +197,7 @@ impl Stage for LinkStage {
             ("bad_signature", self.guard.rejected().bad_signature),
             ("replayed", self.guard.rejected().replayed),
             ("messages_lost", self.last_link.messages_lost),
+            ("clock_jumps", self.node.autopilot_clock().jumps()),
             ("states", c.states),
             ("outcomes", c.outcomes),
             ("setpoints", c.setpoints),

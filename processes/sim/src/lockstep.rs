@@ -172,6 +172,7 @@ impl Simulator {
         let world = World::new(scenario.world_params(seed))?;
         let mut commander = Commander::new(scenario.px4.clone())?;
         commander.set_faults(scenario.scenario.faults.clone())?;
+        commander.set_clock(scenario.scenario.autopilot_clock)?;
         let calibration = CameraCalibration::load(scenario.calibration_path())?;
         let pad = PadModel::load(scenario.pad_path())?;
         let mut down = scenario.scenario.camera.sensor.clone();

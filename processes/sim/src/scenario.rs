@@ -17,8 +17,8 @@ use crate::depth::DepthCameraParams;
 use crate::estimator_noise::EstimatorNoiseParams;
 use crate::ground_vehicle::GroundVehicleParams;
 use crate::params::ParamError;
-use crate::px4::commander::Faults;
 use crate::px4::commander::Px4Params;
+use crate::px4::commander::{AutopilotClock, Faults};
 use crate::quadrotor::AirframeParams;
 use crate::rng::Pcg32;
 use crate::wind::WindParams;
@@ -151,6 +151,10 @@ pub struct Scenario {
     /// The autopilot's telemetry link: its delay, drawn per seed, and jitter.
     #[serde(default)]
     pub telemetry_link: TelemetryLink,
+    /// The autopilot's own clock: its rate against true time, its boot offset, a jump
+    /// (keeps time by default).
+    #[serde(default)]
+    pub autopilot_clock: AutopilotClock,
 }
 
 /// The companion's view of the autopilot's clock: every MAVLink message the autopilot
@@ -295,6 +299,9 @@ impl Validate for Scenario {
             .map_err(|e| from_param("estimator_noise", e))?;
         self.crash.validate().map_err(|e| from_param("crash", e))?;
         self.telemetry_link
+            .validate()
+            .map_err(|e| from_param("scenario", e))?;
+        self.autopilot_clock
             .validate()
             .map_err(|e| from_param("scenario", e))?;
         for (i, b) in self.obstacles.iter().enumerate() {

@@ -44,6 +44,11 @@ pub struct SimFlags {
     /// Stop after this many simulated seconds (default: the scenario's duration).
     #[arg(long)]
     pub duration_s: Option<f64>,
+    /// The autopilot's clock rate against true time, boot seconds per second (default:
+    /// the scenario's `[autopilot_clock] rate`, 1): 0.98 stamps telemetry as a PX4 SITL
+    /// running 2 % behind real time does.
+    #[arg(long, value_name = "RATE")]
+    pub autopilot_clock_rate: Option<f64>,
 }
 
 /// Why the flags make no simulator.
@@ -55,6 +60,9 @@ pub enum SimFlagsError {
     /// `--duration-s` out of range.
     #[error("--duration-s {0} is not allowed (allowed: above 0, at most 86400)")]
     Duration(f64),
+    /// `--autopilot-clock-rate` out of range.
+    #[error("--autopilot-clock-rate: {0}")]
+    ClockRate(crate::params::ParamError),
     /// The scenario.
     #[error(transparent)]
     Scenario(#[from] crate::scenario::ScenarioError),
@@ -70,7 +78,12 @@ impl SimFlags {
         if !(self.speed.is_finite() && self.speed > 0.0 && self.speed <= 100.0) {
             return Err(SimFlagsError::Speed(self.speed));
         }
-        let scenario = crate::scenario::load(&self.scenario, deploy)?;
+        let mut scenario = crate::scenario::load(&self.scenario, deploy)?;
+        if let Some(rate) = self.autopilot_clock_rate {
+            let clock = &mut scenario.scenario.autopilot_clock;
+            clock.rate = rate;
+            clock.validate().map_err(SimFlagsError::ClockRate)?;
+        }
         let end_s = self.duration_s.unwrap_or(scenario.scenario.duration_s);
         if !(end_s.is_finite() && end_s > 0.0 && end_s <= 86_400.0) {
             return Err(SimFlagsError::Duration(end_s));

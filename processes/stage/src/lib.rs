@@ -11,6 +11,7 @@
 
 pub mod lockstep;
 mod message;
+pub mod testing;
 
 pub use message::{Message, OwnedMessage, SliceHeader, SliceMut};
 

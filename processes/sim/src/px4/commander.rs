@@ -416,6 +416,71 @@ impl BootClock {
     }
 }
 
+/// The autopilot's own clock against true time (scenario `[autopilot_clock]`): a
+/// crystal that drifts, or a PX4 SITL whose simulator runs behind or ahead of real time
+/// (SIH's loop sleeps its interval minus its compute time and runs about 1 % slow on a
+/// loaded machine), and jumps (a reboot, a simulator reset). What the telemetry's
+/// `time_boot_ms` says; the vehicle flies in true time either way.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AutopilotClock {
+    /// Autopilot seconds per true second (1: keeps time; 0.98: 2 % slow).
+    pub rate: f64,
+    /// The autopilot's boot clock when the simulation starts, s (it booted before).
+    pub boot_offset_s: f64,
+    /// From this true time, s, the clock reads `jump_s` more (negative: back, as a
+    /// restarted autopilot's clock does).
+    pub jump_at_s: Option<f64>,
+    /// The jump, s.
+    pub jump_s: f64,
+}
+
+impl Default for AutopilotClock {
+    /// A clock that keeps time, booted with the simulation, never jumping.
+    fn default() -> Self {
+        Self {
+            rate: 1.0,
+            boot_offset_s: 0.0,
+            jump_at_s: None,
+            jump_s: 0.0,
+        }
+    }
+}
+
+impl AutopilotClock {
+    /// Checks the values, so a bad scenario fails before it flies.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        params::in_range("autopilot_clock.rate", self.rate, 0.1, 10.0)?;
+        params::in_range(
+            "autopilot_clock.boot_offset_s",
+            self.boot_offset_s,
+            0.0,
+            1e6,
+        )?;
+        if let Some(t) = self.jump_at_s {
+            params::in_range("autopilot_clock.jump_at_s", t, 0.0, 86_400.0)?;
+        }
+        params::in_range("autopilot_clock.jump_s", self.jump_s, -1e6, 1e6)?;
+        Ok(())
+    }
+
+    /// The boot clock, ns, at `true_ns` of true time (0 is the simulation's start).
+    pub fn at(&self, true_ns: u64) -> u64 {
+        // Exact for a clock that keeps time: lockstep flights stamp as they always did.
+        let scaled = if self.rate == 1.0 {
+            true_ns
+        } else {
+            (true_ns as f64 * self.rate) as u64
+        };
+        let jump = match self.jump_at_s {
+            Some(at) if true_ns as f64 >= at * 1e9 => (self.jump_s * 1e9) as i64,
+            _ => 0,
+        };
+        let offset = (self.boot_offset_s * 1e9) as i64;
+        scaled.saturating_add_signed(offset.saturating_add(jump))
+    }
+}
+
 /// The PX4-like commander (see the module docs).
 #[derive(Debug, Clone)]
 pub struct Commander {
@@ -452,6 +517,7 @@ pub struct Commander {
     arm_rejections: u32,
     silent: bool,
     boot_clock: BootClock,
+    clock: AutopilotClock,
 }
 
 /// PX4's default rates on an onboard link: HEARTBEAT 1 Hz, ATTITUDE_QUATERNION
@@ -504,12 +570,25 @@ impl Commander {
             arm_rejections: 0,
             silent: false,
             boot_clock: BootClock::default(),
+            clock: AutopilotClock::default(),
         })
     }
 
     /// How the boot clock the telemetry carries follows simulated time (see [`BootClock`]).
     pub fn set_boot_clock(&mut self, clock: BootClock) {
         self.boot_clock = clock;
+    }
+
+    /// How the autopilot's own clock runs against true time (see [`AutopilotClock`]).
+    pub fn set_clock(&mut self, clock: AutopilotClock) -> Result<(), ParamError> {
+        clock.validate()?;
+        self.clock = clock;
+        Ok(())
+    }
+
+    /// The boot clock the telemetry carries at simulated time `now_ns`, ns.
+    pub fn boot_ns(&self, now_ns: u64) -> u64 {
+        self.clock.at(self.boot_clock.at(now_ns))
     }
 
     /// The parameters in use.
@@ -1130,7 +1209,7 @@ impl Commander {
     /// Builds telemetry message `id` for now, as PX4 would report it.
     fn telemetry(&self, id: u32, now_ns: u64, vehicle: &VehicleStatus) -> Option<MavMessage> {
         let est = &vehicle.estimate;
-        let boot_ns = self.boot_clock.at(now_ns);
+        let boot_ns = self.boot_ns(now_ns);
         let time_boot_ms = (boot_ns / 1_000_000) as u32;
         let deg_e7 = |deg: f64| (deg * 1e7).round() as i32;
         let mm = |m: f64| (m * 1e3).round() as i32;

@@ -1077,3 +1077,47 @@ fn a_landed_vehicle_stays_at_idle_until_a_setpoint_asks_it_to_climb() {
     c.update(t, &g);
     assert_eq!(c.setpoint().position[2], Some(0.5), "50 cm up: take-off");
 }
+
+#[test]
+fn the_autopilot_clock_runs_at_its_rate_from_its_boot_offset_and_jumps() {
+    let mut c = new();
+    // Keeps time by default: the boot clock is simulated time, to the nanosecond.
+    assert_eq!(c.boot_ns(123_456_789), 123_456_789);
+    c.set_clock(AutopilotClock {
+        rate: 0.98,
+        boot_offset_s: 40.0,
+        jump_at_s: Some(100.0),
+        jump_s: -130.0,
+    })
+    .unwrap();
+    let s = 1_000_000_000u64;
+    assert_eq!(c.boot_ns(0), 40 * s);
+    assert_eq!(c.boot_ns(50 * s), 40 * s + 49 * s);
+    // Restarted at 100 s: its clock went back from 138 s to 8 s, and counts on.
+    assert_eq!(c.boot_ns(100 * s), 8 * s);
+    assert_eq!(c.boot_ns(200 * s), 40 * s + 196 * s - 130 * s);
+    // The telemetry carries it.
+    let v = status(1.0, false);
+    c.update(60 * s, &v);
+    let stamp = c
+        .take_outgoing()
+        .into_iter()
+        .find_map(|m| match m {
+            MavMessage::ATTITUDE_QUATERNION(a) => Some(a.time_boot_ms),
+            _ => None,
+        })
+        .unwrap();
+    assert_eq!(stamp, 40_000 + 58_800);
+}
+
+#[test]
+fn a_clock_rate_out_of_range_is_refused_naming_it() {
+    let mut c = new();
+    let e = c
+        .set_clock(AutopilotClock {
+            rate: 0.0,
+            ..AutopilotClock::default()
+        })
+        .unwrap_err();
+    assert_eq!(e.field, "autopilot_clock.rate");
+}
