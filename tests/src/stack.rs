@@ -10,8 +10,8 @@ use std::process::{Command, ExitStatus};
 use std::time::Duration;
 
 use graph::{Graph, RunValues};
-use landing::run_processes::run_values;
 use runtime::IpcPrefix;
+use stack::processes::run_values;
 
 use crate::process::Running;
 

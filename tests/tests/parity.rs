@@ -28,11 +28,11 @@ use ipc_types::msg::{
     CameraFrameHeader, DepthFrameHeader, Header, OccupancyMapHeader, PadObservation, VehicleState,
 };
 use ipc_types::{services, topics};
-use landing::config_cmd::StackConfig;
-use landing::run_lockstep::{self, Setup};
 use landing_tests::stack::{Stack, deploy_dir};
 use landing_tests::stop::{count_in, last_line_with};
 use runtime::Ipc;
+use stack::StackConfig;
+use stack::lockstep::{self as run_lockstep, Setup};
 use stage::lockstep::{Lockstep, Published};
 use stage::{Message, OwnedMessage};
 

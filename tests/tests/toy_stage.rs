@@ -13,14 +13,14 @@
 use std::path::PathBuf;
 use std::process::Command;
 
+use evaluation::{End, Referee};
 use graph::Graph;
 use ipc_types::msg::MissionState;
-use landing::config_cmd::StackConfig;
-use landing::run_eval::{End, Referee};
-use landing::run_lockstep::{self, Recording, Setup};
 use landing_tests::stack::{deploy_dir, stack_binary};
 use landing_tests::stop::{count_in, last_line_with};
 use landing_tests::toy::{AltitudeGuard, graph_node};
+use stack::StackConfig;
+use stack::lockstep::{self as run_lockstep, Recording, Setup};
 use stage::Stage;
 
 /// Below the preset height of paper-sim: crossed during take-off.

@@ -314,7 +314,7 @@ fn config_seeds(deploy: &Path) -> Vec<Vec<u8>> {
 
 fn config(_: &mut State, data: &[u8]) -> u64 {
     let Some(t) = text(data) else { return 0 };
-    match stack_config::parse::<landing::config_cmd::StackConfig>(t, Path::new("fuzz.toml")) {
+    match stack_config::parse::<stack::StackConfig>(t, Path::new("fuzz.toml")) {
         Ok(_) => 1,
         Err(e) => error_kind(&e),
     }

@@ -1,10 +1,31 @@
 //! `landing`: the one user-facing command of the landing stack.
 
-use landing::{
-    bench_aruco, bench_depth, bench_faults, bench_ipc, bench_latency, bench_perception,
-    bench_planner, bench_recorder, bench_sim, config_cmd, graph_cmd, inject_cmd, latency_cmd,
-    link_cmd, map_cmd, pad_detect, pad_print, plan_cmd, plot_cmd, replay_cmd, run_cmd, status_cmd,
+mod config_cmd;
+mod graph_cmd;
+mod inject_cmd;
+mod latency_cmd;
+mod link_cmd;
+mod pad_detect;
+mod pad_print;
+mod plan_cmd;
+mod plot_cmd;
+mod recorded_json;
+mod replay_cmd;
+mod replay_depth;
+mod replay_fsm;
+mod replay_planner;
+mod run_cmd;
+mod status_cmd;
+
+use benches::{
+    aruco as bench_aruco, depth as bench_depth, faults as bench_faults, ipc as bench_ipc,
+    latency as bench_latency, perception as bench_perception, planner as bench_planner,
+    recorder as bench_recorder, sim as bench_sim,
 };
+use stack::mapping as map_cmd;
+// The libraries' modules under the names the command modules use.
+use evaluation::{flight_log, plot, referee as run_eval};
+use stack::{inject, lockstep as run_lockstep};
 use std::path::PathBuf;
 use std::process::ExitCode;
 

@@ -113,7 +113,7 @@ fn from_truth(read: &Read, name: &str, obstacles: Vec<([f64; 3], [f64; 3])>) -> 
             Event::State(_) => {}
         }
     }
-    crate::run_cmd::flight_log(name, read.seed, &referee.eval, obstacles)
+    referee.eval.flight_log(name, read.seed, obstacles)
 }
 
 /// At most this often a sample of the estimates, s (the truth's 20 Hz).

@@ -1,33 +1,15 @@
-//! `landing run`: one whole autonomous landing mission in the simulator, with a
-//! progress line, a summary, and optionally JSON, plots and a recording.
+//! `landing run`: one whole autonomous landing mission in the simulator
+//! (`stack::mission`), with a progress line, a summary, and optionally JSON, plots and a
+//! recording.
 
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
-use ipc_types::msg::MissionState;
+use evaluation::{Outcome, plot};
+use stack::mission::{Event, Mission};
 use stack_config::deploy_dir;
-
-use crate::config_cmd::StackConfig;
-use crate::flight_log::{
-    FlightLog, FlightSample, Outcome, RunSummary, Touchdown, TouchdownContact,
-};
-use crate::plot;
-use crate::run_eval::{self, Evaluator, Referee, Rules};
-use crate::run_lockstep::{self, Recording};
-use crate::run_processes;
-use recorder::Recorder;
-
-/// Where the evaluator's ground truth of a run recorded in `pipeline` goes: `run.mcap`
-/// -> `run.truth.mcap`.
-pub fn truth_path(pipeline: &std::path::Path) -> PathBuf {
-    let stem = pipeline
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "recording".into());
-    pipeline.with_file_name(format!("{stem}.truth.mcap"))
-}
 
 /// Arguments of `landing run`.
 #[derive(Debug, Args)]
@@ -98,229 +80,73 @@ pub struct RunArgs {
     /// track, descend, land) or seconds after the start. The summary lists the faults,
     /// when the watchdog found each and what it decided (docs/faults.md).
     #[arg(long, value_name = "FAULT:PROCESS@WHEN")]
-    inject: Vec<crate::inject::Injection>,
+    inject: Vec<stack::inject::Injection>,
 }
 
-/// The evaluator's record as the flight log the summary and the plots read.
-pub(crate) fn flight_log(
-    name: &str,
-    seed: u64,
-    eval: &Evaluator,
-    obstacles: Vec<([f64; 3], [f64; 3])>,
-) -> FlightLog {
-    let samples = eval
-        .samples
-        .iter()
-        .map(|s| FlightSample {
-            t_s: s.t_s,
-            uav: s.uav,
-            ugv_pad: s.pad,
-            phase: s.phase.name().to_string(),
-            uav_velocity: s.uav_velocity,
-            ugv_velocity: s.pad_velocity,
-        })
-        .collect();
-    let touchdown = eval.final_touchdown().map(|t| {
-        let at = eval
-            .samples
-            .iter()
-            .rev()
-            .find(|s| s.t_s <= t.t_s)
-            .or(eval.samples.last());
-        Touchdown {
-            t_s: t.t_s,
-            uav: at.map_or([0.0; 3], |s| s.uav),
-            pad: at.and_then(|s| s.pad).unwrap_or([0.0; 3]),
-            error_m: t.error_m,
-            rel_speed_mps: t.rel_speed_mps,
-            on_pad: t.on_pad,
-        }
-    });
-    let contact = eval.landing_contact().map(|t| TouchdownContact {
-        vertical_speed_mps: t.vertical_mps,
-        horizontal_speed_mps: t.horizontal_mps,
-        tilt_deg: t.tilt_deg,
-    });
-    FlightLog {
-        scenario: name.to_string(),
-        seed,
-        samples,
-        obstacles,
-        touchdown,
-        contact,
-    }
-}
-
-/// Runs the mission and reports; exit code 1 when it did not land on the pad.
+/// Runs the mission and reports; `Ok(false)` (exit code 1) when it did not land on the pad.
 pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
-    let deploy = args.deploy_dir.clone().unwrap_or_else(deploy_dir);
-    let cfg_path = args
-        .config
-        .clone()
-        .unwrap_or_else(|| deploy.join("config").join("landing.toml"));
-    let cfg = StackConfig::load(&cfg_path)?;
-    let scn = sim::scenario::load(&args.scenario, &deploy)?;
-    // Both modes run what the graph declares; checked before anything starts.
-    let graph_path = args
-        .graph
-        .clone()
-        .unwrap_or_else(|| graph::default_path(&deploy));
-    let graph = graph::Graph::load(&graph_path)?;
-    // Faults go to processes of this graph, in the processes mode only.
-    if !args.inject.is_empty() && !args.processes {
-        anyhow::bail!("--inject needs --processes (faults are done to the stage processes)");
-    }
-    let mut injections = args.inject.clone();
-    for i in &mut injections {
-        i.resolve(&graph).map_err(anyhow::Error::msg)?;
-    }
-    let seed = args.seed.unwrap_or(scn.scenario.seed);
-    let fsm_cfg = run_lockstep::mission(&cfg, &scn)?;
-    let rules = Rules::of(&scn)?;
-    let mut rec = Recording {
-        skip: cfg.recorder.skip.clone(),
-        ..Recording::default()
+    let mission = Mission {
+        scenario: args.scenario.clone(),
+        seed: args.seed,
+        deploy: args.deploy_dir.clone().unwrap_or_else(deploy_dir),
+        config: args.config.clone(),
+        graph: args.graph.clone(),
+        processes: args.processes,
+        record: args.record.clone(),
+        raw_images: args.raw_images,
+        live: args.live,
+        realtime: args.realtime,
+        log_dir: args.log_dir.clone(),
+        inject: args.inject.clone(),
+        ipc_prefix: ipc_prefix.map(str::to_string),
     };
-    let mut meta = recorder::metadata::stack(Some(&cfg_path), &graph_path)?;
-    meta.insert("scenario".into(), scn.scenario.name.clone());
-    meta.insert("seed".into(), seed.to_string());
-    meta.insert(
-        "mode".into(),
-        if args.processes {
-            "processes"
-        } else {
-            "lockstep"
-        }
-        .into(),
-    );
-    if let Some(p) = &args.record {
-        // As --plot does: a new directory for the outputs is made, not refused.
-        if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir)
-                .with_context(|| format!("--record: cannot create {}", dir.display()))?;
-        }
-        let mut truth = Recorder::create(&truth_path(p))?;
-        truth.write_metadata("landing", meta.clone())?;
-        rec.truth = Some(truth);
-    }
-    let config_error =
-        |e: stack_config::Invalid| anyhow::anyhow!("[recorder] {}: {}", e.key, e.message);
-    // In lockstep this process records the pipeline and serves the live view, with the
-    // recorder process's code; --processes starts that process for them.
-    if !args.processes && (args.record.is_some() || args.live) {
-        let mut options = cfg.recorder.options().map_err(config_error)?;
-        if args.raw_images {
-            options.images = recorder::ImageFormat::Raw;
-        }
-        // The mounts as the recorder process reads them.
-        let text = std::fs::read_to_string(&cfg_path)
-            .with_context(|| format!("reading {}", cfg_path.display()))?;
-        (options.body_from_camera, options.body_from_depth) = recorder::config::mounts(&text)?;
-        let mut pipeline = match &args.record {
-            Some(p) => {
-                let mut r = Recorder::with_options(p, options)?;
-                r.write_metadata("landing", meta)?;
-                r
-            }
-            None => Recorder::without_file(options),
-        };
-        if args.live {
-            let at = pipeline.serve_live(cfg.recorder.live_socket().map_err(config_error)?)?;
-            eprintln!("  live view: ws://{at} (Foxglove: Open connection)");
-        }
-        rec.pipeline = Some(pipeline);
-    }
-    if args.processes && args.live {
-        let at = cfg.recorder.live_socket().map_err(config_error)?;
-        eprintln!(
-            "  live view: ws://{at} (Foxglove: Open connection; the recorder process serves it)"
-        );
-    }
+    let mode = if args.processes {
+        "processes"
+    } else {
+        "lockstep"
+    };
     let tty = std::io::stderr().is_terminal();
-    eprintln!(
-        "run: {} (seed {seed}, {}): {}",
-        scn.scenario.name,
-        if args.processes {
-            "processes"
-        } else {
-            "lockstep"
-        },
-        scn.scenario.description
-    );
-    let progress = |t: f64, state: MissionState, d: Option<f64>| {
-        let d = d.map_or("-".to_string(), |d| format!("{d:.2} m"));
-        let line = format!("[{t:6.1} s] {:<13} to pad {d}", state.name());
-        if tty {
-            eprint!("\r{line}   ");
-            let _ = std::io::stderr().flush();
-        } else if (t as u64).is_multiple_of(10) {
-            eprintln!("{line}");
-        }
-    };
     // Ctrl-C and SIGTERM end the run as `interrupted`, with its summary, in both modes.
     runtime::shutdown::install();
-    let mut died = None;
-    let mut faults = Vec::new();
-    let (end, referee) = if args.processes {
-        let log_dir = args.log_dir.clone().unwrap_or_else(|| {
-            std::env::temp_dir().join(format!("landing-run-{}", std::process::id()))
-        });
-        let launch = run_processes::Launch {
-            scenario: &scn,
+    let flown = mission.fly(&mut |e| match e {
+        Event::Start {
+            scenario,
             seed,
-            config: &cfg_path,
-            deploy: &deploy,
-            log_dir: &log_dir,
-            ipc_prefix,
-            graph: &graph,
-            graph_path: &graph_path,
-            injections: &injections,
-            recorder: run_processes::RecorderLaunch {
-                out: args.record.as_deref(),
-                raw_images: args.raw_images,
-                live: args.live,
-            },
-            signing_key: &cfg.px4_link.signing_key,
-            realtime: args.realtime,
-        };
-        let r = run_processes::run(&launch, &mut rec.truth, progress)?;
-        if tty {
-            eprintln!();
+            description,
+        } => eprintln!("run: {scenario} (seed {seed}, {mode}): {description}"),
+        Event::Live {
+            address,
+            by_recorder_process,
+        } => {
+            let by = if by_recorder_process {
+                "; the recorder process serves it"
+            } else {
+                ""
+            };
+            eprintln!("  live view: ws://{address} (Foxglove: Open connection{by})");
         }
-        eprintln!("  process logs: {}", log_dir.display());
-        died = r.died;
-        faults = r.faults;
-        (r.end, r.referee)
-    } else {
-        let setup = run_lockstep::Setup {
-            scenario: &scn,
-            seed,
-            config: &cfg,
-            fsm: fsm_cfg,
-        };
-        let mut driver = run_lockstep::driver(&graph, &setup, |_| None)?;
-        let mut referee = Referee::new(0);
-        let end = run_lockstep::run(
-            &mut driver,
-            scn.scenario.duration_s,
-            &mut referee,
-            &mut rec,
-            args.live,
-            progress,
-        )?;
-        if tty {
-            eprintln!();
+        Event::Progress {
+            t_s,
+            state,
+            to_pad_m,
+        } => {
+            let d = to_pad_m.map_or("-".to_string(), |d| format!("{d:.2} m"));
+            let line = format!("[{t_s:6.1} s] {:<13} to pad {d}", state.name());
+            if tty {
+                eprint!("\r{line}   ");
+                let _ = std::io::stderr().flush();
+            } else if (t_s as u64).is_multiple_of(10) {
+                eprintln!("{line}");
+            }
         }
-        (end, referee)
-    };
-    let last_state = referee.last_state().copied();
-    let Referee {
-        eval,
-        stats,
-        transitions,
-        ..
-    } = referee;
-    for t in &transitions {
+    })?;
+    if tty {
+        eprintln!();
+    }
+    if let Some(dir) = &flown.log_dir {
+        eprintln!("  process logs: {}", dir.display());
+    }
+    for t in &flown.transitions {
         eprintln!(
             "  {:7.2} s  {:>13} -> {:<13} {}",
             t.at_ns as f64 * 1e-9,
@@ -329,7 +155,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             t.reason
         );
     }
-    for t in &eval.touchdowns {
+    for t in &flown.eval.touchdowns {
         eprintln!(
             "  {:7.2} s  touchdown on the {} {:.3} m from the pad centre at {:.2} m/s down, {:.2} m/s sideways, tilt {:.1} deg ({})",
             t.t_s,
@@ -341,65 +167,35 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
             t.phase.name()
         );
     }
-    for c in &eval.crashes {
+    for c in &flown.eval.crashes {
         eprintln!("  crash: {c}");
     }
-    let obstacles = scn
-        .scenario
-        .obstacles
-        .iter()
-        .map(|b| (b.min_m, b.max_m))
-        .collect();
-    let log = flight_log(&scn.scenario.name, seed, &eval, obstacles);
-    let (outcome, why) = run_eval::verdict(end, &eval, last_state.as_ref(), &rules);
-    let why = died.unwrap_or(why);
-    eprintln!("  referee: {outcome}: {why}");
-    let replans = u32::try_from(stats.plans.saturating_sub(1)).unwrap_or(u32::MAX);
-    let mut summary = RunSummary::from_log(
-        &log,
-        outcome,
-        &stats.planning_ms,
-        replans,
-        Some(eval.collisions),
-    );
-    summary.referee = why;
-    for f in &mut faults {
-        f.outcome = outcome.name().to_string();
+    let summary = &flown.summary;
+    eprintln!("  referee: {}: {}", flown.outcome, summary.referee);
+    for f in &summary.faults {
         eprintln!("  fault: {} {} at {:.2} s", f.fault, f.process, f.at_s);
     }
-    summary.faults = faults;
     if let Some(dir) = &args.plot {
-        let mut written = plot::write_plots(dir, &log)?;
-        if !stats.planning_ms.is_empty() {
+        let mut written = plot::write_plots(dir, &flown.log)?;
+        if !flown.planning_ms.is_empty() {
             let p = dir.join("planning_ms.png");
-            plot::write_histogram(&p, "planning time per call (ms)", &stats.planning_ms)?;
+            plot::write_histogram(&p, "planning time per call (ms)", &flown.planning_ms)?;
             written.push(p);
         }
         for p in written {
             eprintln!("  plot: {}", p.display());
         }
     }
-    for r in [rec.pipeline.take(), rec.truth.take()]
-        .into_iter()
-        .flatten()
-    {
-        let path = r.path().to_path_buf();
-        let file = r.has_file();
-        let n = r.finish()?;
-        if !file {
-            continue;
+    for (path, n) in &flown.recordings {
+        match n {
+            Some(n) => eprintln!("  recording: {} ({n} messages)", path.display()),
+            None => eprintln!("  recording: {} (the recorder process)", path.display()),
         }
-        eprintln!("  recording: {} ({n} messages)", path.display());
-    }
-    if args.processes
-        && let Some(p) = &args.record
-    {
-        eprintln!("  recording: {} (the recorder process)", p.display());
     }
     if args.json {
-        println!("{}", serde_json::to_string(&summary)?);
+        println!("{}", serde_json::to_string(summary)?);
     } else {
         println!("{summary}");
     }
-    Ok(outcome == Outcome::Landed)
+    Ok(flown.outcome == Outcome::Landed)
 }

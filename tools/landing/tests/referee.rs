@@ -6,9 +6,9 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a panic is a failed test
 
+use evaluation::flight_log::Outcome;
+use evaluation::referee::{Referee, Rules, TouchdownLimits, verdict};
 use ipc_types::msg::{FsmStatus, MissionState, Text};
-use landing::flight_log::Outcome;
-use landing::run_eval::{Referee, Rules, TouchdownLimits, verdict};
 use nalgebra::{UnitQuaternion, Vector3};
 use optics::Board;
 use sim::autopilot::Setpoint;

@@ -12,7 +12,6 @@ use std::str::FromStr;
 
 use ipc_types::msg::{MissionState, PortFault};
 use ipc_types::topics::{self, Payload};
-use serde::Serialize;
 use thiserror::Error;
 
 /// What is done to the process.
@@ -273,32 +272,7 @@ impl Injection {
     }
 }
 
-/// One fault in the run summary (`--json` `faults`).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct FaultRecord {
-    /// `kill`, `stop`, or `exited` (a process that ended on its own).
-    pub fault: String,
-    /// The process.
-    pub process: String,
-    /// Simulated time of the fault, s.
-    pub at_s: f64,
-    /// How long until the watchdog found the process hung or dead, ms (its view's
-    /// `fault_ns` against the monotonic time the signal was sent); `null`: it did not.
-    pub detected_after_ms: Option<f64>,
-    /// What the watchdog decided about it (its decision line: "fsm died: critical,
-    /// land"); `null` when it decided nothing (on the ground, or not found).
-    pub action: Option<String>,
-    /// How long until the watchdog's safe-land (or hold) order went out, ms; `null` when
-    /// none followed this fault.
-    pub ordered_after_ms: Option<f64>,
-    /// Datagrams sent at px4-link's port (`garbage`, `flood`), else `null`.
-    pub datagrams_sent: Option<u64>,
-    /// Monotonic time of the fault, ns (not in the summary).
-    #[serde(skip)]
-    pub at_ns: u64,
-    /// The run's outcome.
-    pub outcome: String,
-}
+pub use evaluation::flight_log::FaultRecord;
 
 #[cfg(test)]
 #[path = "inject_test.rs"]

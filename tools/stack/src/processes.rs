@@ -23,7 +23,8 @@ use sim::scenario::LoadedScenario;
 
 use crate::inject::{Fault, FaultRecord, Injection};
 use crate::procs::{Children, binary, free_udp_port};
-use crate::run_eval::{End, Referee, stage_ms};
+use evaluation::referee::stage_ms;
+use evaluation::{End, Referee};
 use recorder::Recorder;
 use stage::Message;
 
@@ -133,7 +134,7 @@ pub fn command(
 /// it then stops as systemd would stop it, releasing its shared memory, instead of
 /// flying on as an orphan. Must be spawned from the thread that lives as long as the
 /// child should (Linux ties the signal to the spawning thread): the main thread here.
-pub(crate) fn stop_with_parent(cmd: &mut Command) {
+pub fn stop_with_parent(cmd: &mut Command) {
     use std::os::unix::process::CommandExt;
     // SAFETY: getpid and getppid are async-signal-safe.
     let parent = unsafe { libc::getpid() };

@@ -20,7 +20,7 @@ use runtime::ipc::Svc;
 use runtime::{Ipc, IpcPrefix, PeriodicWait, Wake, monotonic_ns, run_wait_loop};
 use serde_json::json;
 
-use crate::stats::percentile;
+use evaluation::stats::percentile;
 
 /// Frames skipped at the start of each case (page faults, connection set-up).
 const WARMUP: usize = 20;

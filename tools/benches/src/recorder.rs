@@ -24,7 +24,7 @@ use optics::PadModel;
 use runtime::{Ipc, IpcPrefix, monotonic_ns};
 use serde::Serialize;
 
-use crate::procs::binary;
+use stack::procs::binary;
 
 /// Arguments of `landing bench recorder`.
 #[derive(Debug, Args)]
@@ -272,7 +272,7 @@ fn run_case(
     let mut cmd = Command::new(binary("recorder")?);
     // It stops with this process, however this one ends (a recorder left behind had
     // outlived a bench that failed).
-    crate::run_processes::stop_with_parent(&mut cmd);
+    stack::processes::stop_with_parent(&mut cmd);
     let mut child = cmd
         .args(["--ipc-prefix", prefix.as_str(), "--deploy-dir"])
         .arg(&deploy)
@@ -333,7 +333,7 @@ pub fn run(args: &RecorderArgs) -> Result<()> {
     let deploy = stack_config::deploy_dir();
     let pad = PadModel::load(deploy.join("config").join("pad.toml"))?;
     eprintln!("bench recorder: rendering 30 frames at {W}x{H}...");
-    let seq = crate::bench_aruco::render("camera_down_1280x720.yaml", 30, &deploy, &pad)?;
+    let seq = crate::aruco::render("camera_down_1280x720.yaml", 30, &deploy, &pad)?;
     let frames: Vec<Vec<u8>> = seq.frames.into_iter().map(|f| f.0).collect();
     if frames.iter().any(|f| f.len() != (W * H) as usize) {
         bail!("the simulator's camera no longer renders {W}x{H} mono8: update this bench");

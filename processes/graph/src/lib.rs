@@ -25,7 +25,7 @@ pub const FILE_NAME: &str = "graph.toml";
 
 /// The stack's own process binaries. A node may also run a binary of its own (a stage
 /// added through the graph and the stage interface); the shipped graph uses only these
-/// (tools/graph/tests/deploy.rs).
+/// (processes/graph/tests/deploy.rs).
 pub const STACK_BINARIES: &[&str] = &[
     "sim",
     "camera-ingest",

@@ -14,7 +14,7 @@ use serde_json::Value;
 use stage::lockstep::{InputSpec, NodeSpec};
 use stage::{Counter, Input, Message, Outbox, Stage, StageError};
 
-use crate::latency_cmd::{Analysis, LatencyReport};
+use crate::latency::{Analysis, LatencyReport};
 
 /// The node name this process takes on the bus.
 const NODE: &str = "latency-live";

@@ -22,9 +22,9 @@ use serde_json::json;
 
 use stack_config::deploy_dir;
 
-use crate::procs::{Children, free_udp_port};
-use crate::run_processes::{command, run_values};
-use crate::stats::percentile;
+use evaluation::stats::percentile;
+use stack::processes::{command, run_values};
+use stack::procs::{Children, free_udp_port};
 
 /// The graph's nodes this benchmark starts.
 const NODES: [&str; 4] = ["sim", "px4-link", "camera-ingest", "aruco-pnp"];

@@ -16,7 +16,7 @@ use planner::{
 };
 use serde_json::json;
 
-use crate::stats::percentile;
+use evaluation::stats::percentile;
 
 /// Arguments of `landing bench planner`.
 #[derive(Debug, Args)]

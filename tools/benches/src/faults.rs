@@ -18,7 +18,7 @@ use clap::Args;
 use serde::Serialize;
 use serde_json::Value;
 
-use crate::stats::percentile;
+use evaluation::stats::percentile;
 
 /// Arguments of `landing bench faults`.
 #[derive(Debug, Args)]

@@ -172,7 +172,7 @@ pub struct RunSummary {
     pub collisions: Option<u32>,
     /// Faults done to the stack's processes (`--inject`) or processes that exited on
     /// their own during the run (`--processes`).
-    pub faults: Vec<crate::inject::FaultRecord>,
+    pub faults: Vec<FaultRecord>,
 }
 
 fn norm(v: [f64; 3]) -> f64 {
@@ -365,6 +365,33 @@ impl fmt::Display for RunSummary {
             None => write!(f, "collisions  n/a (no obstacles)"),
         }
     }
+}
+
+/// One fault in the run summary (`--json` `faults`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FaultRecord {
+    /// `kill`, `stop`, or `exited` (a process that ended on its own).
+    pub fault: String,
+    /// The process.
+    pub process: String,
+    /// Simulated time of the fault, s.
+    pub at_s: f64,
+    /// How long until the watchdog found the process hung or dead, ms (its view's
+    /// `fault_ns` against the monotonic time the signal was sent); `null`: it did not.
+    pub detected_after_ms: Option<f64>,
+    /// What the watchdog decided about it (its decision line: "fsm died: critical,
+    /// land"); `null` when it decided nothing (on the ground, or not found).
+    pub action: Option<String>,
+    /// How long until the watchdog's safe-land (or hold) order went out, ms; `null` when
+    /// none followed this fault.
+    pub ordered_after_ms: Option<f64>,
+    /// Datagrams sent at px4-link's port (`garbage`, `flood`), else `null`.
+    pub datagrams_sent: Option<u64>,
+    /// Monotonic time of the fault, ns (not in the summary).
+    #[serde(skip)]
+    pub at_ns: u64,
+    /// The run's outcome.
+    pub outcome: String,
 }
 
 #[cfg(test)]

@@ -21,9 +21,9 @@ use stack_config::deploy_dir;
 use stage::lockstep::Lockstep;
 use stage::{Counter, Input, Outbox, Stage, StageError};
 
-use crate::config_cmd::StackConfig;
-use crate::run_lockstep::{self, Setup};
-use crate::stats::percentile;
+use evaluation::stats::percentile;
+use stack::StackConfig;
+use stack::lockstep::{self as run_lockstep, Setup};
 
 /// Arguments of `landing bench sim`.
 #[derive(Debug, Args)]

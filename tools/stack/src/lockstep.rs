@@ -25,8 +25,8 @@ use sim::stage::SimStage;
 use stage::lockstep::{Lockstep, Published};
 use stage::{Message, Stage};
 
-use crate::config_cmd::StackConfig;
-use crate::run_eval::{End, Referee};
+use crate::config::StackConfig;
+use evaluation::{End, Referee};
 use recorder::Recorder;
 
 /// The Unix time at a lockstep run's time 0 (2026-09-15T00:00:00Z): signing timestamps

@@ -12,7 +12,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use serde::Serialize;
 
-use crate::latency_cmd::{Percentiles, analyse};
+use evaluation::latency::{Percentiles, analyse};
 
 /// Arguments of `landing bench latency`.
 #[derive(Debug, Args)]

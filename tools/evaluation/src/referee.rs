@@ -6,7 +6,7 @@ use ipc_types::msg::{
 };
 pub use sim::scenario::TouchdownLimits;
 
-use crate::flight_log::Outcome;
+use crate::flight_log::{self, FlightLog, FlightSample, Outcome, TouchdownContact};
 
 /// The world at one instant, for the flight log and the plots.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -475,4 +475,57 @@ pub fn stage_ms(h: &ipc_types::msg::Header, stage: ipc_types::msg::Stage) -> Opt
         .rev()
         .find(|s| s.stage == stage as u32)
         .map(|s| s.exit_ns.saturating_sub(s.enter_ns) as f64 * 1e-6)
+}
+
+impl Evaluator {
+    /// The evaluator's record as the flight log the summary and the plots read.
+    pub fn flight_log(
+        &self,
+        name: &str,
+        seed: u64,
+        obstacles: Vec<([f64; 3], [f64; 3])>,
+    ) -> FlightLog {
+        let eval = self;
+        let samples = eval
+            .samples
+            .iter()
+            .map(|s| FlightSample {
+                t_s: s.t_s,
+                uav: s.uav,
+                ugv_pad: s.pad,
+                phase: s.phase.name().to_string(),
+                uav_velocity: s.uav_velocity,
+                ugv_velocity: s.pad_velocity,
+            })
+            .collect();
+        let touchdown = eval.final_touchdown().map(|t| {
+            let at = eval
+                .samples
+                .iter()
+                .rev()
+                .find(|s| s.t_s <= t.t_s)
+                .or(eval.samples.last());
+            flight_log::Touchdown {
+                t_s: t.t_s,
+                uav: at.map_or([0.0; 3], |s| s.uav),
+                pad: at.and_then(|s| s.pad).unwrap_or([0.0; 3]),
+                error_m: t.error_m,
+                rel_speed_mps: t.rel_speed_mps,
+                on_pad: t.on_pad,
+            }
+        });
+        let contact = eval.landing_contact().map(|t| TouchdownContact {
+            vertical_speed_mps: t.vertical_mps,
+            horizontal_speed_mps: t.horizontal_mps,
+            tilt_deg: t.tilt_deg,
+        });
+        FlightLog {
+            scenario: name.to_string(),
+            seed,
+            samples,
+            obstacles,
+            touchdown,
+            contact,
+        }
+    }
 }

@@ -28,7 +28,7 @@ use sim::camera::{BodyMotion, DownCamera, DownCameraParams};
 use sim::ground_vehicle::PadState;
 use stack_config::deploy_dir;
 
-use crate::stats::percentile;
+use evaluation::stats::percentile;
 
 /// Arguments of `landing bench aruco`.
 #[derive(Debug, Args)]

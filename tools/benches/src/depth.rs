@@ -19,7 +19,7 @@ use serde_json::json;
 use sim::depth::{DepthCamera, DepthCameraParams};
 use sim::world::{Aabb, Obb};
 
-use crate::stats::percentile;
+use evaluation::stats::percentile;
 
 /// Arguments of `landing bench depth`.
 #[derive(Debug, Args)]

@@ -1,4 +1,4 @@
-//! `landing map`: flies a short scripted path in the lockstep simulator, maps every depth
+//! The mapping demo (`landing map`): flies a short scripted path in the lockstep simulator, maps every depth
 //! frame with the pose the autopilot *reports*, and draws the map (top and side views)
 //! into a PNG.
 //!
@@ -26,9 +26,9 @@ use stack_config::{self as cfgload, deploy_dir};
 use stage::lockstep::{Lockstep, Published};
 use stage::{Message, Stage};
 
-use crate::config_cmd::StackConfig;
+use crate::config::StackConfig;
+use crate::lockstep::{self as run_lockstep, Setup};
 use crate::map_pilot::{self, MapPilot};
-use crate::run_lockstep::{self, Setup};
 
 /// Arguments of `landing map`.
 #[derive(Debug, Args)]
