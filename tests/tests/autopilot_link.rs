@@ -231,7 +231,7 @@ fn fly(
     path: impl Fn(f64) -> ([f64; 3], [f64; 3]),
 ) -> Report {
     let mut f = Flight::new(clock);
-    let mut judge = FsmStage::new(FsmConfig {
+    let mut judge = FsmStage::from_config(&FsmConfig {
         autostart: false,
         ..FsmConfig::default()
     });
@@ -421,7 +421,7 @@ fn safe_land(lose_heartbeat: Box<dyn FnMut(u64, Option<u64>) -> bool>) -> Flight
         goto_timeout_s: 2.0,
         ..FsmConfig::default()
     };
-    let mut fsm = FsmStage::new(cfg);
+    let mut fsm = FsmStage::from_config(&cfg);
     let mut out = Collector::new();
     let mut land_shown = false;
     while f.now() < 30 * S {

@@ -237,3 +237,155 @@ fn the_checks_see_a_use_and_ignore_a_comment() {
     assert_eq!(uses_of(&stripped, "iceoryx2").len(), 1);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Every dependency name of a manifest: normal, dev and build.
+fn all_dependencies(manifest: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(manifest).expect("read Cargo.toml");
+    let doc: toml::Table = toml::from_str(&text).expect("parse Cargo.toml");
+    ["dependencies", "dev-dependencies", "build-dependencies"]
+        .iter()
+        .filter_map(|k| doc.get(*k).and_then(|d| d.as_table()))
+        .flat_map(|t| t.keys().cloned())
+        .collect()
+}
+
+/// The crates in a top-level folder (`tools`, `processes`).
+fn crates_in(folder: &str) -> Vec<PathBuf> {
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(root().join(folder))
+        .expect("folder")
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.join("Cargo.toml").is_file())
+        .collect();
+    dirs.sort();
+    dirs
+}
+
+#[test]
+fn nothing_under_processes_or_ipc_types_depends_on_a_tool() {
+    let tools: Vec<String> = crates_in("tools").iter().map(|d| package_name(d)).collect();
+    assert!(
+        tools.iter().any(|t| t == "stack") && tools.iter().any(|t| t == "landing"),
+        "{tools:?}"
+    );
+    let mut offenders = Vec::new();
+    for dir in crates_in("processes")
+        .into_iter()
+        .chain([root().join("ipc_types")])
+    {
+        for dep in all_dependencies(&dir.join("Cargo.toml")) {
+            if tools.contains(&dep) {
+                offenders.push(format!(
+                    "{} depends on the tool crate {dep}",
+                    package_name(&dir)
+                ));
+            }
+        }
+    }
+    assert!(
+        offenders.is_empty(),
+        "every crate under processes/ stands below everything under tools/:\n{}",
+        offenders.join("\n")
+    );
+}
+
+/// The longest a process's `main.rs` may be: it parses its arguments, builds its stage
+/// through the stage's one constructor and hands it to the driver (issue 15's rule).
+const MAIN_LINES: usize = 60;
+
+#[test]
+fn every_process_main_is_at_most_60_lines() {
+    let mut offenders = Vec::new();
+    for dir in process_crates() {
+        let main = dir.join("src").join("main.rs");
+        let Ok(text) = std::fs::read_to_string(&main) else {
+            continue;
+        };
+        let lines = text.lines().count();
+        if lines > MAIN_LINES {
+            offenders.push(format!("{}: {lines} lines", main.display()));
+        }
+    }
+    assert!(
+        offenders.is_empty(),
+        "a process main.rs holds at most {MAIN_LINES} lines; move the rest into its library:\n{}",
+        offenders.join("\n")
+    );
+}
+
+/// The raw constructors of each stage's library, and the one file that may call them:
+/// the file of the stage's `from_config`, its one constructor, which its binary, the
+/// lockstep registry, the benchmarks, `landing pad detect` and the fuzz targets all call.
+const ONE_CONSTRUCTOR: &[(&str, &str)] = &[
+    ("PadEstimator::new(", "processes/aruco_pnp/src/stage.rs"),
+    ("ArucoStage::new(", "processes/aruco_pnp/src/stage.rs"),
+    ("Ingest::new(", "processes/camera_ingest/src/stage.rs"),
+    ("IngestStage::new(", "processes/camera_ingest/src/stage.rs"),
+    (
+        "DepthMapper::from_config(",
+        "processes/depth_map/src/stage.rs",
+    ),
+    ("DepthStage::new(", "processes/depth_map/src/stage.rs"),
+    ("PlannerNode::new(", "processes/planner/src/stage.rs"),
+    ("Fsm::new(", "processes/fsm/src/stage.rs"),
+    ("LinkNode::new(", "processes/px4_link/src/stage.rs"),
+    ("LinkStage::new(", "processes/px4_link/src/stage.rs"),
+    ("Watchdog::new(", "processes/watchdog/src/stage.rs"),
+    ("SimStage::new(", "processes/sim/src/stage.rs"),
+    ("SimStage::paced(", "processes/sim/src/stage.rs"),
+    ("RecorderStage::new(", "processes/recorder/src/stage.rs"),
+];
+
+/// Every Rust file of the workspace that is not test code: under `ipc_types/`,
+/// `processes/` and `tools/`, outside `tests/` folders and `*_test.rs` files.
+fn non_test_sources() -> Vec<PathBuf> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            return;
+        };
+        for e in entries.flatten() {
+            let p = e.path();
+            let name = p.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+            if p.is_dir() {
+                if !matches!(name, "tests" | "target" | "fuzz_corpus") {
+                    walk(&p, out);
+                }
+            } else if name.ends_with(".rs") && !name.ends_with("_test.rs") {
+                out.push(p);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for folder in ["ipc_types", "processes", "tools"] {
+        walk(&root().join(folder), &mut out);
+    }
+    out
+}
+
+#[test]
+fn every_stage_is_built_through_its_one_constructor() {
+    let root = root().canonicalize().unwrap();
+    let mut offenders = Vec::new();
+    for (_, allowed) in ONE_CONSTRUCTOR {
+        let home = root.join(allowed);
+        let text = std::fs::read_to_string(&home).unwrap_or_default();
+        assert!(
+            text.contains("pub fn from_config("),
+            "{allowed} has no `from_config`, the stage's one constructor"
+        );
+    }
+    for file in non_test_sources() {
+        let file = file.canonicalize().unwrap();
+        let code = code_of(&file);
+        for (call, allowed) in ONE_CONSTRUCTOR {
+            if uses_of(&code, call).is_empty() || file == root.join(allowed) {
+                continue;
+            }
+            offenders.push(format!(
+                "{} calls {call}..): build the stage with its from_config ({allowed})",
+                file.strip_prefix(&root).unwrap_or(&file).display()
+            ));
+        }
+    }
+    assert!(offenders.is_empty(), "{}", offenders.join("\n"));
+}

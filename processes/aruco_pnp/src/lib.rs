@@ -263,6 +263,11 @@ impl PadEstimator {
         })
     }
 
+    /// The camera mount: maps body-frame points into the optical frame.
+    pub fn camera_from_body(&self) -> Isometry3<f64> {
+        self.camera_from_body
+    }
+
     /// The calibration frames must match.
     pub fn calibration(&self) -> &CameraCalibration {
         &self.calibration

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Result;
-use aruco_pnp::{ArucoConfig, ArucoStage, PadEstimator, down_camera_from_body};
+use aruco_pnp::{ArucoConfig, ArucoStage};
 use clap::Parser;
 use optics::{CameraCalibration, PadModel};
 use runtime::StageArgs;
@@ -41,14 +41,12 @@ fn run(args: &Args) -> Result<()> {
         .clone()
         .unwrap_or_else(|| in_config(&cfg.camera));
     let pad = args.pad.clone().unwrap_or_else(|| in_config(&cfg.pad));
-    let estimator = PadEstimator::new(
+    let mut stage = ArucoStage::from_config(
+        &cfg,
         CameraCalibration::load(&camera)?,
         PadModel::load(&pad)?,
-        down_camera_from_body(cfg.camera_position_in_body_m),
-        cfg.settings(),
     )?;
     tracing::info!(camera = %camera.display(), "aruco-pnp");
-    let mut stage = ArucoStage::new(estimator, cfg.max_state_age_ms * 1_000_000);
     runtime::serve(&args.stage, &ipc, &mut stage, None, None)?;
     Ok(())
 }

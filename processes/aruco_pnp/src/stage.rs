@@ -6,7 +6,9 @@ use ipc_types::topics;
 use stage::{Counter, Input, Message, Outbox, Stage, StageError};
 use state_history::{HistoryError, StateHistory, timed_pose_of};
 
-use crate::{Frame, PadEstimator};
+use optics::{CameraCalibration, PadModel};
+
+use crate::{ArucoConfig, EstimateError, Frame, PadEstimator, down_camera_from_body};
 
 /// How many vehicle states are kept (2 s at 50 Hz).
 const STATE_HISTORY: usize = 100;
@@ -35,8 +37,33 @@ struct Counts {
 }
 
 impl ArucoStage {
+    /// The one way the stage is built, wherever it runs (its process, the lockstep
+    /// registry, a benchmark, `landing pad detect`, a fuzz target): from its
+    /// `[aruco_pnp]` section and the camera and pad it works with (on a vehicle the files
+    /// the section names; in simulation the scenario's). Two places building it with
+    /// their own arguments is how lockstep and the deployment drift apart.
+    pub fn from_config(
+        cfg: &ArucoConfig,
+        camera: CameraCalibration,
+        pad: PadModel,
+    ) -> Result<Self, EstimateError> {
+        let estimator = PadEstimator::new(
+            camera,
+            pad,
+            down_camera_from_body(cfg.camera_position_in_body_m),
+            cfg.settings(),
+        )?;
+        Ok(Self::new(estimator, cfg.max_state_age_ms * 1_000_000))
+    }
+
+    /// The estimator, for tools that hand it frames themselves (a benchmark, one image).
+    pub fn estimator_mut(&mut self) -> &mut PadEstimator {
+        &mut self.estimator
+    }
+
     /// The stage of `estimator`; a frame whose capture time is more than
-    /// `max_state_age_ns` past the newest vehicle state gets no pose prior.
+    /// `max_state_age_ns` past the newest vehicle state gets no pose prior. Built by
+    /// [`Self::from_config`] (tests build it here with estimators of their own).
     pub fn new(estimator: PadEstimator, max_state_age_ns: u64) -> Self {
         Self {
             estimator,

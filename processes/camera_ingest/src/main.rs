@@ -5,12 +5,11 @@
 
 mod capture;
 
-use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, anyhow};
 use camera_ingest::config::{CameraIngestConfig, SourceFlags};
-use camera_ingest::{Ingest, IngestStage, SourceSpec};
+use camera_ingest::{IngestStage, SourceSpec};
 use clap::Parser;
 use ipc_types::topics;
 use optics::CameraCalibration;
@@ -34,18 +33,17 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<()> {
     let (ipc, cfg): (_, CameraIngestConfig) = args.stage.load("camera_ingest")?;
-    let config_dir = match &args.stage.config {
-        Some(file) => file.parent().map(PathBuf::from).unwrap_or_default(),
-        None => args.stage.deploy().join("config"),
-    };
     let s = args
         .source
-        .resolve(&cfg, &config_dir)
+        .resolve(&cfg, &args.stage.config_dir())
         .map_err(|e| anyhow!(e))?;
     let calibration = CameraCalibration::load(&s.camera)?;
-    let ingest = Ingest::new(calibration, s.undistort).context("undistortion maps")?;
+    let section = CameraIngestConfig {
+        undistort: s.undistort,
+        ..cfg
+    };
+    let mut stage = IngestStage::from_config(&section, calibration).context("undistortion maps")?;
     tracing::info!(source = %s.spec, camera = %s.camera.display(), s.undistort, "camera-ingest");
-    let mut stage = IngestStage::new(ingest);
     if s.spec == SourceSpec::Sim {
         runtime::serve(&args.stage, &ipc, &mut stage, None, None)?;
         return Ok(());

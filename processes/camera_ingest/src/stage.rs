@@ -9,7 +9,9 @@ use stage::{Counter, Input, Message, Outbox, SliceHeader, SliceMut, Stage, Stage
 
 use std::time::Duration;
 
-use crate::{Dropped, Ingest, IngestError, RateLimit, Rejection};
+use optics::CameraCalibration;
+
+use crate::{CameraIngestConfig, Dropped, Ingest, IngestError, RateLimit, Rejection};
 
 /// Why the newest frame was lost, kept unformatted until a log line is due.
 #[derive(Debug)]
@@ -44,7 +46,17 @@ pub struct IngestStage {
 const DROP_LOG_PERIOD: Duration = Duration::from_secs(1);
 
 impl IngestStage {
-    /// The stage of `ingest`.
+    /// The one way the stage is built, wherever it runs (its process, the lockstep
+    /// registry): from its `[camera_ingest]` section and the calibration of the camera it
+    /// reads (on a vehicle the file the section names; in simulation the scenario's).
+    pub fn from_config(
+        cfg: &CameraIngestConfig,
+        calibration: CameraCalibration,
+    ) -> Result<Self, IngestError> {
+        Ok(Self::new(Ingest::new(calibration, cfg.undistort)?))
+    }
+
+    /// The stage of `ingest` (built by [`Self::from_config`]).
     pub fn new(ingest: Ingest) -> Self {
         Self {
             ingest,

@@ -8,7 +8,7 @@ use std::process::ExitCode;
 
 use anyhow::{Result, anyhow};
 use clap::Parser;
-use depth_map::{DepthMapConfig, DepthMapper, DepthStage, Input};
+use depth_map::{DepthMapConfig, DepthStage, Input};
 use runtime::StageArgs;
 
 /// Builds the local occupancy map from depth frames and the vehicle state, and publishes
@@ -34,9 +34,8 @@ fn run(args: &Args) -> Result<()> {
         cfg.input = Input::parse(i)
             .ok_or_else(|| anyhow!("--input `{i}` is not allowed (allowed: sim, depth-frame)"))?;
     }
-    let mapper = DepthMapper::from_config(&cfg)?;
-    tracing::info!(input = cfg.input.topic(), dims = ?mapper.map().dims(), "depth-map");
-    let mut stage = DepthStage::new(mapper, cfg.publish_period_ms);
+    let mut stage = DepthStage::from_config(&cfg)?;
+    tracing::info!(input = cfg.input.topic(), dims = ?stage.mapper().map().dims(), "depth-map");
     let rename = Some((Input::Sim.topic(), cfg.input.topic()));
     runtime::serve(&args.stage, &ipc, &mut stage, None, rename)?;
     Ok(())

@@ -31,6 +31,15 @@ struct Counts {
 }
 
 impl DepthStage {
+    /// The one way the stage is built, wherever it runs (its process, the lockstep
+    /// registry, a fuzz target): from its `[depth_map]` section.
+    pub fn from_config(cfg: &crate::DepthMapConfig) -> Result<Self, DepthError> {
+        Ok(Self::new(
+            DepthMapper::from_config(cfg)?,
+            cfg.publish_period_ms,
+        ))
+    }
+
     /// The stage of `mapper`, republishing every `publish_period_ms`.
     pub fn new(mapper: DepthMapper, publish_period_ms: u64) -> Self {
         Self {

@@ -48,6 +48,12 @@ fn run(args: &Args) -> Result<()> {
     cfg.validate()
         .map_err(|e| anyhow!("--preset/--commit-height: fsm.{}: {}", e.key, e.message))?;
     tracing::info!(preset = ?cfg.preset_m, commit_height_m = cfg.commit_height_m, "fsm");
-    runtime::serve(&args.stage, &ipc, &mut FsmStage::new(cfg), None, None)?;
+    runtime::serve(
+        &args.stage,
+        &ipc,
+        &mut FsmStage::from_config(&cfg),
+        None,
+        None,
+    )?;
     Ok(())
 }

@@ -31,10 +31,12 @@ struct Counts {
 }
 
 impl FsmStage {
-    /// The stage of a mission with `cfg` (validated by the caller).
-    pub fn new(cfg: FsmConfig) -> Self {
+    /// The one way the stage is built, wherever it runs (its process, the lockstep
+    /// registry): from its `[fsm]` section (validated by the caller; `landing run` puts
+    /// the scenario's preset point and commit height in it).
+    pub fn from_config(cfg: &FsmConfig) -> Self {
         Self {
-            fsm: Fsm::new(cfg),
+            fsm: Fsm::new(cfg.clone()),
             counts: Counts::default(),
             pad_news: false,
         }

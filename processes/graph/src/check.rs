@@ -284,12 +284,12 @@ fn node(n: &NodeFile, topics: &[Topic], path: &Path) -> Result<Node, GraphError>
     let wake = match n.wake.as_deref() {
         None | Some("event") => Wake::Event,
         Some("periodic") => {
-            let iceoryx2 = topics
+            let shared_memory = topics
                 .iter()
                 .any(|t| t.name == trigger && t.transport == Transport::Iceoryx2);
-            if !iceoryx2 {
+            if !shared_memory {
                 return Err(err(&format!(
-                    "wake = \"periodic\" needs an iceoryx2 input as the trigger, not {trigger} (allowed: wake = \"event\", or a trigger among its iceoryx2 inputs)"
+                    "wake = \"periodic\" needs an input over shared memory as the trigger, not {trigger} (allowed: wake = \"event\", or a trigger among its shared-memory inputs)"
                 )));
             }
             Wake::Periodic

@@ -349,7 +349,7 @@ fn a_periodic_wake_needs_an_iceoryx2_trigger_and_is_handed_to_the_driver() {
     let e = error(&clock);
     assert!(
         e.contains(
-            "node fsm: wake = \"periodic\" needs an iceoryx2 input as the trigger, not clock"
+            "node fsm: wake = \"periodic\" needs an input over shared memory as the trigger, not clock"
         ),
         "{e}"
     );

@@ -6,8 +6,8 @@
 use std::cell::Cell;
 use std::time::Instant;
 
-use fixtures::fields::{FIELD_DENSITIES, FIELD_GOAL, FIELD_START, FieldRng, pillar_field};
 use nalgebra::Vector3;
+use planner::fields::{FIELD_DENSITIES, FIELD_GOAL, FIELD_START, FieldRng, pillar_field};
 use planner::{Goal, GridMap, OccupancyQuery, Planner, PlannerConfig, State};
 
 type Error = Box<dyn std::error::Error>;

@@ -16,6 +16,7 @@
 pub mod astar;
 pub mod config;
 pub mod cost;
+pub mod fields;
 pub mod lbfgs;
 pub mod map;
 pub mod node;

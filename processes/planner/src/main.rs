@@ -24,6 +24,12 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<()> {
     let (ipc, cfg): (_, PlannerConfig) = args.stage.load("planner")?;
-    runtime::serve(&args.stage, &ipc, &mut PlannerStage::new(cfg), None, None)?;
+    runtime::serve(
+        &args.stage,
+        &ipc,
+        &mut PlannerStage::from_config(&cfg),
+        None,
+        None,
+    )?;
     Ok(())
 }

@@ -39,10 +39,11 @@ struct Counts {
 }
 
 impl PlannerStage {
-    /// The stage of a planner with `cfg`.
-    pub fn new(cfg: PlannerConfig) -> Self {
+    /// The one way the stage is built, wherever it runs (its process, the lockstep
+    /// registry): from its `[planner]` section.
+    pub fn from_config(cfg: &PlannerConfig) -> Self {
         Self {
-            node: PlannerNode::new(cfg),
+            node: PlannerNode::new(cfg.clone()),
             vehicle: None,
             goal: None,
             map_header: None,

@@ -4,8 +4,8 @@
 //! its own basis matrix and sampled densely against the raw boxes (distance >= the
 //! inflation), the limits, and the requested end states.
 
-use fixtures::fields::{FieldRng, pillar_field};
 use nalgebra::Vector3;
+use planner::fields::{FieldRng, pillar_field};
 use planner::{
     Aabb, BSpline, EXPANSIONS_PER_ITERATION, Goal, GridMap, LIMIT_TOLERANCE, OccupancyQuery,
     PlanError, Planner, PlannerConfig, State,

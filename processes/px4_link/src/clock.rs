@@ -47,8 +47,14 @@ pub const REORDER_NS: u64 = 100_000_000;
 /// late bucket among two would tilt the line.
 const MIN_FIT: usize = 4;
 
-/// A change of the estimated rate this large is logged (once the window is full).
-const RATE_LOG_STEP: f64 = 2e-3;
+/// The rate is logged once the window is full if it is this far from ours, then again
+/// when it moved this far from the rate last logged...
+const RATE_LOG_FIRST: f64 = 2e-3;
+/// ...by this much,
+const RATE_LOG_STEP: f64 = 5e-3;
+/// ...and this long after the last line, ns: PX4 SITL's SIH wanders between 1 and 3.5 %
+/// slow on a loaded machine, and a 0.2 % step logged 57 lines in 3.5 minutes.
+const RATE_LOG_PERIOD_NS: u64 = 60_000_000_000;
 
 /// `offset(boot) = offset0 + slope * (boot - boot0)`, ns.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -89,7 +95,8 @@ pub struct AutopilotClock {
     /// Local time since which every message sat more than [`JUMP_NS`] above the line.
     late_since: Option<u64>,
     jumps: u64,
-    logged_rate: f64,
+    /// The rate last logged, and the boot time it was logged at.
+    logged: Option<(f64, u64)>,
 }
 
 impl Default for AutopilotClock {
@@ -104,7 +111,7 @@ impl Default for AutopilotClock {
             last_boot_ns: 0,
             late_since: None,
             jumps: 0,
-            logged_rate: 1.0,
+            logged: None,
         }
     }
 }
@@ -173,7 +180,7 @@ impl AutopilotClock {
     fn start_over(&mut self) {
         *self = Self {
             jumps: self.jumps + 1,
-            logged_rate: self.logged_rate,
+            logged: self.logged,
             ..Self::default()
         };
     }
@@ -259,11 +266,19 @@ impl AutopilotClock {
             offset0: first.offset_ns.saturating_add(a.1 as i64),
             slope,
         });
+        let now = self.point(self.len - 1).boot_ns;
+        let due = |rate: f64| match self.logged {
+            None => (rate - 1.0).abs() >= RATE_LOG_FIRST,
+            Some((logged, at)) => {
+                (rate - logged).abs() >= RATE_LOG_STEP
+                    && now.saturating_sub(at) >= RATE_LOG_PERIOD_NS
+            }
+        };
         if let Some(rate) = self.rate()
             && self.len == BUCKETS
-            && (rate - self.logged_rate).abs() >= RATE_LOG_STEP
+            && due(rate)
         {
-            self.logged_rate = rate;
+            self.logged = Some((rate, now));
             let percent = (rate - 1.0) * 100.0;
             tracing::info!(
                 percent,

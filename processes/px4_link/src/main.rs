@@ -12,7 +12,7 @@ use anyhow::{Result, anyhow};
 use clap::Parser;
 use px4_link::LinkStage;
 use px4_link::config::Px4LinkConfig;
-use px4_protocol::signing::{Signer, SigningKey};
+use px4_protocol::signing::SigningKey;
 use runtime::StageArgs;
 use stack_config::Validate;
 
@@ -31,9 +31,6 @@ struct Args {
     remote: Option<String>,
 }
 
-/// The link id px4-link signs with (one link per companion).
-const LINK_ID: u8 = 1;
-
 fn main() -> ExitCode {
     runtime::process_main("info", run)
 }
@@ -51,17 +48,12 @@ fn run(args: &Args) -> Result<()> {
     let address = cfg.address().map_err(|e| anyhow!(e.message))?;
     let remote = cfg.remote_address().map_err(|e| anyhow!(e.message))?;
     // The key is read before the link opens: a key others may read stops the start.
-    let signer = match cfg.signing_key_path(&args.stage.config_dir()) {
-        Some(path) => Some(Signer::new(
-            SigningKey::load(&path)?,
-            LINK_ID,
-            runtime::unix_ns_at_monotonic_zero(),
-        )),
-        None => None,
-    };
+    let key_path = cfg.signing_key_path(&args.stage.config_dir());
+    let key = key_path.map(|p| SigningKey::load(&p)).transpose()?;
     let mut link = transport::Transport::open(&address, remote)?;
-    tracing::info!(link = %cfg.link, signed = signer.is_some(), "px4-link");
-    let mut stage = LinkStage::new(cfg.settings(), link.framing(), signer);
+    tracing::info!(link = %cfg.link, signed = key.is_some(), "px4-link");
+    let zero = runtime::unix_ns_at_monotonic_zero();
+    let mut stage = LinkStage::from_config(&cfg, link.framing(), key, zero);
     runtime::serve(&args.stage, &ipc, &mut stage, Some(&mut link), None)?;
     Ok(())
 }

@@ -54,7 +54,26 @@ struct Counts {
     safety: u64,
 }
 
+/// The link id px4-link signs with (one link per companion).
+pub const LINK_ID: u8 = 1;
+
 impl LinkStage {
+    /// The one way the stage is built, wherever it runs (its process, the lockstep
+    /// registry, a fuzz target): from its `[px4_link]` section, how the autopilot's bytes
+    /// come (`framing`, from the link the section or a flag names), and the signing key
+    /// the section names (read by the caller, which owns the files): signatures are
+    /// stamped in Unix time, `unix_ns_at_zero` being the Unix time at the caller's clock's
+    /// zero.
+    pub fn from_config(
+        cfg: &crate::config::Px4LinkConfig,
+        framing: Framing,
+        key: Option<px4_protocol::signing::SigningKey>,
+        unix_ns_at_zero: u64,
+    ) -> Self {
+        let signer = key.map(|k| Signer::new(k, LINK_ID, unix_ns_at_zero));
+        Self::new(cfg.settings(), framing, signer)
+    }
+
     /// The stage of a link with `settings`, reading `framing`; with `signer`, the link
     /// is signed (MAVLink 2 signing: what goes out is signed, what comes in unsigned or
     /// badly signed is counted and dropped).

@@ -5,13 +5,11 @@
 //! paced by the wall clock; this file binds the UDP socket and hands both to the driver.
 
 use std::net::SocketAddr;
-use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::Result;
 use clap::Parser;
 use ipc_types::topics;
-use px4_protocol::signing::SigningKey;
 use runtime::{Reply, StageArgs, UdpLink};
 use sim::stage::SimFlags;
 
@@ -30,10 +28,6 @@ struct Args {
     /// autopilot sends, and the only address it takes datagrams from.
     #[arg(long, default_value = "127.0.0.1:14540")]
     mavlink_remote: SocketAddr,
-    /// The autopilot's MAVLink signing key file (as PX4 keeps one on its SD card):
-    /// signing on from the start. Empty or absent: off until SETUP_SIGNING installs one.
-    #[arg(long, default_value = "")]
-    signing_key: String,
 }
 
 fn main() -> ExitCode {
@@ -42,15 +36,8 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<()> {
     let ipc = args.stage.ipc()?;
-    let key = if args.signing_key.is_empty() {
-        None
-    } else {
-        Some(SigningKey::load(Path::new(&args.signing_key))?)
-    };
-    let mut stage = args
-        .sim
-        .stage(&args.stage.deploy())?
-        .with_signing(key, runtime::unix_ns_at_monotonic_zero());
+    let zero = runtime::unix_ns_at_monotonic_zero();
+    let mut stage = args.sim.stage(&args.stage.deploy(), zero)?;
     let mut link = UdpLink::bind(
         args.mavlink_listen,
         Some(args.mavlink_remote),

@@ -49,6 +49,10 @@ pub struct SimFlags {
     /// running 2 % behind real time does.
     #[arg(long, value_name = "RATE")]
     pub autopilot_clock_rate: Option<f64>,
+    /// The autopilot's MAVLink signing key file (as PX4 keeps one on its SD card):
+    /// signing on from the start. Empty or absent: off until SETUP_SIGNING installs one.
+    #[arg(long, default_value = "")]
+    pub signing_key: String,
 }
 
 /// Why the flags make no simulator.
@@ -63,6 +67,9 @@ pub enum SimFlagsError {
     /// `--autopilot-clock-rate` out of range.
     #[error("--autopilot-clock-rate: {0}")]
     ClockRate(crate::params::ParamError),
+    /// `--signing-key`.
+    #[error("--signing-key: {0}")]
+    Key(#[from] px4_protocol::signing::KeyError),
     /// The scenario.
     #[error(transparent)]
     Scenario(#[from] crate::scenario::ScenarioError),
@@ -73,8 +80,18 @@ pub enum SimFlagsError {
 
 impl SimFlags {
     /// The stage: the scenario's world (shipped scenarios from `deploy`), paced by the
-    /// wall clock at `--speed`, ending at `--duration-s` or the scenario's duration.
-    pub fn stage(&self, deploy: &std::path::Path) -> Result<SimStage, SimFlagsError> {
+    /// wall clock at `--speed`, ending at `--duration-s` or the scenario's duration,
+    /// signing with `--signing-key` (`unix_ns_at_zero`: the Unix time at the driver
+    /// clock's zero).
+    pub fn stage(
+        &self,
+        deploy: &std::path::Path,
+        unix_ns_at_zero: u64,
+    ) -> Result<SimStage, SimFlagsError> {
+        let key_file = Some(&self.signing_key).filter(|k| !k.is_empty());
+        let key = key_file
+            .map(|k| SigningKey::load(std::path::Path::new(k)))
+            .transpose()?;
         if !(self.speed.is_finite() && self.speed > 0.0 && self.speed <= 100.0) {
             return Err(SimFlagsError::Speed(self.speed));
         }
@@ -88,13 +105,15 @@ impl SimFlags {
         if !(end_s.is_finite() && end_s > 0.0 && end_s <= 86_400.0) {
             return Err(SimFlagsError::Duration(end_s));
         }
-        let sim = Simulator::new(&scenario, self.seed.unwrap_or(scenario.scenario.seed))?;
-        tracing::info!(scenario = %scenario.scenario.name, seed = sim.seed(), end_s, "sim");
-        Ok(SimStage::paced(
-            sim,
+        let seed = self.seed.unwrap_or(scenario.scenario.seed);
+        tracing::info!(scenario = %scenario.scenario.name, seed, end_s, "sim");
+        let stage = SimStage::from_config(
+            &scenario,
+            seed,
             Pace::realtime(self.speed),
             Some((end_s * 1e9) as u64),
-        ))
+        )?;
+        Ok(stage.with_signing(key, unix_ns_at_zero))
     }
 }
 
@@ -251,7 +270,20 @@ struct Counts {
 }
 
 impl SimStage {
-    /// The stage of `sim`, in lockstep.
+    /// The one way the stage is built, wherever it runs (its process on the wall clock,
+    /// the lockstep registry): from its scenario (the simulator's configuration: the
+    /// world) and a seed, paced by `pace`, finished at simulated time `end_ns`.
+    pub fn from_config(
+        scenario: &crate::scenario::LoadedScenario,
+        seed: u64,
+        pace: Pace,
+        end_ns: Option<u64>,
+    ) -> Result<Self, crate::lockstep::SimError> {
+        Ok(Self::paced(Simulator::new(scenario, seed)?, pace, end_ns))
+    }
+
+    /// The stage of `sim`, in lockstep (built by [`Self::from_config`]; tests build it
+    /// here around simulators of their own).
     pub fn new(sim: Simulator) -> Self {
         Self {
             sim,

@@ -52,7 +52,7 @@ fn run(args: &Args) -> Result<()> {
         processes = ?processes.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>(),
         "watching"
     );
-    let mut stage = WatchdogStage::new(cfg, &processes)?;
+    let mut stage = WatchdogStage::from_config(&cfg, &processes)?;
     runtime::serve(&args.stage, &ipc, &mut stage, Some(&mut source), None)?;
     Ok(())
 }

@@ -181,15 +181,17 @@ pub struct WatchdogStage {
 }
 
 impl WatchdogStage {
-    /// The stage watching `processes` (name, heartbeat deadline ms) with `cfg` (validated
-    /// by the caller).
-    pub fn new(
-        cfg: WatchdogStageConfig,
+    /// The one way the stage is built, wherever it runs (its process, the lockstep
+    /// registry): from its `[watchdog]` section (validated by the caller), watching
+    /// `processes` (name, heartbeat deadline ms: the graph's, `watched_processes`; none
+    /// in lockstep, where no process can die).
+    pub fn from_config(
+        cfg: &WatchdogStageConfig,
         processes: &[(String, f64)],
     ) -> Result<Self, crate::ConfigError> {
         Ok(Self {
             dog: Watchdog::new(cfg.watchdog_config(processes))?,
-            cfg,
+            cfg: cfg.clone(),
             phase: MissionState::Idle,
             pad_valid: false,
             airborne: false,

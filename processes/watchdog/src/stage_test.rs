@@ -31,8 +31,8 @@ impl Outbox for Sent {
 
 #[test]
 fn views_and_safety_orders_are_numbered_each_on_their_own_without_gaps() {
-    let mut st = WatchdogStage::new(
-        WatchdogStageConfig::default(),
+    let mut st = WatchdogStage::from_config(
+        &WatchdogStageConfig::default(),
         &[("fsm".to_string(), 500.0)],
     )
     .unwrap();

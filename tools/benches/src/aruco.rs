@@ -15,7 +15,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use aruco_pnp::{EstimatorSettings, Frame, PadEstimator};
+use aruco_pnp::{ArucoConfig, ArucoStage, Frame};
 use clap::Args;
 use ipc_types::msg::PixelEncoding;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
@@ -136,13 +136,15 @@ pub(crate) fn render(
     })
 }
 
-fn ours(seq: &Sequence, pad: &PadModel) -> Result<Run> {
-    let mut est = PadEstimator::new(
-        seq.calibration,
-        pad.clone(),
-        seq.camera_from_body,
-        EstimatorSettings::default(),
-    )?;
+/// Ours as it ships: the stage built from the deploy directory's `[aruco_pnp]`, its
+/// estimator fed the frames.
+fn ours(seq: &Sequence, pad: &PadModel, cfg: &ArucoConfig) -> Result<Run> {
+    let mut stage = ArucoStage::from_config(cfg, seq.calibration, pad.clone())?;
+    anyhow::ensure!(
+        stage.estimator_mut().camera_from_body() == seq.camera_from_body,
+        "the renderer's camera mount is not the config's"
+    );
+    let est = stage.estimator_mut();
     let mut run = Run {
         ms: Vec::new(),
         found: 0,
@@ -304,6 +306,7 @@ pub fn run(args: &ArucoArgs) -> Result<()> {
     }
     let deploy = args.deploy_dir.clone().unwrap_or_else(deploy_dir);
     let pad = PadModel::load(deploy.join("config").join("pad.toml")).context("pad layout")?;
+    let shipped = stack::StackConfig::load(&deploy.join("config").join("landing.toml"))?.aruco_pnp;
     let mut out = serde_json::Map::new();
     let mut lines = Vec::new();
     for (file, tag) in [
@@ -318,7 +321,7 @@ pub fn run(args: &ArucoArgs) -> Result<()> {
         eprintln!(
             "bench aruco: ours, then OpenCV (best settings, whole frame and tracked), on the same frames..."
         );
-        let a = ours(&seq, &pad)?;
+        let a = ours(&seq, &pad, &shipped)?;
         let (b, b_how) = opencv_best(&seq, &pad, false)?;
         let (c, c_how) = opencv_best(&seq, &pad, true)?;
         let pa = percentile(&a.ms, 50.0);

@@ -9,8 +9,8 @@ use std::time::Instant;
 
 use anyhow::Result;
 use clap::Args;
-use fixtures::fields::{FIELD_DENSITIES, FIELD_GOAL, FIELD_START, FieldRng, pillar_field};
 use nalgebra::Vector3;
+use planner::fields::{FIELD_DENSITIES, FIELD_GOAL, FIELD_START, FieldRng, pillar_field};
 use planner::{
     Aabb, BSpline, Goal, GridMap, LIMIT_TOLERANCE, OccupancyQuery, Planner, PlannerConfig, State,
 };

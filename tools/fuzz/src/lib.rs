@@ -10,8 +10,8 @@ use std::collections::hash_map::DefaultHasher;
 use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
 
-use aruco_pnp::{ArucoStage, PadEstimator};
-use depth_map::{DepthMapConfig, DepthMapper, DepthStage};
+use aruco_pnp::ArucoStage;
+use depth_map::{DepthMapConfig, DepthStage};
 use ipc_types::msg::{
     CameraFrameHeader, DepthFrameHeader, Header, Intrinsics, PixelEncoding, Pose, VehicleState,
 };
@@ -21,9 +21,8 @@ use mavlink::dialects::common::{
     ATTITUDE_QUATERNION_DATA, COMMAND_ACK_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA,
     MavAutopilot, MavMessage, MavModeFlag, MavState, MavType,
 };
-use optics::mount::down_camera_from_body;
 use optics::{CameraCalibration, PadModel};
-use px4_link::{Framing, LinkSettings, LinkStage};
+use px4_link::{Framing, LinkStage};
 use px4_protocol::codec::{Guard, StreamDecoder, encode};
 use px4_protocol::signing::{Signer, SigningKey};
 use stage::{Input, Message, Outbox, SliceHeader, SliceMut, Stage, StageError};
@@ -263,8 +262,9 @@ fn mavlink_datagram(_: &mut State, data: &[u8]) -> u64 {
     let Some((&first, rest)) = data.split_first() else {
         return 0;
     };
-    let signer = (first & 0x80 != 0).then(|| Signer::new(fuzz_key(), 1, 0));
-    let mut stage = LinkStage::new(LinkSettings::default(), Framing::Datagram, signer);
+    let key = (first & 0x80 != 0).then(fuzz_key);
+    let cfg = px4_link::config::Px4LinkConfig::default();
+    let mut stage = LinkStage::from_config(&cfg, Framing::Datagram, key, 0);
     let mut out = Count::default();
     for t in [1_000_000u64, 2_000_000] {
         let input = Input {
@@ -470,14 +470,12 @@ fn state_at(t_ns: u64) -> VehicleState {
 
 fn aruco_stage(deploy: &Path) -> Option<ArucoStage> {
     let cfg = aruco_pnp::ArucoConfig::default();
-    let estimator = PadEstimator::new(
+    ArucoStage::from_config(
+        &cfg,
         CameraCalibration::load(deploy.join("config").join("camera_down_640x480.yaml")).ok()?,
         PadModel::load(deploy.join("config").join("pad.toml")).ok()?,
-        down_camera_from_body(cfg.camera_position_in_body_m),
-        cfg.settings(),
     )
-    .ok()?;
-    Some(ArucoStage::new(estimator, cfg.max_state_age_ms * 1_000_000))
+    .ok()
 }
 
 fn camera_frame(state: &mut State, data: &[u8]) -> u64 {
@@ -543,9 +541,11 @@ fn depth_frame(state: &mut State, data: &[u8]) -> u64 {
         return 0;
     }
     if state.depth.is_none() {
-        state.depth = DepthMapper::from_config(&DepthMapConfig::default())
-            .ok()
-            .map(|m| DepthStage::new(m, 100));
+        let cfg = DepthMapConfig {
+            publish_period_ms: 100,
+            ..DepthMapConfig::default()
+        };
+        state.depth = DepthStage::from_config(&cfg).ok();
     }
     let Some(stage) = state.depth.as_mut() else {
         return 0;

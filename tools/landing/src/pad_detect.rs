@@ -3,10 +3,9 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use aruco_pnp::{EstimatorSettings, Frame, PadEstimator};
+use aruco_pnp::{ArucoConfig, ArucoStage, Frame};
 use clap::Args;
 use ipc_types::msg::PixelEncoding;
-use nalgebra::Isometry3;
 use opencv::imgcodecs;
 use opencv::prelude::*;
 use optics::{CameraCalibration, PadModel};
@@ -73,12 +72,11 @@ pub fn run(args: &DetectArgs) -> Result<bool> {
         data,
         undistorted: false,
     };
-    let mut est = PadEstimator::new(
-        calibration,
-        pad,
-        Isometry3::identity(),
-        EstimatorSettings::default(),
-    )?;
+    // The estimator aruco-pnp runs: its stage from the shipped `[aruco_pnp]` section.
+    let config = deploy_dir().join("config").join("landing.toml");
+    let section: ArucoConfig = stack_config::load_process(&config, "aruco_pnp")?.1;
+    let mut stage = ArucoStage::from_config(&section, calibration, pad)?;
+    let est = stage.estimator_mut();
     let Some(e) = est.process(&frame, 0, None)? else {
         if args.json {
             println!("{}", json!({"found": false}));

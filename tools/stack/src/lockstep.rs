@@ -7,21 +7,18 @@
 //! pipeline sees only telemetry and sensor data; the ground truth goes to the referee.
 
 use anyhow::{Context, Result, bail};
-use aruco_pnp::{ArucoStage, PadEstimator};
-use camera_ingest::{Ingest, IngestStage};
-use depth_map::{DepthMapper, DepthStage};
+use aruco_pnp::ArucoStage;
+use camera_ingest::IngestStage;
+use depth_map::DepthStage;
 use fsm::{FsmConfig, FsmStage};
 use graph::{Graph, Node};
 use ipc_types::msg::MissionState;
 use ipc_types::topics;
-use optics::mount::down_camera_from_body;
 use optics::{CameraCalibration, PadModel};
 use planner::PlannerStage;
 use px4_link::{Framing, LinkStage};
-use px4_protocol::signing::Signer;
-use sim::lockstep::Simulator;
 use sim::scenario::LoadedScenario;
-use sim::stage::SimStage;
+use sim::stage::{Pace, SimStage};
 use stage::lockstep::{Lockstep, Published};
 use stage::{Message, Stage};
 
@@ -62,49 +59,41 @@ pub fn mission(config: &StackConfig, scenario: &LoadedScenario) -> Result<FsmCon
     Ok(fsm)
 }
 
-/// The stage of one graph node, built from the stack configuration and the scenario;
-/// `None` for a node the stack has no stage for.
+/// The stage of one graph node, built from the stack configuration and the scenario
+/// through the stage's one constructor (`from_config`, as its binary builds it); `None`
+/// for a node the stack has no stage for. Where the deployment reads a file the config
+/// names (the camera's calibration, the pad), lockstep reads the scenario's: the camera
+/// the simulator renders.
 pub fn stage_for(node: &Node, setup: &Setup<'_>) -> Result<Option<Box<dyn Stage>>> {
     let cfg = setup.config;
     let scn = setup.scenario;
+    let camera = || CameraCalibration::load(scn.calibration_path());
     Ok(Some(match node.name.as_str() {
         "sim" => Box::new(
-            SimStage::new(Simulator::new(scn, setup.seed).context("building the simulator")?)
+            SimStage::from_config(scn, setup.seed, Pace::Lockstep, None)
+                .context("building the simulator")?
                 .with_signing(cfg.signing_key()?, LOCKSTEP_UNIX_NS_AT_ZERO),
         ),
-        "px4-link" => Box::new(LinkStage::new(
-            cfg.px4_link.settings(),
+        "px4-link" => Box::new(LinkStage::from_config(
+            &cfg.px4_link,
             Framing::Datagram,
-            cfg.signing_key()?
-                .map(|k| Signer::new(k, 1, LOCKSTEP_UNIX_NS_AT_ZERO)),
+            cfg.signing_key()?,
+            LOCKSTEP_UNIX_NS_AT_ZERO,
         )),
         "camera-ingest" => {
-            let calibration = CameraCalibration::load(scn.calibration_path())?;
-            let undistort = cfg.camera_ingest.as_ref().is_some_and(|c| c.undistort);
-            Box::new(IngestStage::new(
-                Ingest::new(calibration, undistort).context("undistortion maps")?,
-            ))
+            let section = cfg.camera_ingest.clone().unwrap_or_default();
+            Box::new(IngestStage::from_config(&section, camera()?).context("undistortion maps")?)
         }
-        "aruco-pnp" => {
-            let estimator = PadEstimator::new(
-                CameraCalibration::load(scn.calibration_path())?,
-                PadModel::load(scn.pad_path())?,
-                down_camera_from_body(cfg.aruco_pnp.camera_position_in_body_m),
-                cfg.aruco_pnp.settings(),
-            )?;
-            Box::new(ArucoStage::new(
-                estimator,
-                cfg.aruco_pnp.max_state_age_ms * 1_000_000,
-            ))
-        }
-        "depth-map" => Box::new(DepthStage::new(
-            DepthMapper::from_config(&cfg.depth_map)?,
-            cfg.depth_map.publish_period_ms,
-        )),
-        "planner" => Box::new(PlannerStage::new(cfg.planner.clone())),
-        "fsm" => Box::new(FsmStage::new(setup.fsm.clone())),
+        "aruco-pnp" => Box::new(ArucoStage::from_config(
+            &cfg.aruco_pnp,
+            camera()?,
+            PadModel::load(scn.pad_path())?,
+        )?),
+        "depth-map" => Box::new(DepthStage::from_config(&cfg.depth_map)?),
+        "planner" => Box::new(PlannerStage::from_config(&cfg.planner)),
+        "fsm" => Box::new(FsmStage::from_config(&setup.fsm)),
         // In lockstep no process can die or hang: it watches the data paths only.
-        "watchdog" => Box::new(watchdog::WatchdogStage::new(cfg.watchdog.clone(), &[])?),
+        "watchdog" => Box::new(watchdog::WatchdogStage::from_config(&cfg.watchdog, &[])?),
         _ => return Ok(None),
     }))
 }
