@@ -1,6 +1,7 @@
 //! `landing`: the one user-facing command of the landing stack.
 
 mod config_cmd;
+mod eval;
 mod graph_cmd;
 mod inject_cmd;
 mod latency_cmd;
@@ -76,6 +77,12 @@ enum Command {
     /// progress line, every state transition and a summary (exit code 1 when the vehicle
     /// did not land on the pad).
     Run(run_cmd::RunArgs),
+    /// Fly scenarios many times (a Monte Carlo campaign) in lockstep worker processes,
+    /// or one shard of it for a batch engine, and print the table: per scenario the
+    /// success rate with its 95 % interval, touchdown error and contact percentiles, the
+    /// failed and worst runs with the command that flies each again; figures in
+    /// OUT/plots (docs/eval.md). `landing eval merge DIR..` gathers shards.
+    Eval(eval::EvalArgs),
     /// Look into MCAP recordings (`landing run --record`).
     #[command(subcommand)]
     Mcap(McapCommand),
@@ -271,6 +278,7 @@ fn main() -> ExitCode {
             other => other.map(|_| ()),
         },
         Command::Mcap(McapCommand::Info { file, json }) => mcap_info(&file, json),
+        Command::Eval(args) => eval::run(&args),
         Command::Latency(args) => latency_cmd::run(&args, cli.ipc_prefix.as_deref()),
         Command::Replay(args) => match replay_cmd::run(&args) {
             Ok(false) => return ExitCode::from(1),
