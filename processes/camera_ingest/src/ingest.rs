@@ -10,7 +10,7 @@ use std::fmt;
 use ipc_types::msg::{CameraFrameHeader, Header, PixelEncoding};
 use optics::CameraCalibration;
 
-use crate::undistort::Undistorter;
+use crate::undistort::{RemapError, UndistortMapsError, Undistorter};
 
 /// What can go wrong while writing an admitted frame. Frames that are merely unusable are
 /// a [`Rejection`], not an error.
@@ -32,13 +32,13 @@ pub enum IngestError {
         /// Bytes the header implies.
         want: usize,
     },
-    /// OpenCV failed while building or applying the undistortion maps.
-    #[error("OpenCV: {0}")]
-    OpenCv(#[from] opencv::Error),
-    /// OpenCV wrote the undistorted image somewhere other than the caller's buffer; the
-    /// frame is not published rather than published blank.
-    #[error("remap did not write into the output buffer")]
-    NotInPlace,
+    /// OpenCV failed while building the undistortion maps.
+    #[error(transparent)]
+    Maps(#[from] UndistortMapsError),
+    /// Undistorting the frame failed: OpenCV failed, or wrote somewhere other than the
+    /// caller's buffer (the frame is not published rather than published blank).
+    #[error(transparent)]
+    Remap(#[from] RemapError),
 }
 
 /// Why a source frame is not published. Carries numbers only, so that rejecting a frame
@@ -334,7 +334,7 @@ impl Ingest {
                     &self.scratch
                 };
                 let channels = frame.row_len / frame.header.width as usize;
-                undistorter.remap_into(input, channels, out)
+                Ok(undistorter.remap_into(input, channels, out)?)
             }
             _ if tight => {
                 out.copy_from_slice(payload);

@@ -22,4 +22,4 @@ pub use source::{
     FrameSource, ImageDir, SourceError, SourceSpec, VideoSource, header_for_mat, mat_bytes,
 };
 pub use stage::{IngestStage, Problem};
-pub use undistort::Undistorter;
+pub use undistort::{RemapError, UndistortMapsError, Undistorter};

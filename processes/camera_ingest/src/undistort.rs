@@ -7,7 +7,25 @@ use opencv::imgproc;
 use opencv::prelude::*;
 use optics::CameraCalibration;
 
-use crate::ingest::IngestError;
+/// Why the undistortion maps could not be computed ([`Undistorter::new`]).
+#[derive(Debug, thiserror::Error)]
+pub enum UndistortMapsError {
+    /// OpenCV failed while building the maps.
+    #[error("OpenCV: {0}")]
+    OpenCv(#[from] opencv::Error),
+}
+
+/// Why a frame could not be undistorted ([`Undistorter::remap_into`]).
+#[derive(Debug, thiserror::Error)]
+pub enum RemapError {
+    /// OpenCV failed while applying the maps (or was handed a pixel format it cannot remap).
+    #[error("OpenCV: {0}")]
+    OpenCv(#[from] opencv::Error),
+    /// OpenCV wrote the undistorted image somewhere other than the caller's buffer; the
+    /// frame is not published rather than published blank.
+    #[error("remap did not write into the output buffer")]
+    NotInPlace,
+}
 
 /// Maps from each pixel of the ideal pinhole image (same camera matrix, no distortion) to
 /// where the lens put it, as OpenCV's `initUndistortRectifyMap` computes them.
@@ -34,7 +52,7 @@ impl Undistorter {
     /// Computes the maps for `calibration`. The undistorted image keeps the calibration's
     /// camera matrix, so a consumer of undistorted frames uses the same intrinsics with
     /// zero distortion.
-    pub fn new(calibration: &CameraCalibration) -> Result<Self, IngestError> {
+    pub fn new(calibration: &CameraCalibration) -> Result<Self, UndistortMapsError> {
         let k = calibration.camera_matrix_mat()?;
         let d = calibration.distortion_mat()?;
         let (width, height) = (calibration.width as i32, calibration.height as i32);
@@ -66,7 +84,7 @@ impl Undistorter {
         input: &[u8],
         channels: usize,
         out: &mut [u8],
-    ) -> Result<(), IngestError> {
+    ) -> Result<(), RemapError> {
         let (w, h) = (self.width, self.height);
         match channels {
             1 => {
@@ -79,7 +97,7 @@ impl Undistorter {
                 let mut dst = Mat::new_rows_cols_with_bytes_mut::<Vec3b>(h, w, out)?;
                 self.remap(&src, &mut dst)
             }
-            _ => Err(IngestError::OpenCv(opencv::Error::new(
+            _ => Err(RemapError::OpenCv(opencv::Error::new(
                 opencv::core::StsBadArg,
                 format!("{channels} channels per pixel (allowed: 1 or 3)"),
             ))),
@@ -90,7 +108,7 @@ impl Undistorter {
         &self,
         src: &impl ToInputArray,
         dst: &mut (impl ToOutputArray + MatTraitConst),
-    ) -> Result<(), IngestError> {
+    ) -> Result<(), RemapError> {
         let before = dst.data();
         imgproc::remap(
             src,
@@ -104,7 +122,7 @@ impl Undistorter {
         // `dst` has the right size and type, so OpenCV writes in place; if it ever
         // reallocated, the caller's buffer would silently keep the old pixels.
         if dst.data() != before {
-            return Err(IngestError::NotInPlace);
+            return Err(RemapError::NotInPlace);
         }
         Ok(())
     }

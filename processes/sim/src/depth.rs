@@ -17,9 +17,9 @@ use serde::Deserialize;
 /// Metres per unit of a depth frame's pixels (u16 millimetres), for readers of the frames.
 pub const DEPTH_SCALE_M: f64 = 0.001;
 
+use crate::geometry::Obb;
 use crate::noise::{MAX_SLICE, PixelNoise};
 use crate::params::{self, ParamError};
-use crate::world::Obb;
 
 /// Configuration of the forward depth camera (the `[camera_depth]` section).
 #[derive(Debug, Clone, PartialEq, Deserialize)]

@@ -15,10 +15,10 @@
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector2, Vector3};
 use serde::Deserialize;
 
+use crate::geometry::Obb;
 use crate::params::{self, ParamError};
 use crate::quadrotor::Surface;
 use crate::rng::Pcg32;
-use crate::world::Obb;
 
 /// The highest ground-vehicle speed the simulator accepts: 60 km/h, in m/s.
 pub const MAX_GROUND_SPEED_M_S: f64 = 60.0 / 3.6;

@@ -33,7 +33,7 @@
 
 use nalgebra::Vector3;
 
-use crate::autopilot::AutopilotParams;
+use crate::autopilot_params::AutopilotParams;
 use crate::hysteresis::Hysteresis;
 use crate::quadrotor::GRAVITY_M_S2;
 

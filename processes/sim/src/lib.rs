@@ -20,9 +20,11 @@
 //! (`world_from_body * p_body = p_world`). SI units throughout.
 
 pub mod autopilot;
+pub mod autopilot_params;
 pub mod camera;
 pub mod depth;
 pub mod estimator_noise;
+pub mod geometry;
 pub mod ground_vehicle;
 pub mod hover_thrust;
 pub mod hysteresis;

@@ -163,7 +163,7 @@ pub struct Simulator {
     /// The telemetry link's delay.
     telemetry: TelemetryDelay,
     /// The boxes the depth camera renders, refilled per frame.
-    boxes: Vec<crate::world::Obb>,
+    boxes: Vec<crate::geometry::Obb>,
 }
 
 impl Simulator {

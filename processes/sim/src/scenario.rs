@@ -11,10 +11,11 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use stack_config::{self as config, ConfigError, Invalid, Validate, check_range};
 
-use crate::autopilot::AutopilotParams;
+use crate::autopilot_params::AutopilotParams;
 use crate::camera::{CameraErrors, DownCameraParams, MountErrors};
 use crate::depth::DepthCameraParams;
 use crate::estimator_noise::EstimatorNoiseParams;
+use crate::geometry::Aabb;
 use crate::ground_vehicle::GroundVehicleParams;
 use crate::params::ParamError;
 use crate::px4::commander::Px4Params;
@@ -22,7 +23,7 @@ use crate::px4::commander::{AutopilotClock, Faults};
 use crate::quadrotor::AirframeParams;
 use crate::rng::Pcg32;
 use crate::wind::WindParams;
-use crate::world::{Aabb, CrashThresholds, WorldParams};
+use crate::world::{CrashThresholds, WorldParams};
 
 /// Names of the scenarios shipped in `deploy/scenarios/`.
 pub const SHIPPED: &[&str] = &[

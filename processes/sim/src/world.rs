@@ -9,12 +9,14 @@
 //! events (touchdown, lift-off, crash, collision) that only the evaluator may
 //! see; the pipeline never does.
 
-use nalgebra::{Isometry3, Vector2, Vector3};
+use nalgebra::{Vector2, Vector3};
 use serde::Deserialize;
 use thiserror::Error;
 
-use crate::autopilot::{Autopilot, AutopilotParams, ControlOutput, EstimatedState, Setpoint};
+use crate::autopilot::{Autopilot, ControlOutput, EstimatedState, Setpoint};
+use crate::autopilot_params::AutopilotParams;
 use crate::estimator_noise::{EstimatorNoise, EstimatorNoiseParams};
+pub use crate::geometry::{Aabb, Obb};
 use crate::ground_vehicle::{GroundVehicle, GroundVehicleParams, PAD_SURFACE_ID, PadState};
 use crate::params::{self, ParamError};
 use crate::quadrotor::{
@@ -36,86 +38,6 @@ pub const BODY_CONTACT_TOLERANCE_M: f64 = 0.06;
 
 /// Propeller radius as a fraction of the arm length (10" props on 0.225 m arms).
 const ROTOR_RADIUS_FRACTION: f64 = 0.55;
-
-/// An axis-aligned box obstacle in world ENU.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Aabb {
-    /// Lowest corner (x, y, z), m.
-    pub min_m: [f64; 3],
-    /// Highest corner (x, y, z), m.
-    pub max_m: [f64; 3],
-}
-
-impl Aabb {
-    /// True if a sphere of `radius` around `centre` touches or enters the box.
-    pub fn intersects_sphere(&self, centre: &Vector3<f64>, radius: f64) -> bool {
-        let mut d2 = 0.0;
-        for i in 0..3 {
-            let c = centre[i].clamp(self.min_m[i], self.max_m[i]);
-            d2 += (centre[i] - c).powi(2);
-        }
-        d2 <= radius * radius
-    }
-
-    fn validate(&self, index: usize) -> Result<(), ParamError> {
-        for i in 0..3 {
-            params::finite(&format!("obstacles[{index}].min_m[{i}]"), self.min_m[i])?;
-            params::finite(&format!("obstacles[{index}].max_m[{i}]"), self.max_m[i])?;
-            if self.max_m[i] < self.min_m[i] {
-                return Err(ParamError::new(
-                    format!("obstacles[{index}].max_m[{i}]"),
-                    self.max_m[i],
-                    format!("must be >= min_m[{i}] ({})", self.min_m[i]),
-                ));
-            }
-        }
-        Ok(())
-    }
-}
-
-/// A box in any orientation: the ground vehicle's body, or an obstacle.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Obb {
-    /// Pose of the box centre; the box's axes are its frame's axes.
-    pub world_from_box: Isometry3<f64>,
-    /// Half the size along the box's x, y, z, m.
-    pub half_m: [f64; 3],
-}
-
-impl Obb {
-    /// The eight corners in world (bit 0 of the index picks +x, bit 1 +y, bit 2 +z).
-    pub fn corners(&self) -> [nalgebra::Point3<f64>; 8] {
-        let h = self.half_m;
-        std::array::from_fn(|k| {
-            let sign = |bit: usize, half: f64| if k & bit == 0 { -half } else { half };
-            self.world_from_box * nalgebra::Point3::new(sign(1, h[0]), sign(2, h[1]), sign(4, h[2]))
-        })
-    }
-
-    /// True if a sphere of `radius` around `centre` touches or enters the box.
-    pub fn intersects_sphere(&self, centre: &Vector3<f64>, radius: f64) -> bool {
-        let local = self
-            .world_from_box
-            .inverse_transform_point(&(*centre).into());
-        let mut d2 = 0.0;
-        for i in 0..3 {
-            let c = local[i].clamp(-self.half_m[i], self.half_m[i]);
-            d2 += (local[i] - c).powi(2);
-        }
-        d2 <= radius * radius
-    }
-}
-
-impl From<&Aabb> for Obb {
-    fn from(b: &Aabb) -> Self {
-        let centre = Vector3::from_fn(|i, _| (b.min_m[i] + b.max_m[i]) / 2.0);
-        Self {
-            world_from_box: Isometry3::translation(centre.x, centre.y, centre.z),
-            half_m: std::array::from_fn(|i| (b.max_m[i] - b.min_m[i]) / 2.0),
-        }
-    }
-}
 
 /// When a contact or attitude counts as a crash.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
