@@ -193,7 +193,10 @@ impl Campaign {
         if specs.is_empty() {
             return Err(CampaignError::NoScenario);
         }
-        let config = config.map_or_else(|| deploy.join("config").join("landing.toml"), Path::to_path_buf);
+        let config = config.map_or_else(
+            || deploy.join("config").join("landing.toml"),
+            Path::to_path_buf,
+        );
         let graph = graph::default_path(deploy);
         let config_hash = sha256_hex(&[&read(&config)?, &read(&graph)?]);
         let mut scenarios = Vec::new();
@@ -245,7 +248,10 @@ impl Campaign {
 
     /// The run file of `task`.
     pub fn path_of(&self, task: &Task) -> PathBuf {
-        let name = self.scenarios.get(task.scenario).map_or("", |p| p.name.as_str());
+        let name = self
+            .scenarios
+            .get(task.scenario)
+            .map_or("", |p| p.name.as_str());
         run_path(&self.out, name, task.index)
     }
 

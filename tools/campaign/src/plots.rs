@@ -105,10 +105,7 @@ impl Canvas {
 
     fn frame(&mut self, title: &str, xl: &str, yl: &str) -> opencv::Result<()> {
         let (x, y) = (self.x, self.y);
-        for (a, b) in [
-            ([x[0], y[0]], [x[1], y[0]]),
-            ([x[0], y[0]], [x[0], y[1]]),
-        ] {
+        for (a, b) in [([x[0], y[0]], [x[1], y[0]]), ([x[0], y[0]], [x[0], y[1]])] {
             self.line(a, b, black(), 1)?;
         }
         for k in 0..=4 {
@@ -179,7 +176,7 @@ pub fn write(dir: &Path, name: &str, runs: &[&RunRecord]) -> Result<Vec<PathBuf>
             }
         }
         c.frame(
-            &format!("{name}: where {n} runs came down on the 84 cm board (pad frame)"),
+            &format!("{name}: {n} touchdowns on the 84 cm board"),
             "x along the vehicle's heading, m",
             "y left, m",
         )?;
@@ -208,11 +205,15 @@ pub fn write(dir: &Path, name: &str, runs: &[&RunRecord]) -> Result<Vec<PathBuf>
             if let Some(v) = quantile(&errors, q) {
                 c.line([v, 0.0], [v, q], grey(), 1)?;
                 let at = c.at(v, q);
-                c.text(&format!("{label} {:.1} cm", v * 100.0), Point::new(at.x + 4, at.y - 4), 0.45)?;
+                c.text(
+                    &format!("{label} {:.1} cm", v * 100.0),
+                    Point::new(at.x + 4, at.y - 4),
+                    0.45,
+                )?;
             }
         }
         c.frame(
-            &format!("{name}: touchdown error of {} landed runs", errors.len()),
+            &format!("{name}: error of {} landed runs", errors.len()),
             "horizontal error from the pad centre, m",
             "fraction of runs",
         )?;
@@ -230,7 +231,7 @@ pub fn write(dir: &Path, name: &str, runs: &[&RunRecord]) -> Result<Vec<PathBuf>
             }
         }
         c.frame(
-            &format!("{name}: speed relative to the pad at first contact, {n} runs"),
+            &format!("{name}: speed at first contact, {n} runs"),
             "sideways, m/s (limit 0.5)",
             "down, m/s (limit 1.0)",
         )?;

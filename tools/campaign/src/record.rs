@@ -193,7 +193,9 @@ pub fn run_files(dir: &Path) -> Result<Vec<PathBuf>, RecordError> {
         for f in std::fs::read_dir(&sub).map_err(io(&sub))? {
             let p = f.map_err(io(&sub))?.path();
             let name = p.file_name().and_then(|n| n.to_str()).unwrap_or_default();
-            if name.starts_with("run-") && name.ends_with(".json") && !name.ends_with(".timing.json")
+            if name.starts_with("run-")
+                && name.ends_with(".json")
+                && !name.ends_with(".timing.json")
             {
                 out.push(p);
             }

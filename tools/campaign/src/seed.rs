@@ -16,11 +16,12 @@ fn name_hash(name: &str) -> u64 {
     })
 }
 
-/// The seed run `index` of `scenario` flies in a campaign of base seed `base`; never 0.
+/// The seed run `index` of `scenario` flies in a campaign of base seed `base`: from 1 to
+/// 2^32 - 1, so the command that flies it again stays short to type.
 pub fn derive(base: u64, scenario: &str, index: u64) -> u64 {
     let stream = mix(base ^ mix(name_hash(scenario)));
     let s = mix(stream.wrapping_add(index.wrapping_mul(0x9E37_79B9_7F4A_7C15)));
-    s.max(1)
+    (s % 0xFFFF_FFFF) + 1
 }
 
 #[cfg(test)]

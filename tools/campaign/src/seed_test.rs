@@ -7,7 +7,10 @@ fn a_seed_depends_on_the_base_the_scenario_and_the_index_only() {
     for base in [1, 2] {
         for scenario in ["paper-sim", "outdoor-2"] {
             for i in 0..1000 {
-                assert!(seen.insert(derive(base, scenario, i)), "{base} {scenario} {i}");
+                assert!(
+                    seen.insert(derive(base, scenario, i)),
+                    "{base} {scenario} {i}"
+                );
             }
         }
     }

@@ -250,10 +250,18 @@ impl fmt::Display for Table {
                 writeln!(f, "{name}: {}", others.join(", "))?;
             }
             for r in s.failed.iter().take(10) {
-                writeln!(f, "  failed  run {:>4}: {:<12} {}", r.index, r.outcome, r.command)?;
+                writeln!(
+                    f,
+                    "  failed  run {:>4}: {:<12} {}",
+                    r.index, r.outcome, r.command
+                )?;
             }
             if s.failed.len() > 10 {
-                writeln!(f, "  ... and {} more failed runs (--json lists them)", s.failed.len() - 10)?;
+                writeln!(
+                    f,
+                    "  ... and {} more failed runs (--json lists them)",
+                    s.failed.len() - 10
+                )?;
             }
             for r in &s.worst {
                 writeln!(

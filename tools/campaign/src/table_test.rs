@@ -7,7 +7,10 @@ fn the_wilson_interval_of_300_of_300_bounds_the_failure_rate_by_about_1_3_percen
     assert_eq!(hi, 1.0);
     // A textbook value: 8 of 10.
     let [lo, hi] = wilson95(8, 10);
-    assert!((lo - 0.4902).abs() < 1e-3 && (hi - 0.9433).abs() < 1e-3, "{lo} {hi}");
+    assert!(
+        (lo - 0.4902).abs() < 1e-3 && (hi - 0.9433).abs() < 1e-3,
+        "{lo} {hi}"
+    );
     assert_eq!(wilson95(0, 0), [0.0, 1.0]);
     let [lo, _] = wilson95(0, 20);
     assert_eq!(lo, 0.0);

@@ -68,7 +68,7 @@ impl Worker {
             outcome: flown.outcome.name().to_string(),
             referee: s.referee.clone(),
             touchdown_error_m: s.touchdown_error_m,
-            touchdown_pad_m: flown.eval.final_touchdown().map(|t| centre_on_pad(&t)),
+            touchdown_pad_m: flown.eval.final_touchdown().map(centre_on_pad),
             touchdown_rel_speed_mps: s.touchdown_rel_speed_mps,
             contact_vertical_mps: s.touchdown_vertical_speed_mps,
             contact_horizontal_mps: s.touchdown_horizontal_speed_mps,

@@ -135,7 +135,10 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         cmd.arg("--out").arg(&c.out);
         cmd.arg("--config").arg(&c.config);
         cmd.arg("--deploy-dir").arg(&c.deploy);
-        cmd.env("LANDING_LOG", std::env::var("LANDING_LOG").unwrap_or("warn".into()));
+        cmd.env(
+            "LANDING_LOG",
+            std::env::var("LANDING_LOG").unwrap_or("warn".into()),
+        );
         if let Ok(f) = std::fs::File::create(logs.join(format!("worker-{k}.log"))) {
             cmd.stderr(f);
         }
@@ -183,7 +186,11 @@ fn report(
     let table = Table::of(runs);
     if let Some(dir) = plots {
         for name in table.0.keys() {
-            let of: Vec<&RunRecord> = runs.iter().map(|r| &r.0).filter(|r| &r.scenario == name).collect();
+            let of: Vec<&RunRecord> = runs
+                .iter()
+                .map(|r| &r.0)
+                .filter(|r| &r.scenario == name)
+                .collect();
             for p in plots::write(dir, name, &of)? {
                 eprintln!("  plot: {}", p.display());
             }
@@ -212,7 +219,10 @@ fn tracks(c: &Campaign, table: &Table, n: usize) -> Result<()> {
                 ..stack::mission::Mission::default()
             };
             let flown = mission.fly(&mut |_| {})?;
-            let dir = c.out.join("plots").join(format!("{}-run-{}", plan.name, r.index));
+            let dir = c
+                .out
+                .join("plots")
+                .join(format!("{}-run-{}", plan.name, r.index));
             for p in evaluation::plot::write_plots(&dir, &flown.log)? {
                 eprintln!("  track: {} ({})", p.display(), r.command);
             }
@@ -238,6 +248,10 @@ fn worker(args: &EvalArgs, deploy: &Path) -> Result<()> {
 /// `landing eval merge`.
 fn merge_cmd(m: &MergeArgs) -> Result<()> {
     let runs = merge::merge(&m.dirs, m.expect)?;
-    eprintln!("merge: {} runs from {} director(ies)", runs.len(), m.dirs.len());
+    eprintln!(
+        "merge: {} runs from {} director(ies)",
+        runs.len(),
+        m.dirs.len()
+    );
     report(&runs, m.json, m.plots.as_deref())
 }
