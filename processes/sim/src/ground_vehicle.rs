@@ -152,6 +152,11 @@ pub struct GroundVehicleParams {
     /// A lane change: a smooth sideways move off the route.
     #[serde(default)]
     pub lane_change: Option<LaneChange>,
+    /// The whole route moved by this much in x and y, m: where a run's seed puts the
+    /// vehicle's start and the take-off point (the scenario's `[variation]`), not a
+    /// scenario file's key.
+    #[serde(skip)]
+    pub offset_m: [f64; 2],
 }
 
 /// A driver's imperfection, seeded per run: the speed wanders around the profile
@@ -223,6 +228,7 @@ impl Default for GroundVehicleParams {
             oscillation: None,
             driver: None,
             lane_change: None,
+            offset_m: [0.0; 2],
         }
     }
 }
@@ -614,7 +620,9 @@ impl GroundVehicle {
             + rz * (Vector3::y() * pitch_rate)
             + (rz * ry) * (Vector3::x() * roll_rate);
         let rotation = UnitQuaternion::from_euler_angles(roll, pitch, heading);
-        let position = point.position + Vector2::new(normal.x, normal.y) * y;
+        let position = point.position
+            + Vector2::new(normal.x, normal.y) * y
+            + Vector2::new(self.params.offset_m[0], self.params.offset_m[1]);
         PadState {
             world_from_pad: Isometry3::from_parts(
                 Translation3::new(position.x, position.y, self.params.pad_height_m),

@@ -156,7 +156,76 @@ pub struct Scenario {
     /// (keeps time by default).
     #[serde(default)]
     pub autopilot_clock: AutopilotClock,
+    /// What else a seed varies of the world: when and where the pad vehicle starts, and
+    /// where the vehicle takes off from.
+    #[serde(default)]
+    pub variation: Variation,
 }
+
+/// What a flight-test engineer varies from one run to the next besides the weather and
+/// the hardware: the pad vehicle's start (a driver never leaves at the same instant or
+/// from the same spot) and the take-off point (a vehicle is never set down exactly on its
+/// mark). Each is drawn per seed, uniform within +- its value.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Variation {
+    /// The pad vehicle's start time, +- s (never before 0).
+    pub start_delay_s: f64,
+    /// Its route's start, +- m in x and in y.
+    pub start_offset_m: f64,
+    /// The take-off point, +- m in x and in y: the road, the pad vehicle and the
+    /// obstacles move by the opposite in the vehicle's frame (its flight plan, the preset
+    /// point, is relative to where it took off).
+    pub takeoff_offset_m: f64,
+}
+
+impl Default for Variation {
+    /// Half a second, 25 cm and 15 cm.
+    fn default() -> Self {
+        Self {
+            start_delay_s: 0.5,
+            start_offset_m: 0.25,
+            takeoff_offset_m: 0.15,
+        }
+    }
+}
+
+impl Variation {
+    /// No variation: every seed starts the world the same (tests that need that).
+    pub fn none() -> Self {
+        Self {
+            start_delay_s: 0.0,
+            start_offset_m: 0.0,
+            takeoff_offset_m: 0.0,
+        }
+    }
+
+    /// Checks every field; the error names it.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        crate::params::in_range("variation.start_delay_s", self.start_delay_s, 0.0, 60.0)?;
+        crate::params::in_range("variation.start_offset_m", self.start_offset_m, 0.0, 50.0)?;
+        crate::params::in_range(
+            "variation.takeoff_offset_m",
+            self.takeoff_offset_m,
+            0.0,
+            10.0,
+        )?;
+        Ok(())
+    }
+
+    /// The draws for `seed`: (start delay change s, route offset m, take-off offset m).
+    pub fn draw(&self, seed: u64) -> (f64, [f64; 2], [f64; 2]) {
+        let mut rng = Pcg32::with_stream(seed.wrapping_add(VARIATION_SEED_OFFSET), 53);
+        let mut u = |half: f64| half * (2.0 * rng.uniform() - 1.0);
+        let delay = u(self.start_delay_s);
+        let start = [u(self.start_offset_m), u(self.start_offset_m)];
+        let takeoff = [u(self.takeoff_offset_m), u(self.takeoff_offset_m)];
+        (delay, start, takeoff)
+    }
+}
+
+/// Offset of the variation draw's seed from the run's seed (see [`MASS_SEED_OFFSET`]).
+const VARIATION_SEED_OFFSET: u64 = 8;
 
 /// The companion's view of the autopilot's clock: every MAVLink message the autopilot
 /// sends reaches px4-link late by a per-run delay (serial framing, PX4's mavlink module
@@ -303,6 +372,9 @@ impl Validate for Scenario {
             .validate()
             .map_err(|e| from_param("scenario", e))?;
         self.autopilot_clock
+            .validate()
+            .map_err(|e| from_param("scenario", e))?;
+        self.variation
             .validate()
             .map_err(|e| from_param("scenario", e))?;
         for (i, b) in self.obstacles.iter().enumerate() {
@@ -524,17 +596,35 @@ impl LoadedScenario {
         if let Some(d) = ground_vehicle.driver.as_mut() {
             d.seed = seed.wrapping_add(2);
         }
+        let (delay, start, takeoff) = s.variation.draw(seed);
+        ground_vehicle.start_delay_s = (ground_vehicle.start_delay_s + delay).max(0.0);
+        ground_vehicle.offset_m = [start[0] - takeoff[0], start[1] - takeoff[1]];
+        let obstacles = self.obstacles(seed);
         WorldParams {
             airframe: self.true_airframe(seed),
             autopilot: Some(self.autopilot.clone()),
             estimator_noise: noise,
             wind,
             ground_vehicle: Some(ground_vehicle),
-            obstacles: s.obstacles.clone(),
+            obstacles,
             crash: s.crash.clone(),
             initial_position_m: [0.0; 3],
             initial_yaw_rad: 0.0,
         }
+    }
+
+    /// The obstacles where they are for `seed`: the scenario's, moved by the seed's
+    /// take-off point (`[variation]`).
+    pub fn obstacles(&self, seed: u64) -> Vec<Aabb> {
+        let (_, _, takeoff) = self.scenario.variation.draw(seed);
+        self.scenario
+            .obstacles
+            .iter()
+            .map(|b| Aabb {
+                min_m: [b.min_m[0] - takeoff[0], b.min_m[1] - takeoff[1], b.min_m[2]],
+                max_m: [b.max_m[0] - takeoff[0], b.max_m[1] - takeoff[1], b.max_m[2]],
+            })
+            .collect()
     }
 
     /// The vehicle that flies for `seed`: the airframe file with the seed's mass error

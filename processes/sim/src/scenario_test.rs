@@ -182,3 +182,23 @@ fn a_zero_mass_spread_flies_the_airframe_file_and_a_large_one_is_refused() {
         "{e}"
     );
 }
+
+#[test]
+fn a_seed_moves_the_pad_vehicle_start_and_the_take_off_point_within_the_variation() {
+    let v = Variation::default();
+    let mut delays = Vec::new();
+    for seed in 1..200 {
+        let (d, start, takeoff) = v.draw(seed);
+        assert_eq!(
+            (d, start, takeoff),
+            v.draw(seed),
+            "the same for the same seed"
+        );
+        assert!(d.abs() <= v.start_delay_s);
+        assert!(start.iter().all(|x| x.abs() <= v.start_offset_m));
+        assert!(takeoff.iter().all(|x| x.abs() <= v.takeoff_offset_m));
+        delays.push(d);
+    }
+    assert!(delays.iter().any(|d| *d > 0.3) && delays.iter().any(|d| *d < -0.3));
+    assert_eq!(Variation::none().draw(5), (0.0, [0.0; 2], [0.0; 2]));
+}

@@ -193,8 +193,7 @@ pub fn run(args: &PlotArgs) -> Result<()> {
     let obstacles = match &read.scenario {
         Some(name) => match sim::scenario::load(name, &deploy) {
             Ok(s) => s
-                .scenario
-                .obstacles
+                .obstacles(read.seed)
                 .iter()
                 .map(|b| (b.min_m, b.max_m))
                 .collect(),

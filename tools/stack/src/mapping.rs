@@ -152,7 +152,7 @@ pub fn run(args: &MapArgs) -> Result<()> {
     let cfg: StackConfig = cfgload::load(&cfg_path)?;
     let scn = sim::scenario::load(&args.scenario, &deploy)?;
     let seed = args.seed.unwrap_or(scn.scenario.seed);
-    let obstacles: Vec<Aabb> = scn.scenario.obstacles.clone();
+    let obstacles: Vec<Aabb> = scn.obstacles(seed);
     let look_at = obstacles
         .first()
         .map(|b| {

@@ -274,8 +274,7 @@ impl Mission {
             ..
         } = referee;
         let obstacles = scn
-            .scenario
-            .obstacles
+            .obstacles(seed)
             .iter()
             .map(|b| (b.min_m, b.max_m))
             .collect();
