@@ -29,7 +29,6 @@ pub mod plan_cmd;
 pub mod plot;
 pub mod plot_cmd;
 pub mod procs;
-pub mod recorded_json;
 pub mod replay_cmd;
 pub mod replay_depth;
 pub mod replay_fsm;
