@@ -4,5 +4,6 @@
 //! dependency graph, and every process, tool and test can depend on it.
 
 pub mod msg;
+pub mod payloads;
 pub mod services;
 pub mod topics;

@@ -81,7 +81,7 @@ impl Stage {
 
 /// When one stage took a message in and let it out, in monotonic nanoseconds.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::StageStamp/v1")]
 pub struct StageStamp {
@@ -100,7 +100,7 @@ pub struct StageStamp {
 /// `capture_ns` is the capture time of the sensor data the message derives from, carried
 /// unchanged down the graph, so that any consumer can tell how old its input really is.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::Header/v1")]
 pub struct Header {
@@ -172,7 +172,7 @@ impl Header {
 
 /// A point in a plane, metres (a landing-gear foot in the pad frame).
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::Point2/v1")]
 pub struct Point2 {
@@ -192,7 +192,7 @@ impl From<[f64; 2]> for Point2 {
 ///
 /// Named at each use by what it maps (`world_from_body`, `camera_from_pad`).
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("landing::Pose/v1")]
 pub struct Pose {
@@ -258,7 +258,7 @@ impl PixelEncoding {
 
 /// Metadata of a camera frame; the pixels are the `[u8]` slice payload behind it.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::CameraFrameHeader/v1")]
 pub struct CameraFrameHeader {
@@ -295,7 +295,7 @@ impl CameraFrameHeader {
 
 /// Pinhole intrinsics, pixels.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::Intrinsics/v1")]
 pub struct Intrinsics {
@@ -311,7 +311,7 @@ pub struct Intrinsics {
 
 /// Metadata of a depth frame; the depths are the `[u16]` slice payload behind it.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::DepthFrameHeader/v1")]
 pub struct DepthFrameHeader {
@@ -333,7 +333,7 @@ pub struct DepthFrameHeader {
 
 /// The pad pose seen in one camera frame.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("landing::PadObservation/v1")]
 pub struct PadObservation {
@@ -344,7 +344,10 @@ pub struct PadObservation {
     /// Pad in the world, through the vehicle state at capture time.
     pub world_from_pad: Pose,
     /// Covariance of world_from_pad, (x, y, z, roll, pitch, yaw), row-major.
-    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::array"))]
+    #[cfg_attr(
+        feature = "serde",
+        serde(serialize_with = "ser::array", deserialize_with = "de::array")
+    )]
     pub covariance: [f64; 36],
     /// RMS reprojection error over all used corners, px.
     pub reprojection_error_px: f64,
@@ -441,7 +444,7 @@ impl LandedState {
 
 /// Health of the link to the autopilot.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::LinkHealth/v2")]
 pub struct LinkHealth {
@@ -456,26 +459,34 @@ pub struct LinkHealth {
     /// Messages lost according to MAVLink sequence numbers.
     pub messages_lost: u64,
     /// 1 when the link is signed (MAVLink 2 signing, a key configured).
+    #[cfg_attr(feature = "serde", serde(default))]
     pub signed: u32,
     /// Keeps the layout free of implicit padding.
+    #[cfg_attr(feature = "serde", serde(default))]
     pub reserved: u32,
     /// Datagrams from an address other than the autopilot's, dropped unread.
+    #[cfg_attr(feature = "serde", serde(default))]
     pub wrong_address: u64,
     /// Frames from a system or component other than the autopilot's, dropped.
+    #[cfg_attr(feature = "serde", serde(default))]
     pub wrong_source: u64,
     /// Frames of a message id the dialect does not know, dropped.
+    #[cfg_attr(feature = "serde", serde(default))]
     pub unknown_id: u64,
     /// Unsigned frames on a signed link, dropped.
+    #[cfg_attr(feature = "serde", serde(default))]
     pub unsigned: u64,
     /// Frames whose signature does not match the key, dropped.
+    #[cfg_attr(feature = "serde", serde(default))]
     pub bad_signature: u64,
     /// Signed frames played again (a timestamp not newer than the last), dropped.
+    #[cfg_attr(feature = "serde", serde(default))]
     pub replayed: u64,
 }
 
 /// The vehicle's estimated state, as the autopilot reports it (never ground truth).
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::VehicleState/v2")]
 pub struct VehicleState {
@@ -529,7 +540,7 @@ impl CellState {
 /// Metadata of the local occupancy window; cells are the `[u8]` slice payload behind it,
 /// x fastest, then y, then z, one [`CellState`] each.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::OccupancyMapHeader/v2")]
 pub struct OccupancyMapHeader {
@@ -548,6 +559,7 @@ pub struct OccupancyMapHeader {
     /// Capture time of the newest vehicle state the frame's pose came from (the first
     /// after its capture, interpolated towards, else the newest; 0: none): the states a
     /// replay must hand the mapper first to rebuild this map.
+    #[cfg_attr(feature = "serde", serde(default))]
     pub state_ns: u64,
 }
 
@@ -576,7 +588,7 @@ impl GoalMode {
 
 /// A goal for the planner, world frame.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::PlannerGoal/v1")]
 pub struct PlannerGoal {
@@ -598,7 +610,7 @@ pub struct PlannerGoal {
 
 /// A uniform cubic B-spline trajectory in the world frame.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("landing::Trajectory/v1")]
 pub struct Trajectory {
@@ -615,7 +627,13 @@ pub struct Trajectory {
     /// 1 for an emergency-stop trajectory.
     pub emergency: u32,
     /// Control points, m.
-    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::points_xyz"))]
+    #[cfg_attr(
+        feature = "serde",
+        serde(
+            serialize_with = "ser::points_xyz",
+            deserialize_with = "de::points_xyz"
+        )
+    )]
     pub control_points: [[f64; 3]; MAX_CONTROL_POINTS],
 }
 
@@ -642,7 +660,7 @@ impl Trajectory {
 
 /// Planning statistics, one per planning call.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::PlannerStats/v1")]
 pub struct PlannerStats {
@@ -669,7 +687,7 @@ pub struct PlannerStats {
 /// A field that is not to be controlled has its bit cleared in `valid`: NaN never goes on
 /// the wire (PX4 reads NaN as "ignore", but a NaN from a bug must not look like intent).
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::Setpoint/v1")]
 pub struct Setpoint {
@@ -808,7 +826,7 @@ impl Text {
 
 /// The mission state machine's status, published on every transition and periodically.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::FsmStatus/v1")]
 pub struct FsmStatus {
@@ -900,7 +918,7 @@ impl LinkRequestKind {
 
 /// A request to px4-link (fsm -> px4-link); answered by a [`LinkOutcome`] with its id.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::LinkRequest/v1")]
 pub struct LinkRequest {
@@ -953,7 +971,7 @@ impl LinkOutcomeKind {
 
 /// px4-link's answer to a [`LinkRequest`].
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::LinkOutcome/v1")]
 pub struct LinkOutcome {
@@ -973,7 +991,7 @@ pub struct LinkOutcome {
 
 /// An order from the watchdog or an operator, executed at once by px4-link and fsm.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::SafetyCommand/v1")]
 pub struct SafetyCommand {
@@ -1029,7 +1047,7 @@ impl Liveness {
 
 /// Health of one supervised process as the watchdog sees it.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::ProcessHealth/v3")]
 pub struct ProcessHealth {
@@ -1054,7 +1072,7 @@ pub struct ProcessHealth {
 
 /// The watchdog's view of the whole stack.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::WatchdogView/v3")]
 pub struct WatchdogView {
@@ -1116,7 +1134,7 @@ impl PortFault {
 /// `landing inject`). Only processes started with `LANDING_FAULT_INJECTION=1` listen:
 /// a deployed stack has no such door.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::FaultOrder/v2")]
 pub struct FaultOrder {
@@ -1167,7 +1185,7 @@ impl ProcessEventKind {
 /// crosses shared memory: the runtime's supervision source delivers it inside the
 /// watchdog's own process.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::ProcessEvent/v2")]
 pub struct ProcessEvent {
@@ -1215,7 +1233,7 @@ impl TruthKind {
 /// topic [`crate::services::SIM_TRUTH_STATE`] (plots and speeds of `landing run
 /// --processes`). No pipeline process may read it.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::TruthState/v3")]
 pub struct TruthState {
@@ -1274,7 +1292,7 @@ impl Contact {
 /// A ground-truth event from the simulator, on the evaluator-only topic
 /// ([`crate::services::SIM_TRUTH`]). No pipeline process may read it.
 #[repr(C)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("landing::TruthEvent/v2")]
 pub struct TruthEvent {
@@ -1339,6 +1357,56 @@ mod ser {
     impl Serialize for super::Text {
         fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
             s.serialize_str(self.as_str())
+        }
+    }
+}
+
+/// Deserialization, the inverse of [`ser`]: what the recorder wrote reads back into the
+/// same structs (`landing replay`, `landing plot`). Like the derives, it is independent of
+/// the format; one thing is the format's: JSON has no NaN, so a non-finite number was
+/// written as `null`, and the recorder's reader (`recorder::decode`) hands a `null` that
+/// stands for a number over as NaN, whichever field it is in.
+#[cfg(feature = "serde")]
+mod de {
+    use serde::de::Error as _;
+    use serde::{Deserialize, Deserializer};
+
+    /// An array written by [`super::ser::array`] (longer than serde's derive covers).
+    pub(super) fn array<'de, D, T, const N: usize>(d: D) -> Result<[T; N], D::Error>
+    where
+        D: Deserializer<'de>,
+        T: Deserialize<'de>,
+    {
+        let items = Vec::<T>::deserialize(d)?;
+        let len = items.len();
+        <[T; N]>::try_from(items)
+            .map_err(|_| D::Error::invalid_length(len, &format!("{N} items").as_str()))
+    }
+
+    /// A point written as `{x, y, z}`.
+    #[derive(Deserialize)]
+    struct Xyz {
+        x: f64,
+        y: f64,
+        z: f64,
+    }
+
+    /// Points written by [`super::ser::points_xyz`].
+    pub(super) fn points_xyz<'de, D, const N: usize>(d: D) -> Result<[[f64; 3]; N], D::Error>
+    where
+        D: Deserializer<'de>,
+    {
+        let points = Vec::<Xyz>::deserialize(d)?;
+        let len = points.len();
+        let xyz: Vec<[f64; 3]> = points.into_iter().map(|p| [p.x, p.y, p.z]).collect();
+        <[[f64; 3]; N]>::try_from(xyz)
+            .map_err(|_| D::Error::invalid_length(len, &format!("{N} points").as_str()))
+    }
+
+    /// Text from the string it was written as (cut to fit, as [`super::Text::new`] cuts).
+    impl<'de> Deserialize<'de> for super::Text {
+        fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+            Ok(Self::new(&String::deserialize(d)?))
         }
     }
 }

@@ -4,81 +4,55 @@
 
 use crate::services;
 
-/// What a topic carries: one payload type (slices: the header type, with elements).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Payload {
-    /// [`crate::msg::CameraFrameHeader`] with `u8` pixels.
-    CameraFrame,
-    /// [`crate::msg::DepthFrameHeader`] with `u16` depths.
-    DepthFrame,
-    /// [`crate::msg::OccupancyMapHeader`] with `u8` cells.
-    OccupancyMap,
-    /// [`crate::msg::VehicleState`].
-    VehicleState,
-    /// [`crate::msg::PadObservation`].
-    PadObservation,
-    /// [`crate::msg::PlannerGoal`].
-    PlannerGoal,
-    /// [`crate::msg::Trajectory`].
-    Trajectory,
-    /// [`crate::msg::PlannerStats`].
-    PlannerStats,
-    /// [`crate::msg::Setpoint`].
-    Setpoint,
-    /// [`crate::msg::LinkRequest`].
-    LinkRequest,
-    /// [`crate::msg::LinkOutcome`].
-    LinkOutcome,
-    /// [`crate::msg::SafetyCommand`].
-    SafetyCommand,
-    /// [`crate::msg::FsmStatus`].
-    FsmStatus,
-    /// [`crate::msg::WatchdogView`].
-    WatchdogView,
-    /// [`crate::msg::ProcessEvent`] (delivered inside the watchdog's process).
-    ProcessEvent,
-    /// [`crate::msg::TruthEvent`] (evaluator only).
-    TruthEvent,
-    /// [`crate::msg::TruthState`] (evaluator only).
-    TruthState,
-    /// MAVLink 2 bytes: one datagram, or a chunk of a serial byte stream.
-    Mavlink,
-}
-
-impl Payload {
-    /// The versioned type name (for slices, the header's), as the graph file writes it.
-    pub fn type_name(self) -> &'static str {
-        match self {
-            Self::CameraFrame => "landing::CameraFrameHeader/v1",
-            Self::DepthFrame => "landing::DepthFrameHeader/v1",
-            Self::OccupancyMap => "landing::OccupancyMapHeader/v2",
-            Self::VehicleState => "landing::VehicleState/v2",
-            Self::PadObservation => "landing::PadObservation/v1",
-            Self::PlannerGoal => "landing::PlannerGoal/v1",
-            Self::Trajectory => "landing::Trajectory/v1",
-            Self::PlannerStats => "landing::PlannerStats/v1",
-            Self::Setpoint => "landing::Setpoint/v1",
-            Self::LinkRequest => "landing::LinkRequest/v1",
-            Self::LinkOutcome => "landing::LinkOutcome/v1",
-            Self::SafetyCommand => "landing::SafetyCommand/v1",
-            Self::FsmStatus => "landing::FsmStatus/v1",
-            Self::WatchdogView => "landing::WatchdogView/v3",
-            Self::ProcessEvent => "landing::ProcessEvent/v2",
-            Self::TruthEvent => "landing::TruthEvent/v2",
-            Self::TruthState => "landing::TruthState/v3",
-            Self::Mavlink => "MAVLink 2",
+/// Writes [`Payload`] and its methods from the payload list.
+macro_rules! payload_enum {
+    (
+        structs: [$($(#[$sd:meta])* $s:ident($st:ty => $so:ty) = $sn:literal,)*],
+        truth: [$($(#[$td:meta])* $t:ident($tt:ty => $to:ty) = $tn:literal,)*],
+        slices: [$($(#[$cd:meta])* $c:ident($ch:ty, [$ce:ty]) = $cn:literal,)*],
+        local: [$($(#[$ld:meta])* $l:ident($lt:ty) = $ln:literal,)*],
+        bytes: [$($(#[$bd:meta])* $b:ident = $bn:literal,)*],
+    ) => {
+        /// What a topic carries: one payload kind (slices: a header type, with elements).
+        /// The kinds are those of [`crate::for_each_payload!`], the one list of them.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+        pub enum Payload {
+            $($(#[$sd])* $s,)*
+            $($(#[$td])* $t,)*
+            $($(#[$cd])* $c,)*
+            $($(#[$ld])* $l,)*
+            $($(#[$bd])* $b,)*
         }
-    }
 
-    /// The slice element type, for payloads that are a header plus a slice.
-    pub fn elements(self) -> Option<&'static str> {
-        match self {
-            Self::CameraFrame | Self::OccupancyMap => Some("u8"),
-            Self::DepthFrame => Some("u16"),
-            _ => None,
+        impl Payload {
+            /// Every payload kind, in the list's order.
+            pub const ALL: &[Payload] = &[
+                $(Self::$s,)* $(Self::$t,)* $(Self::$c,)* $(Self::$l,)* $(Self::$b,)*
+            ];
+
+            /// The versioned type name (for slices, the header's), as the graph file
+            /// writes it and recordings name their schemas.
+            pub fn type_name(self) -> &'static str {
+                match self {
+                    $(Self::$s => $sn,)*
+                    $(Self::$t => $tn,)*
+                    $(Self::$c => $cn,)*
+                    $(Self::$l => $ln,)*
+                    $(Self::$b => $bn,)*
+                }
+            }
+
+            /// The slice element type, for payloads that are a header plus a slice.
+            pub fn elements(self) -> Option<&'static str> {
+                match self {
+                    $(Self::$c => Some(stringify!($ce)),)*
+                    _ => None,
+                }
+            }
         }
-    }
+    };
 }
+crate::for_each_payload!(payload_enum);
 
 /// One row of the table.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -2,10 +2,14 @@
 //! schemas (images, transforms, the 3-D scene, logs) and as plottable JSON, written with
 //! the Foxglove SDK. [`RecorderStage`] is the stage both drivers run: the `recorder`
 //! process under the iceoryx2 driver, and `landing run` in lockstep with the same code.
-//! [`read`] reads recordings back, up to where a damaged one breaks.
+//! [`read`] reads recordings back, up to where a damaged one breaks, and [`decode`] turns
+//! what they hold back into the stack's messages. [`process`] is the `recorder` binary's
+//! whole work.
 
 pub mod config;
+pub mod decode;
 pub mod metadata;
+pub mod process;
 pub mod read;
 pub mod schema;
 pub mod stage;
@@ -13,6 +17,10 @@ pub mod visual;
 pub mod writer;
 
 pub use config::RecorderConfig;
+pub use decode::{
+    CallerError, DecodeError, Decoded, ReadRecordingError, RecordedMap, RecordedMaps,
+    read_recording,
+};
 pub use read::{
     Broken, ReadError, ReadSummary, RecordedMessage, RecordingInfo, info, read_messages,
 };

@@ -14,12 +14,8 @@
 //! reads integers as JavaScript numbers: nanosecond stamps are exact up to 2^53 ns
 //! (104 days of uptime on the monotonic clock).
 
-use ipc_types::msg::{
-    CameraFrameHeader, DepthFrameHeader, FsmStatus, LinkOutcome, LinkRequest, OccupancyMapHeader,
-    PadObservation, PlannerGoal, PlannerStats, SafetyCommand, Setpoint, Trajectory, TruthEvent,
-    TruthState, VehicleState, WatchdogView,
-};
 use serde::Serialize;
+use serde::de::DeserializeOwned;
 use serde_json::{Map, Value, json};
 
 /// MCAP message encoding of every channel.
@@ -37,40 +33,41 @@ pub struct SchemaError {
     pub error: serde_json::Error,
 }
 
-/// A message type that can go into a recording: serializable, with a default value to
-/// derive its schema from and a schema name.
-pub trait Recordable: Serialize + Default {
+/// A message type that can go into a recording and come back out of it: serializable
+/// and deserializable, with a default value to derive its schema from and a schema name.
+pub trait Recordable: Serialize + DeserializeOwned + Default {
     /// Schema name shown by viewers; the message's iceoryx2 type name (versioned), so a
     /// recording says which layout it holds.
     const SCHEMA_NAME: &'static str;
 }
 
+/// Makes every struct of the payload list ([`ipc_types::for_each_payload!`]) recordable
+/// under its versioned type name: pipeline structs, the simulator's truth, and the
+/// headers of frames and maps (their pixels and cells go into Foxglove's schemas).
+/// Local payloads and MAVLink bytes are not recorded.
 macro_rules! recordable {
-    ($($t:ty => $name:literal),* $(,)?) => {
-        $(impl Recordable for $t {
-            const SCHEMA_NAME: &'static str = $name;
+    (
+        structs: [$($(#[$sd:meta])* $s:ident($st:ty => $so:ty) = $sn:literal,)*],
+        truth: [$($(#[$td:meta])* $t:ident($tt:ty => $to:ty) = $tn:literal,)*],
+        slices: [$($(#[$cd:meta])* $c:ident($ch:ty, [$ce:ty]) = $cn:literal,)*],
+        $($rest:tt)*
+    ) => {
+        $(impl Recordable for $st {
+            const SCHEMA_NAME: &'static str = $sn;
+        })*
+        $(impl Recordable for $tt {
+            const SCHEMA_NAME: &'static str = $tn;
+        })*
+        $(impl Recordable for $ch {
+            const SCHEMA_NAME: &'static str = $cn;
         })*
     };
 }
+ipc_types::for_each_payload!(recordable);
 
-recordable!(
-    PadObservation => "landing::PadObservation/v1",
-    VehicleState => "landing::VehicleState/v2",
-    Trajectory => "landing::Trajectory/v1",
-    PlannerStats => "landing::PlannerStats/v1",
-    PlannerGoal => "landing::PlannerGoal/v1",
-    Setpoint => "landing::Setpoint/v1",
-    FsmStatus => "landing::FsmStatus/v1",
-    TruthEvent => "landing::TruthEvent/v2",
-    TruthState => "landing::TruthState/v3",
-    LinkRequest => "landing::LinkRequest/v1",
-    LinkOutcome => "landing::LinkOutcome/v1",
-    SafetyCommand => "landing::SafetyCommand/v1",
-    WatchdogView => "landing::WatchdogView/v3",
-    OccupancyMapHeader => "landing::OccupancyMapHeader/v2",
-    CameraFrameHeader => "landing::CameraFrameHeader/v1",
-    DepthFrameHeader => "landing::DepthFrameHeader/v1",
-);
+/// The channel of a frame's or a map's header: `/camera/frame/header` beside the
+/// pictures on `/camera/frame`.
+pub const HEADER_SUFFIX: &str = "/header";
 
 /// The JSON Schema of a serialized value: objects by property, arrays by their first
 /// item, integers apart from other numbers. `null` (a non-finite float) reads as a number.

@@ -25,7 +25,9 @@ use foxglove::{
 };
 use stage::Message;
 
-use crate::schema::{MESSAGE_ENCODING, Recordable, SCHEMA_ENCODING, SchemaError, schema_for};
+use crate::schema::{
+    HEADER_SUFFIX, MESSAGE_ENCODING, Recordable, SCHEMA_ENCODING, SchemaError, schema_for,
+};
 use crate::visual::{self, Visuals};
 
 /// Why a recording could not be written.
@@ -368,26 +370,27 @@ impl Recorder {
         msg: &Message<'_>,
     ) -> Result<(), RecordError> {
         let name = format!("/{topic}");
-        let t = log_time_ns;
+        self.record_json(&name, log_time_ns, msg)?;
+        self.draw(&name, log_time_ns, msg)
+    }
+
+    /// What Foxglove draws of `msg` on `name` (`/<topic>`), besides its JSON: pictures,
+    /// transforms, scenes, log lines; nothing for most messages.
+    fn draw(&mut self, name: &str, t: u64, msg: &Message<'_>) -> Result<(), RecordError> {
         match *msg {
-            Message::CameraFrame(h, pixels) => {
-                self.write_message(&format!("{name}/header"), t, h)?;
-                self.image(&name, t, h, pixels)?;
-            }
+            Message::CameraFrame(h, pixels) => self.image(name, t, h, pixels)?,
             Message::DepthFrame(h, depths) => {
-                self.write_message(&format!("{name}/header"), t, h)?;
                 let img = visual::depth_image(h, depths);
-                self.raw_channel(&name)
+                self.raw_channel(name)
                     .log_with_meta(&img, PartialMetadata::with_log_time(t));
                 self.messages += 1;
             }
             Message::OccupancyMap(h, cells) => {
-                self.write_message(&format!("{name}/header"), t, h)?;
                 if let Some(grid) = visual::voxel_grid(h, cells) {
                     let ctx = &self.ctx;
                     self.voxels
-                        .entry(name.clone())
-                        .or_insert_with(|| ctx.channel_builder(&name).build::<VoxelGrid>())
+                        .entry(name.to_string())
+                        .or_insert_with(|| ctx.channel_builder(name).build::<VoxelGrid>())
                         .log_with_meta(&grid, PartialMetadata::with_log_time(t));
                     self.messages += 1;
                 }
@@ -401,22 +404,18 @@ impl Recorder {
                 }
             }
             Message::VehicleState(m) => {
-                self.write_message(&name, t, m)?;
                 let tf = self.visuals.vehicle(m);
                 self.transforms(t, &tf);
             }
             Message::PadObservation(m) => {
-                self.write_message(&name, t, m)?;
                 let tf = self.visuals.observation(m);
                 self.transforms(t, &tf);
             }
             Message::Trajectory(m) => {
-                self.write_message(&name, t, m)?;
                 let scene = visual::trajectory_scene(m);
                 self.scene_update(visual::TRAJECTORY_TOPIC, t, &scene);
             }
             Message::FsmStatus(m) => {
-                self.write_message(&name, t, m)?;
                 if let Some(log) = self.visuals.status_log(m) {
                     self.log(t, &log);
                 }
@@ -425,27 +424,16 @@ impl Recorder {
                 self.scene_update(visual::PAD_TOPIC, t, &scene);
             }
             Message::WatchdogView(m) => {
-                self.write_message(&name, t, m)?;
                 if let Some(log) = self.visuals.watchdog_log(m) {
                     self.log(t, &log);
                 }
             }
-            Message::SafetyCommand(m) => {
-                self.write_message(&name, t, m)?;
-                self.log(t, &visual::safety_log(m));
-            }
-            Message::PlannerGoal(m) => self.write_message(&name, t, m)?,
-            Message::PlannerStats(m) => self.write_message(&name, t, m)?,
-            Message::Setpoint(m) => self.write_message(&name, t, m)?,
-            Message::LinkRequest(m) => self.write_message(&name, t, m)?,
-            Message::LinkOutcome(m) => self.write_message(&name, t, m)?,
-            Message::TruthEvent(m) => self.write_message(&name, t, m)?,
+            Message::SafetyCommand(m) => self.log(t, &visual::safety_log(m)),
             Message::TruthState(m) => {
-                self.write_message(&name, t, m)?;
                 let scene = visual::truth_scene(m);
                 self.scene_update(visual::TRUTH_TOPIC, t, &scene);
             }
-            Message::Mavlink(_) | Message::ProcessEvent(_) => {}
+            _ => {}
         }
         Ok(())
     }
@@ -549,6 +537,42 @@ impl Recorder {
         Ok(self.messages)
     }
 }
+
+/// Writes [`Recorder::record_json`] from the payload list
+/// ([`ipc_types::for_each_payload!`]): every struct as JSON on its topic's channel, and
+/// the header of every frame and map on `<channel>/header`; local payloads and bytes
+/// are not recorded.
+macro_rules! record_json {
+    (
+        structs: [$($(#[$sd:meta])* $s:ident($st:ty => $so:ty) = $sn:literal,)*],
+        truth: [$($(#[$td:meta])* $t:ident($tt:ty => $to:ty) = $tn:literal,)*],
+        slices: [$($(#[$cd:meta])* $c:ident($ch:ty, [$ce:ty]) = $cn:literal,)*],
+        local: [$($(#[$ld:meta])* $l:ident($lt:ty) = $ln:literal,)*],
+        bytes: [$($(#[$bd:meta])* $b:ident = $bn:literal,)*],
+    ) => {
+        impl Recorder {
+            /// The JSON of `msg` on `name` (`/<topic>`), or of its header on
+            /// `<name>/header` for a frame or a map.
+            fn record_json(
+                &mut self,
+                name: &str,
+                t: u64,
+                msg: &Message<'_>,
+            ) -> Result<(), RecordError> {
+                match *msg {
+                    $(Message::$s(m) => self.write_message(name, t, m),)*
+                    $(Message::$t(m) => self.write_message(name, t, m),)*
+                    $(Message::$c(h, _) => {
+                        self.write_message(&format!("{name}{HEADER_SUFFIX}"), t, h)
+                    })*
+                    $(Message::$l(_) => Ok(()),)*
+                    $(Message::$b(_) => Ok(()),)*
+                }
+            }
+        }
+    };
+}
+ipc_types::for_each_payload!(record_json);
 
 impl Drop for Recorder {
     fn drop(&mut self) {

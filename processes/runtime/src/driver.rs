@@ -11,11 +11,7 @@ use std::time::Duration;
 
 use iceoryx2::prelude::IceoryxSend;
 
-use ipc_types::msg::{
-    CameraFrameHeader, DepthFrameHeader, FaultOrder, FsmStatus, LinkOutcome, LinkRequest,
-    OccupancyMapHeader, PadObservation, PlannerGoal, PlannerStats, SafetyCommand, Setpoint,
-    Trajectory, TruthEvent, TruthState, VehicleState, WatchdogView,
-};
+use ipc_types::msg::FaultOrder;
 use ipc_types::topics::{self, Payload};
 use stage::lockstep::NodeSpec;
 use stage::{
@@ -91,114 +87,10 @@ pub struct Beat {
     pub deadline: Duration,
 }
 
-/// One input port.
-enum InPort {
-    CameraFrame(SliceSubscriber<u8, CameraFrameHeader>),
-    DepthFrame(SliceSubscriber<u16, DepthFrameHeader>),
-    OccupancyMap(SliceSubscriber<u8, OccupancyMapHeader>),
-    VehicleState(Subscriber<VehicleState>),
-    PadObservation(Subscriber<PadObservation>),
-    PlannerGoal(Subscriber<PlannerGoal>),
-    Trajectory(Subscriber<Trajectory>),
-    PlannerStats(Subscriber<PlannerStats>),
-    Setpoint(Subscriber<Setpoint>),
-    LinkRequest(Subscriber<LinkRequest>),
-    LinkOutcome(Subscriber<LinkOutcome>),
-    SafetyCommand(Subscriber<SafetyCommand>),
-    FsmStatus(Subscriber<FsmStatus>),
-    WatchdogView(Subscriber<WatchdogView>),
-}
-
-/// One output port.
-enum OutPort {
-    CameraFrame(SlicePublisher<u8, CameraFrameHeader>),
-    DepthFrame(SlicePublisher<u16, DepthFrameHeader>),
-    OccupancyMap(SlicePublisher<u8, OccupancyMapHeader>),
-    VehicleState(Publisher<VehicleState>),
-    PadObservation(Publisher<PadObservation>),
-    PlannerGoal(Publisher<PlannerGoal>),
-    Trajectory(Publisher<Trajectory>),
-    PlannerStats(Publisher<PlannerStats>),
-    Setpoint(Publisher<Setpoint>),
-    LinkRequest(Publisher<LinkRequest>),
-    LinkOutcome(Publisher<LinkOutcome>),
-    SafetyCommand(Publisher<SafetyCommand>),
-    FsmStatus(Publisher<FsmStatus>),
-    WatchdogView(Publisher<WatchdogView>),
-    TruthEvent(Publisher<TruthEvent>),
-    TruthState(Publisher<TruthState>),
-    /// Served by the stage's [`External`].
-    External,
-}
-
 struct InSpec {
     topic: &'static str,
     newest: bool,
     port: InPort,
-}
-
-/// The subscriber of `service` for `payload`, buffering `depth` (the graph's) or the
-/// default.
-fn open_in(
-    ipc: &Ipc,
-    service: &str,
-    payload: Payload,
-    depth: Option<u32>,
-) -> Result<Option<InPort>, ServiceError> {
-    let depth = depth.map_or(crate::ipc::DEFAULT_DEPTH, |d| d as usize);
-    Ok(Some(match payload {
-        Payload::CameraFrame => {
-            InPort::CameraFrame(ipc.slice_subscriber_with_depth(service, depth)?)
-        }
-        Payload::DepthFrame => InPort::DepthFrame(ipc.slice_subscriber_with_depth(service, depth)?),
-        Payload::OccupancyMap => {
-            InPort::OccupancyMap(ipc.slice_subscriber_with_depth(service, depth)?)
-        }
-        Payload::VehicleState => InPort::VehicleState(ipc.subscriber_with_depth(service, depth)?),
-        Payload::PadObservation => {
-            InPort::PadObservation(ipc.subscriber_with_depth(service, depth)?)
-        }
-        Payload::PlannerGoal => InPort::PlannerGoal(ipc.subscriber_with_depth(service, depth)?),
-        Payload::Trajectory => InPort::Trajectory(ipc.subscriber_with_depth(service, depth)?),
-        Payload::PlannerStats => InPort::PlannerStats(ipc.subscriber_with_depth(service, depth)?),
-        Payload::Setpoint => InPort::Setpoint(ipc.subscriber_with_depth(service, depth)?),
-        Payload::LinkRequest => InPort::LinkRequest(ipc.subscriber_with_depth(service, depth)?),
-        Payload::LinkOutcome => InPort::LinkOutcome(ipc.subscriber_with_depth(service, depth)?),
-        Payload::SafetyCommand => InPort::SafetyCommand(ipc.subscriber_with_depth(service, depth)?),
-        Payload::FsmStatus => InPort::FsmStatus(ipc.subscriber_with_depth(service, depth)?),
-        Payload::WatchdogView => InPort::WatchdogView(ipc.subscriber_with_depth(service, depth)?),
-        Payload::TruthEvent | Payload::TruthState | Payload::Mavlink | Payload::ProcessEvent => {
-            return Ok(None);
-        }
-    }))
-}
-
-fn open_out(
-    ipc: &Ipc,
-    service: &str,
-    payload: Payload,
-    max_len: usize,
-) -> Result<Option<OutPort>, ServiceError> {
-    let len = max_len.max(1);
-    Ok(Some(match payload {
-        Payload::CameraFrame => OutPort::CameraFrame(ipc.slice_publisher(service, len)?),
-        Payload::DepthFrame => OutPort::DepthFrame(ipc.slice_publisher(service, len)?),
-        Payload::OccupancyMap => OutPort::OccupancyMap(ipc.slice_publisher(service, len)?),
-        Payload::VehicleState => OutPort::VehicleState(ipc.publisher(service)?),
-        Payload::PadObservation => OutPort::PadObservation(ipc.publisher(service)?),
-        Payload::PlannerGoal => OutPort::PlannerGoal(ipc.publisher(service)?),
-        Payload::Trajectory => OutPort::Trajectory(ipc.publisher(service)?),
-        Payload::PlannerStats => OutPort::PlannerStats(ipc.publisher(service)?),
-        Payload::Setpoint => OutPort::Setpoint(ipc.publisher(service)?),
-        Payload::LinkRequest => OutPort::LinkRequest(ipc.publisher(service)?),
-        Payload::LinkOutcome => OutPort::LinkOutcome(ipc.publisher(service)?),
-        Payload::SafetyCommand => OutPort::SafetyCommand(ipc.publisher(service)?),
-        Payload::FsmStatus => OutPort::FsmStatus(ipc.publisher(service)?),
-        Payload::WatchdogView => OutPort::WatchdogView(ipc.publisher(service)?),
-        Payload::TruthEvent => OutPort::TruthEvent(ipc.publisher(service)?),
-        Payload::TruthState => OutPort::TruthState(ipc.publisher(service)?),
-        Payload::Mavlink | Payload::ProcessEvent => return Ok(None),
-    }))
 }
 
 /// Takes what waits on `sub`: every sample in order, or only the newest. Returns how
@@ -235,99 +127,6 @@ where
             n += 1;
         }
         Ok(n)
-    }
-}
-
-/// `$body` with `$s` bound to the subscriber of whatever type `$port` holds.
-macro_rules! on_port {
-    ($port:expr, $s:ident => $body:expr) => {
-        match $port {
-            InPort::CameraFrame($s) => $body,
-            InPort::DepthFrame($s) => $body,
-            InPort::OccupancyMap($s) => $body,
-            InPort::VehicleState($s) => $body,
-            InPort::PadObservation($s) => $body,
-            InPort::PlannerGoal($s) => $body,
-            InPort::Trajectory($s) => $body,
-            InPort::PlannerStats($s) => $body,
-            InPort::Setpoint($s) => $body,
-            InPort::LinkRequest($s) => $body,
-            InPort::LinkOutcome($s) => $body,
-            InPort::SafetyCommand($s) => $body,
-            InPort::FsmStatus($s) => $body,
-            InPort::WatchdogView($s) => $body,
-        }
-    };
-}
-
-impl InPort {
-    fn listener(&self) -> &iceoryx2::port::listener::Listener<crate::ipc::Svc> {
-        on_port!(self, s => s.listener())
-    }
-
-    fn gaps(&self) -> u64 {
-        on_port!(self, s => s.gaps())
-    }
-
-    fn has_samples(&self) -> bool {
-        on_port!(self, s => s.has_samples())
-    }
-
-    /// Hands what waits to `stage`; returns how many messages that was.
-    fn deliver(
-        &self,
-        topic: &str,
-        newest: bool,
-        now: u64,
-        stage: &mut dyn Stage,
-        out: &mut dyn Outbox,
-        skipped: &mut u64,
-    ) -> Result<u64, DriverError> {
-        let mut call = |msg: Message<'_>| stage.on_input(now, Input { topic, msg }, out);
-        match self {
-            Self::CameraFrame(s) => drain(s, newest, skipped, |x| {
-                call(Message::CameraFrame(x.user_header(), x.payload()))
-            }),
-            Self::DepthFrame(s) => drain(s, newest, skipped, |x| {
-                call(Message::DepthFrame(x.user_header(), x.payload()))
-            }),
-            Self::OccupancyMap(s) => drain(s, newest, skipped, |x| {
-                call(Message::OccupancyMap(x.user_header(), x.payload()))
-            }),
-            Self::VehicleState(s) => drain(s, newest, skipped, |x| {
-                call(Message::VehicleState(x.payload()))
-            }),
-            Self::PadObservation(s) => drain(s, newest, skipped, |x| {
-                call(Message::PadObservation(x.payload()))
-            }),
-            Self::PlannerGoal(s) => drain(s, newest, skipped, |x| {
-                call(Message::PlannerGoal(x.payload()))
-            }),
-            Self::Trajectory(s) => drain(s, newest, skipped, |x| {
-                call(Message::Trajectory(x.payload()))
-            }),
-            Self::PlannerStats(s) => drain(s, newest, skipped, |x| {
-                call(Message::PlannerStats(x.payload()))
-            }),
-            Self::Setpoint(s) => {
-                drain(s, newest, skipped, |x| call(Message::Setpoint(x.payload())))
-            }
-            Self::LinkRequest(s) => drain(s, newest, skipped, |x| {
-                call(Message::LinkRequest(x.payload()))
-            }),
-            Self::LinkOutcome(s) => drain(s, newest, skipped, |x| {
-                call(Message::LinkOutcome(x.payload()))
-            }),
-            Self::SafetyCommand(s) => drain(s, newest, skipped, |x| {
-                call(Message::SafetyCommand(x.payload()))
-            }),
-            Self::FsmStatus(s) => drain(s, newest, skipped, |x| {
-                call(Message::FsmStatus(x.payload()))
-            }),
-            Self::WatchdogView(s) => drain(s, newest, skipped, |x| {
-                call(Message::WatchdogView(x.payload()))
-            }),
-        }
     }
 }
 
@@ -395,140 +194,203 @@ macro_rules! send_truth {
     }};
 }
 
-impl Outbox for Ports<'_, '_> {
-    fn publish(&mut self, topic: &str, msg: Message<'_>) -> Result<(), StageError> {
-        let Some((name, port)) = self.outputs.iter_mut().find(|(t, _)| *t == topic) else {
-            return Err(StageError::NotAnOutput {
-                stage: String::new(),
-                topic: topic.to_string(),
-            });
-        };
-        let name: &'static str = name;
-        match (port, msg) {
-            (OutPort::External, _) if !pass(self.faults, self.heartbeat, name) => Ok(()),
-            (OutPort::External, m) => match (self.external.as_deref_mut(), &mut self.deferred) {
-                (Some(ext), _) => ext.send(topic, m),
-                (None, Some(later)) => {
-                    later.push((name, m.to_owned()));
-                    Ok(())
-                }
-                (None, None) => Err(StageError::Transport(format!("nothing serves `{topic}`"))),
-            },
-            (OutPort::VehicleState(p), Message::VehicleState(m)) => {
-                send_plain!(self.faults, self.heartbeat, name, p, m)
-            }
-            (OutPort::PadObservation(p), Message::PadObservation(m)) => {
-                send_plain!(self.faults, self.heartbeat, name, p, m)
-            }
-            (OutPort::PlannerGoal(p), Message::PlannerGoal(m)) => {
-                send_plain!(self.faults, self.heartbeat, name, p, m)
-            }
-            (OutPort::Trajectory(p), Message::Trajectory(m)) => {
-                send_plain!(self.faults, self.heartbeat, name, p, m)
-            }
-            (OutPort::PlannerStats(p), Message::PlannerStats(m)) => {
-                send_plain!(self.faults, self.heartbeat, name, p, m)
-            }
-            (OutPort::Setpoint(p), Message::Setpoint(m)) => {
-                send_plain!(self.faults, self.heartbeat, name, p, m)
-            }
-            (OutPort::LinkRequest(p), Message::LinkRequest(m)) => {
-                send_plain!(self.faults, self.heartbeat, name, p, m)
-            }
-            (OutPort::LinkOutcome(p), Message::LinkOutcome(m)) => {
-                send_plain!(self.faults, self.heartbeat, name, p, m)
-            }
-            (OutPort::SafetyCommand(p), Message::SafetyCommand(m)) => {
-                send_plain!(self.faults, self.heartbeat, name, p, m)
-            }
-            (OutPort::FsmStatus(p), Message::FsmStatus(m)) => {
-                send_plain!(self.faults, self.heartbeat, name, p, m)
-            }
-            (OutPort::WatchdogView(p), Message::WatchdogView(m)) => {
-                send_plain!(self.faults, self.heartbeat, name, p, m)
-            }
-            (OutPort::TruthEvent(p), Message::TruthEvent(m)) => send_truth!(p, m),
-            (OutPort::TruthState(p), Message::TruthState(m)) => send_truth!(p, m),
-            (_, m) => Err(StageError::WrongType {
-                topic: topic.to_string(),
-                expected: topics::find(topic).map_or("?", |t| t.payload.type_name()),
-                got: m.payload().type_name(),
-            }),
-        }
-    }
-
-    fn publish_slice(
-        &mut self,
-        topic: &str,
-        len: usize,
-        fill: &mut dyn FnMut(SliceMut<'_>) -> Option<SliceHeader>,
-    ) -> Result<bool, StageError> {
-        let Some((_, port)) = self.outputs.iter_mut().find(|(t, _)| *t == topic) else {
-            return Err(StageError::NotAnOutput {
-                stage: String::new(),
-                topic: topic.to_string(),
-            });
-        };
-        if !pass(self.faults, self.heartbeat, topic) {
-            return Ok(false);
-        }
-        // A loan that fails (every sample held by subscribers) drops this message: the
-        // stage counts it, the process never waits.
-        match port {
-            OutPort::CameraFrame(p) => {
-                let Ok(mut sample) = p.loan(len) else {
-                    return Ok(false);
-                };
-                let Some(SliceHeader::CameraFrame(mut h)) =
-                    fill(SliceMut::U8(sample.payload_mut()))
-                else {
-                    return Ok(false);
-                };
-                self.faults.corrupt(topic, &mut h);
-                self.faults.blank(topic, sample.payload_mut());
-                h.msg.close_stage(monotonic_ns());
-                *sample.user_header_mut() = h;
-                p.send(sample).map_err(transport)?;
-            }
-            OutPort::OccupancyMap(p) => {
-                let Ok(mut sample) = p.loan(len) else {
-                    return Ok(false);
-                };
-                let Some(SliceHeader::OccupancyMap(mut h)) =
-                    fill(SliceMut::U8(sample.payload_mut()))
-                else {
-                    return Ok(false);
-                };
-                self.faults.corrupt(topic, &mut h);
-                h.msg.close_stage(monotonic_ns());
-                *sample.user_header_mut() = h;
-                p.send(sample).map_err(transport)?;
-            }
-            OutPort::DepthFrame(p) => {
-                let Ok(mut sample) = p.loan(len) else {
-                    return Ok(false);
-                };
-                let Some(SliceHeader::DepthFrame(mut h)) =
-                    fill(SliceMut::U16(sample.payload_mut()))
-                else {
-                    return Ok(false);
-                };
-                self.faults.corrupt(topic, &mut h);
-                h.msg.close_stage(monotonic_ns());
-                *sample.user_header_mut() = h;
-                p.send(sample).map_err(transport)?;
-            }
-            _ => {
-                return Err(StageError::WrongType {
-                    topic: topic.to_string(),
-                    expected: topics::find(topic).map_or("?", |t| t.payload.type_name()),
-                    got: "a slice",
-                });
-            }
-        }
-        Ok(true)
+/// A blank fault paints camera images one grey (the pad hidden, the view blocked); other
+/// slices (depths, maps) pass as they are.
+fn blank_image(faults: &mut PortFaults, payload: Payload, topic: &str, slice: SliceMut<'_>) {
+    if let (Payload::CameraFrame, SliceMut::U8(pixels)) = (payload, slice) {
+        faults.blank(topic, pixels);
     }
 }
+
+/// Writes the typed ports from the payload list ([`ipc_types::for_each_payload!`]): per
+/// payload kind, its subscriber and publisher type and one arm that opens, drains or
+/// sends through it. Pipeline structs and slices have input and output ports; the
+/// simulator's truth only output ports (no pipeline stage may read it); local payloads
+/// and bytes none (a stage's [`External`] serves them, or nothing does).
+macro_rules! ports {
+    (
+        structs: [$($(#[$sd:meta])* $s:ident($st:ty => $so:ty) = $sn:literal,)*],
+        truth: [$($(#[$td:meta])* $t:ident($tt:ty => $to:ty) = $tn:literal,)*],
+        slices: [$($(#[$cd:meta])* $c:ident($ch:ty, [$ce:ty]) = $cn:literal,)*],
+        local: [$($(#[$ld:meta])* $l:ident($lt:ty) = $ln:literal,)*],
+        bytes: [$($(#[$bd:meta])* $b:ident = $bn:literal,)*],
+    ) => {
+        /// One input port.
+        enum InPort {
+            $($s(Subscriber<$st>),)*
+            $($c(SliceSubscriber<$ce, $ch>),)*
+        }
+
+        /// One output port.
+        enum OutPort {
+            $($s(Publisher<$st>),)*
+            $($t(Publisher<$tt>),)*
+            $($c(SlicePublisher<$ce, $ch>),)*
+            /// Served by the stage's [`External`].
+            External,
+        }
+
+        /// The subscriber of `service` for `payload`, buffering `depth` (the graph's) or
+        /// the default; `None` for a payload no stage reads from iceoryx2.
+        fn open_in(
+            ipc: &Ipc,
+            service: &str,
+            payload: Payload,
+            depth: Option<u32>,
+        ) -> Result<Option<InPort>, ServiceError> {
+            let depth = depth.map_or(crate::ipc::DEFAULT_DEPTH, |d| d as usize);
+            Ok(Some(match payload {
+                $(Payload::$s => InPort::$s(ipc.subscriber_with_depth(service, depth)?),)*
+                $(Payload::$c => InPort::$c(ipc.slice_subscriber_with_depth(service, depth)?),)*
+                $(Payload::$t => return Ok(None),)*
+                $(Payload::$l => return Ok(None),)*
+                $(Payload::$b => return Ok(None),)*
+            }))
+        }
+
+        /// The publisher of `service` for `payload`, its slices up to `max_len` long;
+        /// `None` for a payload not carried by iceoryx2.
+        fn open_out(
+            ipc: &Ipc,
+            service: &str,
+            payload: Payload,
+            max_len: usize,
+        ) -> Result<Option<OutPort>, ServiceError> {
+            let len = max_len.max(1);
+            Ok(Some(match payload {
+                $(Payload::$s => OutPort::$s(ipc.publisher(service)?),)*
+                $(Payload::$t => OutPort::$t(ipc.publisher(service)?),)*
+                $(Payload::$c => OutPort::$c(ipc.slice_publisher(service, len)?),)*
+                $(Payload::$l => return Ok(None),)*
+                $(Payload::$b => return Ok(None),)*
+            }))
+        }
+
+        impl InPort {
+            fn listener(&self) -> &iceoryx2::port::listener::Listener<crate::ipc::Svc> {
+                match self {
+                    $(Self::$s(s) => s.listener(),)*
+                    $(Self::$c(s) => s.listener(),)*
+                }
+            }
+
+            fn gaps(&self) -> u64 {
+                match self {
+                    $(Self::$s(s) => s.gaps(),)*
+                    $(Self::$c(s) => s.gaps(),)*
+                }
+            }
+
+            fn has_samples(&self) -> bool {
+                match self {
+                    $(Self::$s(s) => s.has_samples(),)*
+                    $(Self::$c(s) => s.has_samples(),)*
+                }
+            }
+
+            /// Hands what waits to `stage`; returns how many messages that was.
+            fn deliver(
+                &self,
+                topic: &str,
+                newest: bool,
+                now: u64,
+                stage: &mut dyn Stage,
+                out: &mut dyn Outbox,
+                skipped: &mut u64,
+            ) -> Result<u64, DriverError> {
+                let mut call = |msg: Message<'_>| stage.on_input(now, Input { topic, msg }, out);
+                match self {
+                    $(Self::$s(s) => drain(s, newest, skipped, |x| {
+                        call(Message::$s(x.payload()))
+                    }),)*
+                    $(Self::$c(s) => drain(s, newest, skipped, |x| {
+                        call(Message::$c(x.user_header(), x.payload()))
+                    }),)*
+                }
+            }
+        }
+
+        impl Outbox for Ports<'_, '_> {
+            fn publish(&mut self, topic: &str, msg: Message<'_>) -> Result<(), StageError> {
+                let Some((name, port)) = self.outputs.iter_mut().find(|(t, _)| *t == topic) else {
+                    return Err(StageError::NotAnOutput {
+                        stage: String::new(),
+                        topic: topic.to_string(),
+                    });
+                };
+                let name: &'static str = name;
+                match (port, msg) {
+                    (OutPort::External, _) if !pass(self.faults, self.heartbeat, name) => Ok(()),
+                    (OutPort::External, m) => {
+                        match (self.external.as_deref_mut(), &mut self.deferred) {
+                            (Some(ext), _) => ext.send(topic, m),
+                            (None, Some(later)) => {
+                                later.push((name, m.to_owned()));
+                                Ok(())
+                            }
+                            (None, None) => {
+                                Err(StageError::Transport(format!("nothing serves `{topic}`")))
+                            }
+                        }
+                    }
+                    $((OutPort::$s(p), Message::$s(m)) => {
+                        send_plain!(self.faults, self.heartbeat, name, p, m)
+                    })*
+                    $((OutPort::$t(p), Message::$t(m)) => send_truth!(p, m),)*
+                    (_, m) => Err(StageError::WrongType {
+                        topic: topic.to_string(),
+                        expected: topics::find(topic).map_or("?", |t| t.payload.type_name()),
+                        got: m.payload().type_name(),
+                    }),
+                }
+            }
+
+            fn publish_slice(
+                &mut self,
+                topic: &str,
+                len: usize,
+                fill: &mut dyn FnMut(SliceMut<'_>) -> Option<SliceHeader>,
+            ) -> Result<bool, StageError> {
+                let Some((_, port)) = self.outputs.iter_mut().find(|(t, _)| *t == topic) else {
+                    return Err(StageError::NotAnOutput {
+                        stage: String::new(),
+                        topic: topic.to_string(),
+                    });
+                };
+                if !pass(self.faults, self.heartbeat, topic) {
+                    return Ok(false);
+                }
+                // A loan that fails (every sample held by subscribers) drops this message:
+                // the stage counts it, the process never waits.
+                match port {
+                    $(OutPort::$c(p) => {
+                        let Ok(mut sample) = p.loan(len) else {
+                            return Ok(false);
+                        };
+                        let Some(SliceHeader::$c(mut h)) = fill(sample.payload_mut().into())
+                        else {
+                            return Ok(false);
+                        };
+                        self.faults.corrupt(topic, &mut h);
+                        blank_image(self.faults, Payload::$c, topic, sample.payload_mut().into());
+                        h.msg.close_stage(monotonic_ns());
+                        *sample.user_header_mut() = h;
+                        p.send(sample).map_err(transport)?;
+                    })*
+                    _ => {
+                        return Err(StageError::WrongType {
+                            topic: topic.to_string(),
+                            expected: topics::find(topic).map_or("?", |t| t.payload.type_name()),
+                            got: "a slice",
+                        });
+                    }
+                }
+                Ok(true)
+            }
+        }
+    };
+}
+ipc_types::for_each_payload!(ports);
 
 /// The running node: ports, schedule and counters.
 struct Node<'a> {

@@ -13,11 +13,9 @@ use anyhow::{Result, bail};
 use clap::Args;
 use ipc_types::msg::{MissionState, Stage as StageId, VehicleState};
 use ipc_types::topics;
-use serde_json::Value;
 
 use crate::flight_log::{FlightLog, FlightSample};
 use crate::plot;
-use crate::recorded_json::{fsm_status, header, truth_event, truth_state, vehicle_state};
 use crate::run_eval::{Referee, stage_ms};
 
 /// Arguments of `landing plot`.
@@ -60,21 +58,18 @@ struct Read {
 
 /// Reads the messages of `path` the plots need into `read`.
 fn read_file(path: &Path, read: &mut Read) -> Result<()> {
-    let summary = crate::recorded_json::read_recording(path, |m| {
+    let summary = recorder::read_recording(path, |m| {
         if m.encoding != "json" {
             return Ok(());
         }
         let topic = m.topic.trim_start_matches('/');
         let event = match topic {
-            topics::FSM_STATUS => Event::Status(fsm_status(&serde_json::from_slice(m.data)?)?),
-            topics::VEHICLE_STATE => Event::State(vehicle_state(&serde_json::from_slice(m.data)?)?),
-            topics::SIM_TRUTH => Event::Truth(truth_event(&serde_json::from_slice(m.data)?)?),
-            topics::SIM_TRUTH_STATE => {
-                Event::TruthState(truth_state(&serde_json::from_slice(m.data)?)?)
-            }
+            topics::FSM_STATUS => Event::Status(m.decode()?),
+            topics::VEHICLE_STATE => Event::State(m.decode()?),
+            topics::SIM_TRUTH => Event::Truth(m.decode()?),
+            topics::SIM_TRUTH_STATE => Event::TruthState(m.decode()?),
             topics::PLANNER_STATS => {
-                let v: Value = serde_json::from_slice(m.data)?;
-                if let Some(ms) = stage_ms(&header(&v["msg"])?, StageId::Planner) {
+                if let Some(ms) = stage_ms(&m.header()?, StageId::Planner) {
                     read.planning_ms.push(ms);
                 }
                 return Ok(());

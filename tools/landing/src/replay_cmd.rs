@@ -24,7 +24,6 @@ use serde_json::Value;
 use stage::{Input, Message, Outbox, SliceHeader, SliceMut, StageError};
 
 use crate::config_cmd::StackConfig;
-use crate::recorded_json::{frame_header, header, vehicle_state};
 
 /// Arguments of `landing replay`.
 #[derive(Debug, Args)]
@@ -224,23 +223,23 @@ fn replay_aruco(args: &ReplayArgs) -> Result<ReplayReport> {
     // The recorded observations, by capture time: their JSON and the flight's header.
     let mut recorded: BTreeMap<u64, (Value, Header)> = BTreeMap::new();
     let mut jpeg = false;
-    let summary = crate::recorded_json::read_recording(&args.file, |m| {
+    let summary = recorder::read_recording(&args.file, |m| {
         match (m.topic, m.schema) {
             ("/vehicle/state", _) => {
-                let s = vehicle_state(&serde_json::from_slice(m.data)?)?;
+                let s: VehicleState = m.decode()?;
                 // When px4-link published it.
                 let at = exit_of(&s.msg, StageId::Px4Link).unwrap_or(m.log_time);
                 states.push((at, s));
             }
             ("/camera/frame/header", _) => {
-                let h = frame_header(&serde_json::from_slice(m.data)?)?;
+                let h: CameraFrameHeader = m.decode()?;
                 headers.insert(h.msg.capture_ns, h);
             }
             ("/camera/frame", "foxglove.RawImage") => images.push(RawImage::decode(m.data)?),
             ("/camera/frame", _) => jpeg = true,
             ("/pad/observation", _) => {
                 let v: Value = serde_json::from_slice(m.data)?;
-                let h = header(&v["msg"])?;
+                let h = m.header()?;
                 recorded.insert(h.capture_ns, (v, h));
             }
             _ => {}

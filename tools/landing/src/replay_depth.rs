@@ -25,8 +25,8 @@ use ipc_types::msg::{
 use ipc_types::topics;
 use stage::{Input, Message, Outbox, SliceHeader, SliceMut, StageError};
 
-use crate::recorded_json::{RecordedMaps, depth_header, vehicle_state};
 use crate::replay_cmd::{Flight, ReplayArgs, ReplayReport};
+use recorder::RecordedMaps;
 
 /// The maps the replayed stage publishes, with their cells.
 #[derive(Default)]
@@ -108,14 +108,14 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
     let mut frames: HashMap<u64, Vec<u16>> = HashMap::new();
     let mut recorded = RecordedMaps::default();
     let depth = format!("/{}", topics::SIM_DEPTH);
-    let summary = crate::recorded_json::read_recording(&args.file, |m| {
+    let summary = recorder::read_recording(&args.file, |m| {
         let topic = m.topic;
         if topic == format!("/{}", topics::VEHICLE_STATE) {
-            let s = vehicle_state(&serde_json::from_slice(m.data)?)?;
+            let s: VehicleState = m.decode()?;
             let at = exit_of(&s.msg, StageId::Px4Link).unwrap_or(m.log_time);
             states.push((at, s));
         } else if topic == format!("{depth}/header") {
-            let h = depth_header(&serde_json::from_slice(m.data)?)?;
+            let h: DepthFrameHeader = m.decode()?;
             frame_headers.insert(h.msg.capture_ns, h);
         } else if topic == depth && m.schema == "foxglove.RawImage" {
             let img = RawImage::decode(m.data)?;

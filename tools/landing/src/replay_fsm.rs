@@ -19,12 +19,8 @@ use ipc_types::msg::{
     Trajectory, VehicleState, WatchdogView,
 };
 use ipc_types::topics;
-use serde_json::Value;
 use stage::{Input, Message, Outbox, SliceHeader, SliceMut, StageError};
 
-use crate::recorded_json::{
-    fsm_status, header, observation, outcome, safety, trajectory, vehicle_state,
-};
 use crate::replay_cmd::{Flight, ReplayArgs, ReplayReport};
 
 /// An input of the fsm as recorded.
@@ -137,7 +133,7 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
     let mut inputs: Vec<(u64, FsmInput)> = vec![];
     let mut steps: BTreeSet<u64> = BTreeSet::new();
     let mut flown = Transitions::default();
-    let summary = crate::recorded_json::read_recording(&args.file, |m| {
+    let summary = recorder::read_recording(&args.file, |m| {
         if m.encoding != "json" {
             return Ok(());
         }
@@ -161,24 +157,23 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
         if !published_by_fsm && !is_input {
             return Ok(());
         }
-        let v: Value = serde_json::from_slice(m.data)?;
-        let h = header(&v["msg"])?;
+        let h = m.header()?;
         if published_by_fsm && let Some(t) = crate::replay_cmd::enter_of(&h, StageId::Fsm) {
             steps.insert(t);
         }
         let input = match topic {
-            topics::VEHICLE_STATE => FsmInput::State(vehicle_state(&v)?),
-            topics::PAD_OBSERVATION => FsmInput::Observation(observation(&v)?),
-            topics::PLANNER_TRAJECTORY => FsmInput::Trajectory(trajectory(&v)?),
-            topics::PX4_OUTCOME => FsmInput::Outcome(outcome(&v)?),
-            topics::SAFETY_COMMAND => FsmInput::Safety(safety(&v)?),
+            topics::VEHICLE_STATE => FsmInput::State(m.decode()?),
+            topics::PAD_OBSERVATION => FsmInput::Observation(m.decode()?),
+            topics::PLANNER_TRAJECTORY => FsmInput::Trajectory(m.decode()?),
+            topics::PX4_OUTCOME => FsmInput::Outcome(m.decode()?),
+            topics::SAFETY_COMMAND => FsmInput::Safety(m.decode()?),
             // The fsm reads only that a view came (the watchdog lives).
             topics::WATCHDOG_VIEW => FsmInput::View(WatchdogView {
                 msg: h,
                 ..WatchdogView::default()
             }),
             topics::FSM_STATUS => {
-                flown.add_status(&fsm_status(&v)?);
+                flown.add_status(&m.decode()?);
                 return Ok(());
             }
             _ => return Ok(()),

@@ -18,9 +18,9 @@ use ipc_types::topics;
 use serde_json::Value;
 use stage::{Input, Message, Outbox, SliceHeader, SliceMut, StageError};
 
-use crate::recorded_json::{RecordedMaps, arr, f64_of, header, u32_of, vehicle_state};
 use crate::replay_cmd::{Flight, ReplayArgs, ReplayReport, first_difference};
 use crate::replay_fsm::sent_at;
+use recorder::RecordedMaps;
 
 /// The trajectories the replayed stage publishes.
 #[derive(Default)]
@@ -42,19 +42,6 @@ impl Outbox for Trajectories {
     ) -> Result<bool, StageError> {
         Ok(false)
     }
-}
-
-/// A goal as recorded (JSON).
-fn goal(v: &Value) -> Result<PlannerGoal> {
-    Ok(PlannerGoal {
-        msg: header(&v["msg"])?,
-        position: arr(&v["position"]),
-        velocity: arr(&v["velocity"]),
-        acceleration: arr(&v["acceleration"]),
-        yaw: f64_of(&v["yaw"]),
-        mode: u32_of(&v["mode"])?,
-        reserved: 0,
-    })
 }
 
 /// One input of the replay.
@@ -84,7 +71,7 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
     // The flight's trajectories in order, as JSON.
     let mut flown: Vec<Value> = vec![];
     let mut maps = RecordedMaps::default();
-    let summary = crate::recorded_json::read_recording(&args.file, |m| {
+    let summary = recorder::read_recording(&args.file, |m| {
         let topic = m.topic.trim_start_matches('/');
         if maps.take(m)? {
             return Ok(());
@@ -102,13 +89,13 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
             }
             _ => return Ok(()),
         };
-        let h = header(&v["msg"])?;
+        let h = m.header()?;
         let at = sent_at(&h, m.log_time);
         match topic {
             t if t == topics::VEHICLE_STATE => {
-                events.push((at, Event::State(vehicle_state(&v)?)));
+                events.push((at, Event::State(m.decode()?)));
             }
-            t if t == topics::PLANNER_GOAL => events.push((at, Event::Goal(goal(&v)?))),
+            t if t == topics::PLANNER_GOAL => events.push((at, Event::Goal(m.decode()?))),
             t if t == topics::PLANNER_TRAJECTORY => {
                 if let Some(s) = crate::replay_cmd::enter_of(&h, StageId::Planner) {
                     steps.insert(s, h.capture_ns);
