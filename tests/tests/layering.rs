@@ -333,7 +333,7 @@ const ONE_CONSTRUCTOR: &[(&str, &str)] = &[
     ("Watchdog::new(", "processes/watchdog/src/stage.rs"),
     ("SimStage::new(", "processes/sim/src/stage.rs"),
     ("SimStage::paced(", "processes/sim/src/stage.rs"),
-    ("RecorderStage::new(", "processes/recorder/src/stage.rs"),
+    ("RecorderStage::new(", "processes/recorder/src/process.rs"),
 ];
 
 /// Every Rust file of the workspace that is not test code: under `ipc_types/`,

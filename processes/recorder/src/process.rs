@@ -1,18 +1,13 @@
-//! The `recorder` process, as a library (its `main.rs` only parses the flags): every
-//! iceoryx2 topic of the graph into one MCAP file, flushed every second so that it reads
-//! back if killed, finished on SIGTERM. It builds its node from the graph (all iceoryx2
-//! topics as queued inputs: the recorder is no node of the graph, it reads them all),
-//! the recording and its metadata, and hands them to the iceoryx2 driver; what it does
-//! with each message is [`RecorderStage`]'s.
+//! What the `recorder` process is built from: its flags, its node (every iceoryx2 topic
+//! of the graph as a queued input: the recorder is no node of the graph, it reads them
+//! all), the recording and its metadata (`RecorderStage::from_config`). Its `main.rs`
+//! hands the stage to the iceoryx2 driver; what it does with each message is
+//! [`RecorderStage`]'s.
 
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 use graph::{Graph, GraphError, Transport};
 use ipc_types::msg::Pose;
-use runtime::StageArgs;
-use runtime::driver::{self, Beat, DriverError};
-use runtime::ipc::{Ipc, IpcPrefix, NodeError, PrefixError};
 use stack_config::{ConfigError, Invalid};
 use stage::lockstep::{InputSpec, NodeSpec};
 
@@ -103,95 +98,67 @@ pub enum ProcessError {
     /// The recording's metadata.
     #[error(transparent)]
     Metadata(#[from] MetadataError),
-    /// The iceoryx2 prefix.
-    #[error(transparent)]
-    Prefix(#[from] PrefixError),
-    /// The iceoryx2 node.
-    #[error(transparent)]
-    Node(#[from] NodeError),
-    /// The driver.
-    #[error(transparent)]
-    Driver(#[from] DriverError),
-    /// The end of the file could not be written.
-    #[error("finishing {out}")]
-    Finish {
-        /// The recording.
-        out: String,
-        /// What went wrong.
-        #[source]
-        error: RecordError,
-    },
 }
 
-/// Records every topic of the graph (`stage`'s flags say which graph, config and
-/// prefix) as `args` say, until SIGTERM/SIGINT; the file is finished whatever ended the
-/// run.
-pub fn run(stage: &StageArgs, args: &RecorderArgs) -> Result<(), ProcessError> {
-    let (ipc_cfg, mut cfg): (_, RecorderConfig) = stage.load("recorder")?;
-    if args.raw_images {
-        cfg.images = "raw".into();
+impl RecorderStage {
+    /// The one way the recorder's stage is built: from its `[recorder]` section (with
+    /// `args`' overrides applied here), the config file it came from (the cameras'
+    /// mounts) and the graph (every iceoryx2 topic, as the node's queued inputs: the
+    /// recorder is no node of the graph, it reads them all). The recording is created,
+    /// its metadata written, the live view served. Returns the stage, its node and what
+    /// it writes to (for the log).
+    pub fn from_config(
+        mut cfg: RecorderConfig,
+        args: &RecorderArgs,
+        config: Option<&Path>,
+        graph_path: &Path,
+    ) -> Result<(Self, NodeSpec, String), ProcessError> {
+        if args.raw_images {
+            cfg.images = "raw".into();
+        }
+        if let Some(c) = &args.compression {
+            cfg.compression = c.clone();
+        }
+        let graph = Graph::load(graph_path)?;
+        let spec = node_spec(&graph, &cfg.skip);
+        let mut options = cfg.options().map_err(ProcessError::Invalid)?;
+        let (camera, depth) = mounts(config)?;
+        options.body_from_camera = camera;
+        options.body_from_depth = depth;
+        let live = args.live || cfg.live;
+        let out = match (&args.out, &args.out_dir) {
+            (Some(p), _) => Some(p.clone()),
+            (None, Some(dir)) => Some(
+                crate::dated_path(dir, std::time::SystemTime::now()).map_err(|error| {
+                    ProcessError::OutDir {
+                        dir: dir.clone(),
+                        error,
+                    }
+                })?,
+            ),
+            (None, None) => None,
+        };
+        let mut rec = match &out {
+            Some(out) => Recorder::with_options(out, options)?,
+            None if live => Recorder::without_file(options),
+            None => return Err(ProcessError::NothingToDo),
+        };
+        if live {
+            let address = cfg.live_socket().map_err(ProcessError::Invalid)?;
+            let at = rec.serve_live(address)?;
+            tracing::info!(address = %at, "live view: open ws://{at} in Foxglove");
+        }
+        let mut meta = metadata::stack(config, graph_path)?;
+        meta.insert("topics".into(), spec_topics(&spec));
+        meta.extend(args.meta.iter().cloned());
+        rec.write_metadata("landing", meta)?;
+        let out = out.as_ref().map_or_else(
+            || "(live view only)".to_string(),
+            |p| p.display().to_string(),
+        );
+        tracing::info!(out = %out, topics = spec.inputs.len(), "recording");
+        Ok((Self::new(rec), spec, out))
     }
-    if let Some(c) = &args.compression {
-        cfg.compression = c.clone();
-    }
-    let graph_path = stage
-        .graph
-        .clone()
-        .unwrap_or_else(|| graph::default_path(&stage.deploy()));
-    let graph = Graph::load(&graph_path)?;
-    let spec = node_spec(&graph, &cfg.skip);
-    let mut options = cfg.options().map_err(ProcessError::Invalid)?;
-    let (camera, depth) = mounts(stage.config.as_deref())?;
-    options.body_from_camera = camera;
-    options.body_from_depth = depth;
-    let live = args.live || cfg.live;
-    let out = match (&args.out, &args.out_dir) {
-        (Some(p), _) => Some(p.clone()),
-        (None, Some(dir)) => Some(
-            crate::dated_path(dir, std::time::SystemTime::now()).map_err(|error| {
-                ProcessError::OutDir {
-                    dir: dir.clone(),
-                    error,
-                }
-            })?,
-        ),
-        (None, None) => None,
-    };
-    let mut rec = match &out {
-        Some(out) => Recorder::with_options(out, options)?,
-        None if live => Recorder::without_file(options),
-        None => return Err(ProcessError::NothingToDo),
-    };
-    if live {
-        let address = cfg.live_socket().map_err(ProcessError::Invalid)?;
-        let at = rec.serve_live(address)?;
-        tracing::info!(address = %at, "live view: open ws://{at} in Foxglove");
-    }
-    let mut meta = metadata::stack(stage.config.as_deref(), &graph_path)?;
-    meta.insert("topics".into(), spec_topics(&spec));
-    meta.extend(args.meta.iter().cloned());
-    rec.write_metadata("landing", meta)?;
-    let prefix = IpcPrefix::resolve(stage.ipc_prefix.as_deref(), &ipc_cfg.prefix)?;
-    let ipc = Ipc::open("recorder", &prefix)?;
-    let beat = Beat {
-        period: Duration::from_millis(ipc_cfg.heartbeat_period_ms),
-        deadline: Duration::from_millis(500),
-    };
-    let mut stage = RecorderStage::new(rec);
-    let out = out.as_ref().map_or_else(
-        || "(live view only)".to_string(),
-        |p| p.display().to_string(),
-    );
-    tracing::info!(out = %out, topics = spec.inputs.len(), "recording");
-    let served = driver::run(&ipc, &spec, &mut stage, None, beat);
-    // The file is finished whatever ended the run.
-    let n = stage.finish().map_err(|error| ProcessError::Finish {
-        out: out.clone(),
-        error,
-    })?;
-    served?;
-    tracing::info!(messages = n, out = %out, "recording finished");
-    Ok(())
 }
 
 /// The cameras' mounts from the config file (none without one).

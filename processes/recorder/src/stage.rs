@@ -15,8 +15,8 @@ pub struct RecorderStage {
 }
 
 impl RecorderStage {
-    /// A stage writing into `recorder`.
-    pub fn new(recorder: Recorder) -> Self {
+    /// A stage writing into `recorder` (outside the crate: `from_config`).
+    pub(crate) fn new(recorder: Recorder) -> Self {
         Self {
             recorder: Some(recorder),
             inputs: 0,

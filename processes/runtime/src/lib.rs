@@ -31,7 +31,7 @@ pub use ipc::{
     SlicePublisher, SliceSubscriber, Subscriber, WaitError, Wake, run_wait_loop,
 };
 pub use process_main::process_main;
-pub use serve::{ServeError, StageArgs, serve};
+pub use serve::{ServeError, StageArgs, serve, serve_spec};
 pub use supervise::{Supervision, SupervisionError};
 pub use threads::{JOIN_TIMEOUT, JoinError, StopFlag, ThreadRole, Worker};
 pub use udp::{Reply, UdpLink, UdpStats};

@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use graph::{Graph, GraphError};
 use stack_config::{ConfigError, IpcConfig, Validate, deploy_dir, load_process_or_default};
+use stage::lockstep::NodeSpec;
 use stage::{External, Stage};
 
 use crate::driver::{self, Beat, DriverError};
@@ -123,5 +124,26 @@ pub fn serve(
         deadline: Duration::from_millis(node.heartbeat_deadline_ms),
     };
     driver::run(&ipc, &spec, stage, external, beat)?;
+    Ok(())
+}
+
+/// Runs `stage` as a process on the iceoryx2 driver with a node of its own, `spec`, for a
+/// process that reads the graph rather than being one of its nodes (the recorder: every
+/// topic): its prefix from `args`, its heartbeat every `[ipc] heartbeat_period_ms` with
+/// `deadline`. Returns when SIGTERM or SIGINT stops it.
+pub fn serve_spec(
+    args: &StageArgs,
+    ipc_cfg: &IpcConfig,
+    spec: &NodeSpec,
+    deadline: Duration,
+    stage: &mut dyn Stage,
+) -> Result<(), ServeError> {
+    let prefix = IpcPrefix::resolve(args.ipc_prefix.as_deref(), &ipc_cfg.prefix)?;
+    let ipc = Ipc::open(stage.name(), &prefix)?;
+    let beat = Beat {
+        period: Duration::from_millis(ipc_cfg.heartbeat_period_ms),
+        deadline,
+    };
+    driver::run(&ipc, spec, stage, None, beat)?;
     Ok(())
 }

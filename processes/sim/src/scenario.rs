@@ -16,14 +16,14 @@ use crate::camera::{CameraErrors, DownCameraParams, MountErrors};
 use crate::depth::DepthCameraParams;
 use crate::estimator_noise::EstimatorNoiseParams;
 use crate::geometry::Aabb;
-use crate::ground_vehicle::GroundVehicleParams;
+use crate::ground_vehicle::{GroundVehicle, GroundVehicleParams};
 use crate::params::ParamError;
 use crate::px4::commander::Px4Params;
 use crate::px4::commander::{AutopilotClock, Faults};
 use crate::quadrotor::AirframeParams;
 use crate::rng::Pcg32;
 use crate::wind::WindParams;
-use crate::world::{CrashThresholds, WorldParams};
+use crate::world::{CrashThresholds, ROTOR_RADIUS_FRACTION, WorldParams};
 
 /// Names of the scenarios shipped in `deploy/scenarios/`.
 pub const SHIPPED: &[&str] = &[
@@ -226,6 +226,15 @@ impl Variation {
 
 /// Offset of the variation draw's seed from the run's seed (see [`MASS_SEED_OFFSET`]).
 const VARIATION_SEED_OFFSET: u64 = 8;
+
+/// How many draws [`LoadedScenario::variation`] tries before it keeps the scenario's start.
+const VARIATION_DRAWS: u64 = 32;
+
+/// The seed step between two draws of one run (far from any run's neighbour seed).
+const VARIATION_REDRAW_STRIDE: u64 = 0x9E37_79B9_7F4A_7C15;
+
+/// Clearance between a standing vehicle and the roof's edge or the body, m.
+const STAND_MARGIN_M: f64 = 0.03;
 
 /// The companion's view of the autopilot's clock: every MAVLink message the autopilot
 /// sends reaches px4-link late by a per-run delay (serial framing, PX4's mavlink module
@@ -596,7 +605,7 @@ impl LoadedScenario {
         if let Some(d) = ground_vehicle.driver.as_mut() {
             d.seed = seed.wrapping_add(2);
         }
-        let (delay, start, takeoff) = s.variation.draw(seed);
+        let (delay, start, takeoff) = self.variation(seed);
         ground_vehicle.start_delay_s = (ground_vehicle.start_delay_s + delay).max(0.0);
         ground_vehicle.offset_m = [start[0] - takeoff[0], start[1] - takeoff[1]];
         let obstacles = self.obstacles(seed);
@@ -613,10 +622,51 @@ impl LoadedScenario {
         }
     }
 
+    /// The `[variation]` draws for `seed` (start delay change s, route offset m, take-off
+    /// offset m), redrawn until the vehicle can stand where it takes off: wholly on the
+    /// pad vehicle's roof or wholly clear of its body, as an engineer sets it down. A
+    /// scenario that takes off from the roof (the indoor ones) would otherwise put a skid
+    /// over the roof's edge and a rotor into the body. After [`VARIATION_DRAWS`] draws
+    /// that all fail, none: the scenario's own start.
+    pub fn variation(&self, seed: u64) -> (f64, [f64; 2], [f64; 2]) {
+        let v = &self.scenario.variation;
+        (0..VARIATION_DRAWS)
+            .map(|k| v.draw(seed.wrapping_add(k.wrapping_mul(VARIATION_REDRAW_STRIDE))))
+            .find(|&(_, start, takeoff)| self.can_take_off_with(start, takeoff))
+            .unwrap_or((0.0, [0.0; 2], [0.0; 2]))
+    }
+
+    /// True if the vehicle, at the origin, stands wholly on the roof or wholly clear of
+    /// the body of the pad vehicle started `start` m off its route and moved by the
+    /// opposite of `takeoff`.
+    fn can_take_off_with(&self, start: [f64; 2], takeoff: [f64; 2]) -> bool {
+        let mut params = self.scenario.ground_vehicle.clone();
+        params.offset_m = [start[0] - takeoff[0], start[1] - takeoff[1]];
+        let Ok(vehicle) = GroundVehicle::new(params) else {
+            return true;
+        };
+        let pad = vehicle.state_at(0.0);
+        let local = pad
+            .world_from_pad
+            .inverse_transform_point(&nalgebra::Point3::origin());
+        let [hx, hy] = self.scenario.ground_vehicle.pad_half_size_m;
+        // Inside the roof by this much (negative: outside it), m.
+        let inside = (hx - local.x.abs()).min(hy - local.y.abs());
+        let outside = ((local.x.abs() - hx).max(0.0)).hypot((local.y.abs() - hy).max(0.0));
+        let air = &self.airframe;
+        let feet = air
+            .landing_gear_m
+            .iter()
+            .map(|f| f[0].hypot(f[1]))
+            .fold(0.0, f64::max);
+        let rotors = air.arm_length_m * (1.0 + ROTOR_RADIUS_FRACTION);
+        inside >= feet + STAND_MARGIN_M || outside >= rotors + STAND_MARGIN_M
+    }
+
     /// The obstacles where they are for `seed`: the scenario's, moved by the seed's
     /// take-off point (`[variation]`).
     pub fn obstacles(&self, seed: u64) -> Vec<Aabb> {
-        let (_, _, takeoff) = self.scenario.variation.draw(seed);
+        let (_, _, takeoff) = self.variation(seed);
         self.scenario
             .obstacles
             .iter()

@@ -202,3 +202,25 @@ fn a_seed_moves_the_pad_vehicle_start_and_the_take_off_point_within_the_variatio
     assert!(delays.iter().any(|d| *d > 0.3) && delays.iter().any(|d| *d < -0.3));
     assert_eq!(Variation::none().draw(5), (0.0, [0.0; 2], [0.0; 2]));
 }
+
+#[test]
+fn every_seed_of_every_shipped_scenario_sets_the_vehicle_down_where_it_can_stand() {
+    // A second on the ground, disarmed: the pad vehicle may drive off, nothing may crash.
+    for name in SHIPPED {
+        let s = load(name, &deploy()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let mut moved = 0;
+        for seed in 1..=60 {
+            let (_, start, takeoff) = s.variation(seed);
+            moved += usize::from(start != [0.0; 2] || takeoff != [0.0; 2]);
+            let mut world = crate::world::World::new(s.world_params(seed)).expect("world");
+            for _ in 0..1000 {
+                world.step(1_000_000).expect("step");
+            }
+            assert!(!world.crashed(), "{name} seed {seed}: {:?}", world.events());
+        }
+        assert!(
+            moved >= 55,
+            "{name}: only {moved} of 60 seeds varied the start"
+        );
+    }
+}

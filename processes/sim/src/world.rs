@@ -37,7 +37,7 @@ pub const AIRBORNE_DEBOUNCE_NS: u64 = 200_000_000;
 pub const BODY_CONTACT_TOLERANCE_M: f64 = 0.06;
 
 /// Propeller radius as a fraction of the arm length (10" props on 0.225 m arms).
-const ROTOR_RADIUS_FRACTION: f64 = 0.55;
+pub(crate) const ROTOR_RADIUS_FRACTION: f64 = 0.55;
 
 /// When a contact or attitude counts as a crash.
 #[derive(Debug, Clone, PartialEq, Deserialize)]

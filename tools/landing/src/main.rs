@@ -10,7 +10,6 @@ mod pad_detect;
 mod pad_print;
 mod plan_cmd;
 mod plot_cmd;
-mod recorded_json;
 mod replay_cmd;
 mod replay_depth;
 mod replay_fsm;
