@@ -102,6 +102,8 @@ struct Node {
     stage: Box<dyn Stage>,
     period_ns: Option<u64>,
     next_tick_ns: u64,
+    /// Ticks at given times besides the period's ([`Lockstep::tick_at`]), ascending.
+    ticks_at: VecDeque<u64>,
     /// One queue per input, in the spec's order.
     queues: Vec<VecDeque<Pending>>,
     /// Where each output goes.
@@ -289,6 +291,7 @@ impl Lockstep {
                     queues: spec.inputs.iter().map(|_| VecDeque::new()).collect(),
                     period_ns: stage.tick_period_ns().filter(|p| *p > 0),
                     next_tick_ns: 0,
+                    ticks_at: VecDeque::new(),
                     routes,
                     spec,
                     stage,
@@ -362,13 +365,33 @@ impl Lockstep {
         }
     }
 
+    /// Ticks `node` at `at_ns` (not before the current instant), besides its period's
+    /// ticks: a recorded step replayed at its recorded time, for a stage whose flight
+    /// stepped on a clock the replay does not have. Give the times in ascending order;
+    /// one tick per instant, as ever. `false`: no such node.
+    pub fn tick_at(&mut self, node: &str, at_ns: u64) -> bool {
+        let at_ns = at_ns.max(self.now_ns);
+        let Some(n) = self.nodes.iter_mut().find(|n| n.spec.name == node) else {
+            return false;
+        };
+        if n.ticks_at.back().is_none_or(|last| *last < at_ns) {
+            n.ticks_at.push_back(at_ns);
+        }
+        true
+    }
+
     /// The next instant anything happens: a tick or a delivery.
     fn next_instant(&self) -> Option<u64> {
         let ticks = self
             .nodes
             .iter()
             .filter(|n| n.period_ns.is_some())
-            .map(|n| n.next_tick_ns);
+            .map(|n| n.next_tick_ns)
+            .chain(
+                self.nodes
+                    .iter()
+                    .filter_map(|n| n.ticks_at.front().copied()),
+            );
         let deliveries = self
             .nodes
             .iter()
@@ -436,9 +459,9 @@ impl Lockstep {
                 inputs.push((k, m));
             }
         }
+        let scheduled = node.ticks_at.front().is_some_and(|t| *t <= now);
         let tick = !ticked.get(n).copied().unwrap_or(true)
-            && node.period_ns.is_some()
-            && node.next_tick_ns <= now;
+            && (scheduled || (node.period_ns.is_some() && node.next_tick_ns <= now));
         if inputs.is_empty() && !tick {
             return Ok(false);
         }
@@ -477,6 +500,9 @@ impl Lockstep {
                 *slot = true;
             }
             node.stage.on_tick(now, &mut out).map_err(fail)?;
+            while node.ticks_at.front().is_some_and(|t| *t <= now) {
+                node.ticks_at.pop_front();
+            }
             if let Some(p) = node.period_ns {
                 // The next period boundary after now (a late start skips, never bursts).
                 while node.next_tick_ns <= now {

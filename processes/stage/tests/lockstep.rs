@@ -191,3 +191,43 @@ fn a_stage_publishing_outside_its_outputs_fails_the_run() {
     let e = d.step(&mut |_| {}).expect_err("refused");
     assert!(e.to_string().contains("not one of its outputs"), "{e}");
 }
+
+#[test]
+fn ticks_given_by_time_come_at_those_times_beside_the_period_and_once_per_instant() {
+    // A ticker with a 20 ms period, ticked also at 7 ms, 20 ms (a period tick already)
+    // and 33 ms: a recorded step schedule replayed.
+    let seen = Rc::new(RefCell::new(Vec::new()));
+    let mut d = Lockstep::new(vec![
+        (
+            spec("ticker", &[], &[topics::PLANNER_GOAL], 0),
+            Box::new(Ticker {
+                period_ns: 20_000_000,
+                n: 0,
+            }) as Box<dyn Stage>,
+        ),
+        (
+            spec(
+                "echo",
+                &[(topics::PLANNER_GOAL, false, false)],
+                &[topics::FSM_SETPOINT],
+                0,
+            ),
+            Box::new(Echo { seen: seen.clone() }),
+        ),
+    ])
+    .unwrap();
+    for t in [7_000_000, 20_000_000, 33_000_000] {
+        assert!(d.tick_at("ticker", t));
+    }
+    assert!(!d.tick_at("nobody", 1));
+    while d.now_ns() < 40_000_000 {
+        d.step(&mut |_| {}).unwrap();
+    }
+    let times: Vec<u64> = seen.borrow().iter().map(|(t, _)| *t).collect();
+    assert_eq!(
+        times,
+        [0, 7_000_000, 20_000_000, 33_000_000, 40_000_000],
+        "{:?}",
+        seen.borrow()
+    );
+}

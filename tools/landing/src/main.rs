@@ -11,9 +11,6 @@ mod pad_print;
 mod plan_cmd;
 mod plot_cmd;
 mod replay_cmd;
-mod replay_depth;
-mod replay_fsm;
-mod replay_planner;
 mod run_cmd;
 mod status_cmd;
 
@@ -25,7 +22,7 @@ use benches::{
 use stack::mapping as map_cmd;
 // The libraries' modules under the names the command modules use.
 use evaluation::{flight_log, plot, referee as run_eval};
-use stack::{inject, lockstep as run_lockstep};
+use stack::inject;
 use std::path::PathBuf;
 use std::process::ExitCode;
 

@@ -2,7 +2,8 @@
 //! every graph node built from it ([`lockstep`]'s registry), the lockstep runner (every
 //! stage and the simulator in one process on simulated time) and the process runner
 //! ([`processes`]: every stage its own OS process, as systemd starts them), and the
-//! faults done to a running stack ([`inject`], [`flood`]).
+//! faults done to a running stack ([`inject`], [`flood`]), and one stage of a recorded
+//! flight run again on the lockstep driver ([`replay`]).
 //!
 //! The referee (`evaluation`) judges the flights these runners fly; the `landing`
 //! command, the benchmarks, the campaigns and the tests all run missions through here.
@@ -16,5 +17,6 @@ pub mod mapping;
 pub mod mission;
 pub mod processes;
 pub mod procs;
+pub mod replay;
 
 pub use config::StackConfig;
