@@ -12,30 +12,20 @@ use ipc_types::msg::{
 };
 use ipc_types::topics;
 use nalgebra::Isometry3;
-use stage::{Input, Message, Outbox, SliceHeader, SliceMut, Stage, StageError};
+use stage::testing::Collector;
+use stage::{Input, Message, OwnedMessage, Stage};
 
 const MS: u64 = 1_000_000;
 const FILE: &str = "camera_down_640x480.yaml";
 
-#[derive(Default)]
-struct Collect(Vec<PadObservation>);
-
-impl Outbox for Collect {
-    fn publish(&mut self, _topic: &str, msg: Message<'_>) -> Result<(), StageError> {
-        if let Message::PadObservation(o) = msg {
-            self.0.push(*o);
-        }
-        Ok(())
-    }
-
-    fn publish_slice(
-        &mut self,
-        _topic: &str,
-        _len: usize,
-        _fill: &mut dyn FnMut(SliceMut<'_>) -> Option<SliceHeader>,
-    ) -> Result<bool, StageError> {
-        Ok(false)
-    }
+/// The observations the stage published, oldest first.
+fn observations(out: &Collector) -> Vec<PadObservation> {
+    out.on(topics::PAD_OBSERVATION)
+        .filter_map(|m| match m {
+            OwnedMessage::PadObservation(o) => Some(*o),
+            _ => None,
+        })
+        .collect()
 }
 
 fn state(t_ns: u64, world_from_body: &Isometry3<f64>) -> VehicleState {
@@ -62,7 +52,7 @@ fn header(t_ns: u64) -> CameraFrameHeader {
     }
 }
 
-fn feed(stage: &mut ArucoStage, out: &mut Collect, now_ns: u64, msg: Message<'_>) {
+fn feed(stage: &mut ArucoStage, out: &mut Collector, now_ns: u64, msg: Message<'_>) {
     let topic = match msg {
         Message::VehicleState(_) => topics::VEHICLE_STATE,
         _ => topics::CAMERA_FRAME,
@@ -90,7 +80,7 @@ fn setup() -> (ArucoStage, Isometry3<f64>, Isometry3<f64>, Vec<u8>) {
 #[test]
 fn a_frame_ahead_of_the_telemetry_waits_for_the_next_state_and_is_placed_by_it() {
     let (mut stage, world_from_body, truth, pixels) = setup();
-    let mut out = Collect::default();
+    let mut out = Collector::new();
     feed(
         &mut stage,
         &mut out,
@@ -104,7 +94,7 @@ fn a_frame_ahead_of_the_telemetry_waits_for_the_next_state_and_is_placed_by_it()
         201 * MS,
         Message::CameraFrame(&header(200 * MS), &pixels),
     );
-    assert!(out.0.is_empty(), "held, not sent unplaced");
+    assert!(observations(&out).is_empty(), "held, not sent unplaced");
     // The late telemetry: a state from after the exposure places it.
     let later = state(210 * MS, &world_from_body);
     feed(
@@ -113,8 +103,9 @@ fn a_frame_ahead_of_the_telemetry_waits_for_the_next_state_and_is_placed_by_it()
         215 * MS,
         Message::VehicleState(&later),
     );
-    assert_eq!(out.0.len(), 1);
-    let o = &out.0[0];
+    let seen = observations(&out);
+    assert_eq!(seen.len(), 1);
+    let o = &seen[0];
     assert_eq!(o.world_valid, 1);
     assert_eq!(o.msg.capture_ns, 200 * MS);
     let p = o.world_from_pad.translation;
@@ -126,7 +117,7 @@ fn a_frame_ahead_of_the_telemetry_waits_for_the_next_state_and_is_placed_by_it()
 #[test]
 fn a_held_frame_goes_out_unplaced_when_the_next_frame_comes_first() {
     let (mut stage, world_from_body, _, pixels) = setup();
-    let mut out = Collect::default();
+    let mut out = Collector::new();
     feed(
         &mut stage,
         &mut out,
@@ -146,8 +137,9 @@ fn a_held_frame_goes_out_unplaced_when_the_next_frame_comes_first() {
         Message::CameraFrame(&header(233 * MS), &pixels),
     );
     // The first in order, without a world pose; the second held in its turn.
-    assert_eq!(out.0.len(), 1);
-    assert_eq!(out.0[0].msg.capture_ns, 200 * MS);
-    assert_eq!(out.0[0].world_valid, 0);
+    let seen = observations(&out);
+    assert_eq!(seen.len(), 1);
+    assert_eq!(seen[0].msg.capture_ns, 200 * MS);
+    assert_eq!(seen[0].world_valid, 0);
     assert!(stage.counters().contains(&("no_state", 1)));
 }

@@ -6,35 +6,29 @@ use mavlink::dialects::common::{
     MavState, MavType,
 };
 use px4_protocol::signing::SigningKey;
-use stage::{SliceHeader, SliceMut};
+use stage::OwnedMessage;
+use stage::testing::Collector;
 
 use super::*;
 
-/// What the stage published: its vehicle states and the frames it sent.
-#[derive(Default)]
-struct Out {
-    states: Vec<VehicleState>,
-    frames: Vec<Vec<u8>>,
+/// The vehicle states the stage published, oldest first.
+fn states(out: &Collector) -> Vec<VehicleState> {
+    (out.published.iter())
+        .filter_map(|(_, m)| match m {
+            OwnedMessage::VehicleState(s) => Some(*s),
+            _ => None,
+        })
+        .collect()
 }
 
-impl Outbox for Out {
-    fn publish(&mut self, _topic: &str, msg: Message<'_>) -> Result<(), StageError> {
-        match msg {
-            Message::VehicleState(s) => self.states.push(*s),
-            Message::Mavlink(b) => self.frames.push(b.to_vec()),
-            _ => {}
-        }
-        Ok(())
-    }
-
-    fn publish_slice(
-        &mut self,
-        _topic: &str,
-        _len: usize,
-        _fill: &mut dyn FnMut(SliceMut<'_>) -> Option<SliceHeader>,
-    ) -> Result<bool, StageError> {
-        Ok(false)
-    }
+/// The MAVLink frames the stage sent, oldest first.
+fn frames(out: &Collector) -> Vec<Vec<u8>> {
+    (out.published.iter())
+        .filter_map(|(_, m)| match m {
+            OwnedMessage::Mavlink(b) => Some(b.clone()),
+            _ => None,
+        })
+        .collect()
 }
 
 const UNIX: u64 = 1_795_000_000_000_000_000;
@@ -78,7 +72,7 @@ fn telemetry(guard: &mut Guard, seq: u8, now_ns: u64) -> Vec<u8> {
     buf
 }
 
-fn feed(stage: &mut LinkStage, bytes: &[u8], now_ns: u64, out: &mut Out) {
+fn feed(stage: &mut LinkStage, bytes: &[u8], now_ns: u64, out: &mut Collector) {
     let input = Input {
         topic: topics::MAVLINK_FROM_PX4,
         msg: Message::Mavlink(bytes),
@@ -92,7 +86,7 @@ fn a_signed_link_takes_no_telemetry_but_the_autopilots_signed_frames_and_counts_
     let key = SigningKey::from_bytes([0x42; 32]);
     let signer = Signer::new(key.clone(), 1, UNIX);
     let mut stage = LinkStage::new(LinkSettings::default(), Framing::Datagram, Some(signer));
-    let mut out = Out::default();
+    let mut out = Collector::new();
     let ms = 1_000_000;
 
     // A spoofer: unsigned, then signed with another key, then as another system.
@@ -126,12 +120,12 @@ fn a_signed_link_takes_no_telemetry_but_the_autopilots_signed_frames_and_counts_
         )
         .unwrap();
     assert!(
-        out.states.is_empty(),
+        states(&out).is_empty(),
         "a vehicle state from spoofed telemetry"
     );
     // What px4-link sends on a signed link is signed.
-    assert!(!out.frames.is_empty());
-    for f in &out.frames {
+    assert!(!frames(&out).is_empty());
+    for f in &frames(&out) {
         assert_eq!(f[2] & 1, 1, "an unsigned frame sent on a signed link");
     }
 
@@ -143,8 +137,7 @@ fn a_signed_link_takes_no_telemetry_but_the_autopilots_signed_frames_and_counts_
         200 * ms,
         &mut out,
     );
-    let s = out
-        .states
+    let s = states(&out)
         .last()
         .copied()
         .expect("a state from the signed telemetry");
@@ -160,7 +153,7 @@ fn a_signed_link_takes_no_telemetry_but_the_autopilots_signed_frames_and_counts_
 #[test]
 fn an_unsigned_link_acts_on_the_autopilot_only() {
     let mut stage = LinkStage::new(LinkSettings::default(), Framing::Datagram, None);
-    let mut out = Out::default();
+    let mut out = Collector::new();
     let mut g = Guard::open();
     // A system 7 claiming to be the autopilot's: counted, not acted on.
     let mut other = Vec::new();
@@ -181,7 +174,7 @@ fn an_unsigned_link_acts_on_the_autopilot_only() {
         2_000_000,
         &mut out,
     );
-    let s = out.states.last().copied().unwrap();
+    let s = states(&out).last().copied().unwrap();
     assert!(
         (s.world_from_body.translation[0] - 40.0).abs() < 1e-6,
         "{s:?}"
@@ -218,7 +211,7 @@ fn whatever_the_fsm_asks_no_setpoint_beyond_the_bounds_goes_on_the_wire() {
     let settings = LinkSettings::default();
     let b = settings.bounds;
     let mut stage = LinkStage::new(settings, Framing::Datagram, None);
-    let mut out = Out::default();
+    let mut out = Collector::new();
     let ms = 1_000_000u64;
     // The autopilot reports the vehicle 40 m east, 10 m up: the take-off point.
     let mut autopilot = Guard::open();
@@ -239,7 +232,7 @@ fn whatever_the_fsm_asks_no_setpoint_beyond_the_bounds_goes_on_the_wire() {
             sp.velocity[k] = rng.value();
             sp.acceleration[k] = rng.value();
         }
-        out.frames.clear();
+        out.take();
         stage
             .on_input(
                 t,
@@ -258,7 +251,7 @@ fn whatever_the_fsm_asks_no_setpoint_beyond_the_bounds_goes_on_the_wire() {
             &mut out,
         );
         stage.on_tick(t + 5 * ms, &mut out).unwrap();
-        for f in &out.frames {
+        for f in &frames(&out) {
             let mut msgs = Vec::new();
             px4_protocol::codec::decode_datagram(f, &mut msgs);
             for (_, m) in msgs {

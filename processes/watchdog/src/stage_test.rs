@@ -1,32 +1,12 @@
 use super::*;
 use ipc_types::msg::{FsmStatus, ProcessEvent, ProcessEventKind, Text, VehicleState};
-use stage::{SliceHeader, SliceMut};
+use stage::testing::Collector;
 
-/// The sequence numbers published, by topic.
-#[derive(Default)]
-struct Sent {
-    views: Vec<u64>,
-    orders: Vec<u64>,
-}
-
-impl Outbox for Sent {
-    fn publish(&mut self, _topic: &str, msg: Message<'_>) -> Result<(), StageError> {
-        match msg {
-            Message::WatchdogView(v) => self.views.push(v.msg.seq),
-            Message::SafetyCommand(c) => self.orders.push(c.msg.seq),
-            _ => {}
-        }
-        Ok(())
-    }
-
-    fn publish_slice(
-        &mut self,
-        _topic: &str,
-        _len: usize,
-        _fill: &mut dyn FnMut(SliceMut<'_>) -> Option<SliceHeader>,
-    ) -> Result<bool, StageError> {
-        Ok(false)
-    }
+/// The sequence numbers of what was published on `topic`.
+fn seqs(out: &Collector, topic: &str) -> Vec<u64> {
+    out.on(topic)
+        .filter_map(|m| m.as_message().header().map(|h| h.seq))
+        .collect()
 }
 
 #[test]
@@ -36,7 +16,7 @@ fn views_and_safety_orders_are_numbered_each_on_their_own_without_gaps() {
         &[("fsm".to_string(), 500.0)],
     )
     .unwrap();
-    let mut out = Sent::default();
+    let mut out = Collector::new();
     const MS: u64 = 1_000_000;
     let mut died = false;
     for k in 1..=300u64 {
@@ -98,9 +78,13 @@ fn views_and_safety_orders_are_numbered_each_on_their_own_without_gaps() {
         }
         st.on_tick(now, &mut out).unwrap();
     }
-    assert!(out.orders.len() >= 2, "orders {:?}", out.orders);
-    assert!(out.views.len() > out.orders.len(), "views {:?}", out.views);
-    for seqs in [&out.views, &out.orders] {
+    let (views, orders) = (
+        seqs(&out, topics::WATCHDOG_VIEW),
+        seqs(&out, topics::SAFETY_COMMAND),
+    );
+    assert!(orders.len() >= 2, "orders {orders:?}");
+    assert!(views.len() > orders.len(), "views {views:?}");
+    for seqs in [&views, &orders] {
         let expected: Vec<u64> = (1..=seqs.len() as u64).collect();
         assert_eq!(seqs, &expected);
     }
