@@ -4,6 +4,8 @@
 //! on another process's crate (what two processes share is a library crate of its own:
 //! optics, state_history, bspline, px4_protocol). The lockstep runner drives the
 //! libraries without IPC; a library that reached for a port would break that quietly.
+//! The crate diagram of docs/ARCHITECTURE.md is drawn from `cargo metadata` and checked
+//! here, and every crate has a README.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a panic is a failed test
 
@@ -388,4 +390,255 @@ fn every_stage_is_built_through_its_one_constructor() {
         }
     }
     assert!(offenders.is_empty(), "{}", offenders.join("\n"));
+}
+
+/// One crate of the workspace as `cargo metadata` describes it.
+#[derive(Debug)]
+struct Member {
+    /// Its package name.
+    name: String,
+    /// Its folder, relative to the workspace root (`processes/stage`, `tests`).
+    dir: String,
+    /// The workspace crates in its `[dependencies]` (not dev- or build-dependencies).
+    deps: std::collections::BTreeSet<String>,
+}
+
+/// Every crate of the workspace with its normal dependencies on the others, sorted by
+/// name, from `cargo metadata --no-deps` (no registry, no lock file: it reads the
+/// manifests only, in a few milliseconds).
+fn workspace_members() -> Vec<Member> {
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let out = std::process::Command::new(cargo)
+        .args([
+            "metadata",
+            "--format-version",
+            "1",
+            "--no-deps",
+            "--offline",
+        ])
+        .current_dir(root())
+        .output()
+        .expect("run cargo metadata");
+    assert!(
+        out.status.success(),
+        "cargo metadata failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let meta: serde_json::Value = serde_json::from_slice(&out.stdout).expect("metadata JSON");
+    let ws_root = PathBuf::from(meta["workspace_root"].as_str().expect("workspace_root"));
+    let packages = meta["packages"].as_array().expect("packages");
+    let names: std::collections::BTreeSet<String> = packages
+        .iter()
+        .map(|p| p["name"].as_str().expect("name").to_string())
+        .collect();
+    let mut members: Vec<Member> = packages
+        .iter()
+        .map(|p| {
+            let manifest = Path::new(p["manifest_path"].as_str().expect("manifest_path"));
+            let dir = manifest
+                .parent()
+                .and_then(|d| d.strip_prefix(&ws_root).ok())
+                .expect("a member's folder is under the workspace root");
+            let deps = p["dependencies"]
+                .as_array()
+                .expect("dependencies")
+                .iter()
+                .filter(|d| d["kind"].is_null())
+                .filter_map(|d| d["name"].as_str())
+                .filter(|d| names.contains(*d))
+                .map(str::to_string)
+                .collect();
+            Member {
+                name: p["name"].as_str().expect("name").to_string(),
+                dir: dir.to_string_lossy().replace('\\', "/"),
+                deps,
+            }
+        })
+        .collect();
+    members.sort_by(|a, b| a.name.cmp(&b.name));
+    members
+}
+
+/// The layers of the diagram, top to bottom: the top-level folder a crate is in and the
+/// title of its box.
+const LAYERS: &[(&str, &str)] = &[
+    ("tests", "tests/"),
+    ("tools", "tools/"),
+    ("processes", "processes/"),
+    ("ipc_types", "ipc_types/"),
+];
+
+/// A crate's node id in the diagram: `c_` and its name with `-` as `_` (so that no id is
+/// a Mermaid keyword such as `graph` or `end`).
+fn node_id(name: &str) -> String {
+    format!(
+        "c_{}",
+        name.replace(|c: char| !c.is_ascii_alphanumeric(), "_")
+    )
+}
+
+/// The crate diagram: a Mermaid flowchart (an arrow from a crate to what it depends on,
+/// drawn only where no longer path already leads there, one box per top-level folder),
+/// then every direct dependency as a line `crate -> dep, dep`. Sorted throughout, so the
+/// same workspace always gives the same text.
+fn crate_diagram(members: &[Member]) -> String {
+    use std::collections::BTreeSet;
+    use std::fmt::Write as _;
+    let deps_of = |name: &str| -> &BTreeSet<String> {
+        &members
+            .iter()
+            .find(|m| m.name == name)
+            .expect("a workspace crate")
+            .deps
+    };
+    // Whether `to` is reachable from `from` without taking the edge `from -> skip`.
+    let reaches_without = |from: &str, skip: &str, to: &str| -> bool {
+        let mut stack: Vec<&str> = deps_of(from)
+            .iter()
+            .map(String::as_str)
+            .filter(|d| *d != skip)
+            .collect();
+        let mut seen = BTreeSet::new();
+        while let Some(c) = stack.pop() {
+            if c == to {
+                return true;
+            }
+            if seen.insert(c) {
+                stack.extend(deps_of(c).iter().map(String::as_str));
+            }
+        }
+        false
+    };
+    let mut s = String::new();
+    s.push_str("```mermaid\nflowchart TD\n");
+    for (folder, title) in LAYERS {
+        let inside: Vec<&Member> = members
+            .iter()
+            .filter(|m| m.dir.split('/').next() == Some(*folder))
+            .collect();
+        if inside.is_empty() {
+            continue;
+        }
+        writeln!(s, "  subgraph layer_{folder} [\"{title}\"]").unwrap();
+        for m in inside {
+            writeln!(s, "    {}[\"{}\"]", node_id(&m.name), m.name).unwrap();
+        }
+        s.push_str("  end\n");
+    }
+    for m in members {
+        for d in &m.deps {
+            if !reaches_without(&m.name, d, d) {
+                writeln!(s, "  {} --> {}", node_id(&m.name), node_id(d)).unwrap();
+            }
+        }
+    }
+    s.push_str("```\n\n");
+    s.push_str(
+        "<details><summary>Every direct dependency between workspace crates \
+         ([dependencies] only)</summary>\n\n```\n",
+    );
+    for m in members {
+        let deps: Vec<&str> = m.deps.iter().map(String::as_str).collect();
+        if deps.is_empty() {
+            writeln!(s, "{} ({})", m.name, m.dir).unwrap();
+        } else {
+            writeln!(s, "{} ({}) -> {}", m.name, m.dir, deps.join(", ")).unwrap();
+        }
+    }
+    s.push_str("```\n\n</details>\n");
+    s
+}
+
+const DIAGRAM_START: &str = "<!-- crate-diagram:start -->\n";
+const DIAGRAM_END: &str = "<!-- crate-diagram:end -->";
+
+#[test]
+fn the_crate_diagram_in_the_architecture_doc_is_the_workspace_as_built() {
+    let members = workspace_members();
+    assert!(
+        members.iter().any(|m| m.name == "stage") && members.iter().any(|m| m.name == "landing"),
+        "{members:?}"
+    );
+    // Every crate sits in one of the diagram's boxes.
+    for m in &members {
+        let folder = m.dir.split('/').next().unwrap_or_default();
+        assert!(
+            LAYERS.iter().any(|(f, _)| *f == folder),
+            "{} ({}) is in no layer of the diagram: add its folder to LAYERS",
+            m.name,
+            m.dir
+        );
+    }
+    let expected = crate_diagram(&members);
+    let path = root().join("docs/ARCHITECTURE.md");
+    let doc = std::fs::read_to_string(&path).expect("read docs/ARCHITECTURE.md");
+    let block = doc.find(DIAGRAM_START).and_then(|start| {
+        let body = start + DIAGRAM_START.len();
+        doc[body..].find(DIAGRAM_END).map(|len| (body, body + len))
+    });
+    let Some((from, to)) = block else {
+        panic!(
+            "docs/ARCHITECTURE.md has no {} ... {} block; add one holding:\n\n{expected}",
+            DIAGRAM_START.trim_end(),
+            DIAGRAM_END
+        );
+    };
+    if doc[from..to] == expected {
+        return;
+    }
+    if std::env::var_os("UPDATE_CRATE_DIAGRAM").is_some() {
+        let updated = format!("{}{expected}{}", &doc[..from], &doc[to..]);
+        std::fs::write(&path, updated).expect("write docs/ARCHITECTURE.md");
+        eprintln!("docs/ARCHITECTURE.md: crate diagram rewritten from cargo metadata");
+        return;
+    }
+    panic!(
+        "the crate diagram in docs/ARCHITECTURE.md is not the workspace as built; paste this \
+         between the markers (or run with UPDATE_CRATE_DIAGRAM=1):\n\n{expected}"
+    );
+}
+
+#[test]
+fn the_crate_diagram_draws_only_the_edges_no_longer_path_implies() {
+    let member = |name: &str, dir: &str, deps: &[&str]| Member {
+        name: name.into(),
+        dir: dir.into(),
+        deps: deps.iter().map(|d| d.to_string()).collect(),
+    };
+    let members = [
+        member("base", "ipc_types", &[]),
+        member("mid", "processes/mid", &["base"]),
+        member("top-cli", "tools/top-cli", &["base", "mid"]),
+    ];
+    let text = crate_diagram(&members);
+    assert!(text.contains("  c_mid --> c_base\n"), "{text}");
+    assert!(text.contains("  c_top_cli --> c_mid\n"), "{text}");
+    assert!(!text.contains("c_top_cli --> c_base"), "{text}");
+    assert!(
+        text.contains("top-cli (tools/top-cli) -> base, mid\n"),
+        "{text}"
+    );
+    assert!(text.contains("base (ipc_types)\n"), "{text}");
+    assert!(
+        !text.contains("layer_tests"),
+        "an empty layer is not drawn: {text}"
+    );
+}
+
+#[test]
+fn every_crate_has_a_readme() {
+    let mut missing = Vec::new();
+    for m in workspace_members() {
+        let readme = root().join(&m.dir).join("README.md");
+        let text = std::fs::read_to_string(&readme).unwrap_or_default();
+        if text.trim().lines().count() < 3 {
+            missing.push(format!("{} ({}/README.md)", m.name, m.dir));
+        }
+    }
+    assert!(
+        missing.is_empty(),
+        "every crate says in its README what it holds, what it reads and publishes, and \
+         how to run or test it alone:\n{}",
+        missing.join("\n")
+    );
 }
