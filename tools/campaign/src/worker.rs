@@ -91,8 +91,12 @@ impl Worker {
         Ok(record)
     }
 
-    /// The worker process's loop (see the module docs) until stdin closes.
+    /// The worker process's loop (see the module docs) until stdin closes. A worker is
+    /// one core: OpenCV's own threads (the camera's remap, the detector) would take the
+    /// other workers' cores, so it runs them on this one (what is computed does not
+    /// depend on it).
     pub fn serve(&self, input: impl BufRead, mut output: impl Write) -> anyhow::Result<()> {
+        opencv::core::set_num_threads(1)?;
         for line in input.lines() {
             let line = line?;
             let mut f = line.splitn(4, '\t');
