@@ -29,22 +29,27 @@ fn no_pipeline_process_opens_the_truth_topic() {
         let dir = entry.expect("entry").path();
         // The simulator makes the truth; `stage` and `runtime` carry every topic's
         // message type, and both drivers refuse a node reading an evaluator-only topic
-        // (tested in stage/tests/lockstep.rs), as the graph check does.
+        // (tested in stage/tests/lockstep.rs), as the graph's check does (`graph`
+        // names the truth topic to refuse it: processes/graph/src/check.rs).
         if dir
             .file_name()
-            .is_some_and(|n| n == "sim" || n == "stage" || n == "runtime")
+            .is_some_and(|n| n == "sim" || n == "stage" || n == "runtime" || n == "graph")
         {
             continue;
         }
         let mut files = Vec::new();
         rust_files(&dir.join("src"), &mut files);
         // The recorder's library also writes the evaluator's truth file (`landing run
-        // --record`: FILE.truth.mcap), so it names the truth types; its process, main.rs,
-        // must not, and subscribes to no evaluator-only topic (the driver refuses one).
+        // --record`: FILE.truth.mcap), so it names the truth types; its process (main.rs,
+        // and process.rs, which picks what it subscribes to) must not, and takes no
+        // evaluator-only topic (the driver refuses one, too).
         if dir.file_name().is_some_and(|n| n == "recorder") {
-            let main = std::fs::read_to_string(dir.join("src/main.rs")).expect("main.rs");
-            assert!(main.contains("!t.evaluator_only"), "recorder: {main}");
-            files.retain(|f| f.file_name().is_some_and(|n| n == "main.rs"));
+            let picks = std::fs::read_to_string(dir.join("src/process.rs")).expect("process.rs");
+            assert!(picks.contains("!t.evaluator_only"), "recorder: {picks}");
+            files.retain(|f| {
+                f.file_name()
+                    .is_some_and(|n| n == "main.rs" || n == "process.rs")
+            });
         }
         for f in files {
             let text = std::fs::read_to_string(&f).expect("read");
@@ -57,6 +62,18 @@ fn no_pipeline_process_opens_the_truth_topic() {
         }
     }
     assert!(offenders.is_empty(), "ground truth used in: {offenders:?}");
+}
+
+#[test]
+fn the_recorder_subscribes_to_no_truth_topic_of_the_shipped_graph() {
+    let deploy = Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy");
+    let graph = graph::Graph::load(&graph::default_path(&deploy)).expect("graph");
+    let spec = recorder::process::node_spec(&graph, &[]);
+    assert!(spec.inputs.len() > 10, "{spec:?}");
+    for i in &spec.inputs {
+        let info = ipc_types::topics::find(&i.topic).expect("a known topic");
+        assert!(!info.evaluator_only, "the recorder reads {}", i.topic);
+    }
 }
 
 #[test]
