@@ -17,6 +17,7 @@
 
 mod plan;
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -294,10 +295,11 @@ impl Stage for Scheduled {
 }
 
 /// What the flight's stage met, when, and what it made: the schedule a replay runs.
+/// Inputs borrow the recording's messages (the driver copies each once, as it queues it).
 #[derive(Default)]
-struct Plan {
+struct Plan<'a> {
     /// (time, topic, message), in time order per topic.
-    deliveries: Vec<(u64, &'static str, OwnedMessage)>,
+    deliveries: Vec<(u64, &'static str, Cow<'a, OwnedMessage>)>,
     /// The flight's steps, ascending.
     ticks: Vec<u64>,
     /// The outputs the flight recorded.

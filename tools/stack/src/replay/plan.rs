@@ -21,6 +21,7 @@
 //!   Inputs are delivered when sent, a safety order at the first step after it (which it
 //!   then is: no tick there). Transitions compared by number, as statuses show them.
 
+use std::borrow::Cow;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
@@ -43,7 +44,7 @@ pub(super) fn unit(stage: &str) -> &'static str {
 }
 
 /// The flight's schedule of `stage` in `rec` (the recording `file`).
-pub(super) fn plan(stage: &str, rec: &Recording, file: &Path) -> Result<Plan> {
+pub(super) fn plan<'a>(stage: &str, rec: &'a Recording, file: &Path) -> Result<Plan<'a>> {
     match stage {
         "aruco-pnp" => aruco(rec, file),
         "depth-map" => depth(rec, file),
@@ -114,7 +115,7 @@ fn recorded(stage: &str, rec: &Recording, topic: &str) -> Result<Vec<Output>> {
     outputs(stage, rec.on(topic).map(|m| (m.topic, &m.msg)))
 }
 
-fn aruco(rec: &Recording, file: &Path) -> Result<Plan> {
+fn aruco<'a>(rec: &'a Recording, file: &Path) -> Result<Plan<'a>> {
     if rec.cameras.is_empty() {
         if rec.jpeg {
             bail!(
@@ -141,7 +142,7 @@ fn aruco(rec: &Recording, file: &Path) -> Result<Plan> {
     for s in rec.on(topics::VEHICLE_STATE) {
         let at = stamp_of(&s.header, StageId::Px4Link).map_or(s.log_time, |(_, exit)| exit);
         plan.deliveries
-            .push((at, topics::VEHICLE_STATE, s.msg.clone()));
+            .push((at, topics::VEHICLE_STATE, Cow::Borrowed(&s.msg)));
     }
     for f in &rec.cameras {
         let Some(h) = f.as_message().header().copied() else {
@@ -152,7 +153,8 @@ fn aruco(rec: &Recording, file: &Path) -> Result<Plan> {
             .copied()
             .or_else(|| stamp_of(&h, StageId::CameraIngest).map(|(_, exit)| exit))
             .unwrap_or(h.capture_ns);
-        plan.deliveries.push((at, topics::CAMERA_FRAME, f.clone()));
+        plan.deliveries
+            .push((at, topics::CAMERA_FRAME, Cow::Borrowed(f)));
     }
     Ok(plan)
 }
@@ -160,7 +162,7 @@ fn aruco(rec: &Recording, file: &Path) -> Result<Plan> {
 /// A depth frame and the capture time of the newest state its map used.
 type FrameUsed<'a> = (&'a OwnedMessage, u64);
 
-fn depth(rec: &Recording, file: &Path) -> Result<Plan> {
+fn depth<'a>(rec: &'a Recording, file: &Path) -> Result<Plan<'a>> {
     let maps = &rec.maps.maps;
     if maps.is_empty() {
         bail!("{}: no maps (/map/occupancy/header)", file.display());
@@ -223,15 +225,16 @@ fn depth(rec: &Recording, file: &Path) -> Result<Plan> {
         };
         while let Some((_, s)) = states.next_if(held) {
             plan.deliveries
-                .push((at, topics::VEHICLE_STATE, s.msg.clone()));
+                .push((at, topics::VEHICLE_STATE, Cow::Borrowed(&s.msg)));
         }
-        plan.deliveries.push((at, topics::SIM_DEPTH, f.clone()));
+        plan.deliveries
+            .push((at, topics::SIM_DEPTH, Cow::Borrowed(f)));
     }
     plan.ticks.sort_unstable();
     Ok(plan)
 }
 
-fn planner(rec: &Recording, file: &Path) -> Result<Plan> {
+fn planner<'a>(rec: &'a Recording, file: &Path) -> Result<Plan<'a>> {
     if rec.maps.grids == 0 {
         bail!(
             "{}: no map cells (/map/occupancy, foxglove.VoxelGrid): recorded before the recorder kept them",
@@ -262,7 +265,7 @@ fn planner(rec: &Recording, file: &Path) -> Result<Plan> {
         let at = sent_at(&g.header, g.log_time);
         if at <= last {
             plan.deliveries
-                .push((at, topics::PLANNER_GOAL, g.msg.clone()));
+                .push((at, topics::PLANNER_GOAL, Cow::Borrowed(&g.msg)));
         }
     }
     for m in &rec.maps.maps {
@@ -271,7 +274,8 @@ fn planner(rec: &Recording, file: &Path) -> Result<Plan> {
         };
         if at <= last {
             let map = OwnedMessage::OccupancyMap(m.header, cells.clone());
-            plan.deliveries.push((at, topics::MAP_OCCUPANCY, map));
+            plan.deliveries
+                .push((at, topics::MAP_OCCUPANCY, Cow::Owned(map)));
         }
     }
     // States apart: one published at the very instant of a decision (lockstep) may or may
@@ -290,14 +294,14 @@ fn planner(rec: &Recording, file: &Path) -> Result<Plan> {
             // Held back from an earlier decision: delivered after it.
             let at = previous.map_or(at, |p| at.max(p + 1));
             plan.deliveries
-                .push((at, topics::VEHICLE_STATE, s.msg.clone()));
+                .push((at, topics::VEHICLE_STATE, Cow::Borrowed(&s.msg)));
         }
         previous = Some(t);
     }
     Ok(plan)
 }
 
-fn fsm(rec: &Recording, file: &Path) -> Result<Plan> {
+fn fsm<'a>(rec: &'a Recording, file: &Path) -> Result<Plan<'a>> {
     let by_fsm = [
         topics::FSM_SETPOINT,
         topics::FSM_STATUS,
@@ -349,7 +353,7 @@ fn fsm(rec: &Recording, file: &Path) -> Result<Plan> {
             let safety = m.topic == topics::SAFETY_COMMAND;
             stepped |= safety;
             plan.deliveries
-                .push((if safety { t } else { at }, m.topic, m.msg.clone()));
+                .push((if safety { t } else { at }, m.topic, Cow::Borrowed(&m.msg)));
         }
         if !stepped {
             plan.ticks.push(t);
