@@ -13,16 +13,13 @@
 //! shadows, no sky model).
 
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
-use opencv::core::{
-    BORDER_REPLICATE, CV_8UC1, CV_8UC3, CV_16SC2, CV_16UC1, Mat, Scalar, ToInputArray,
-    ToOutputArray, Vec2s,
-};
-use opencv::imgproc;
+use opencv::core::{CV_8UC1, CV_8UC3, Mat, Scalar};
 use opencv::prelude::*;
 use optics::{CameraCalibration, PadModel};
 use serde::Deserialize;
 use thiserror::Error;
 
+use crate::bilinear::{self, Image};
 use crate::ground_vehicle::PadState;
 use crate::noise::{MAX_SLICE, PixelNoise};
 use crate::params::{self, ParamError};
@@ -66,7 +63,7 @@ pub enum CameraError {
     /// The image is wider than the renderer's bands allow.
     #[error("camera: image width {0} px is above the supported 4096 px")]
     TooWide(u32),
-    /// The pad texture is too fine for `remap`'s 16-bit coordinates.
+    /// The pad texture is too fine for the sampler's 16-bit coordinates.
     #[error(
         "camera: texture atlas {0} x {1} px is above 32767 px a side (lower pad_texture_px_per_m)"
     )]
@@ -601,11 +598,11 @@ struct Block {
     h: usize,
 }
 
-/// Every texture level in one OpenCV image, so one `remap` call samples the
-/// pad, the ground and the sky for all pixels at once.
+/// Every texture level in one image, so one sampling pass covers the pad, the
+/// ground and the sky for all pixels at once.
 #[derive(Debug, Clone)]
 struct Atlas {
-    mat: Mat,
+    image: Image,
     pad: Vec<Block>,
     ground: Vec<Block>,
     /// Centre of a 2x2 block of sky grey.
@@ -628,13 +625,8 @@ impl Atlas {
         if width > i16::MAX as usize || height > i16::MAX as usize {
             return Err(CameraError::AtlasTooLarge(width, height));
         }
-        let mut mat = Mat::new_rows_cols_with_default(
-            height as i32,
-            width as i32,
-            CV_8UC1,
-            Scalar::all(0.0),
-        )?;
-        let data = mat.data_bytes_mut()?;
+        let mut texels = vec![0u8; width * height];
+        let data = texels.as_mut_slice();
         let place = |levels: &[Texture], x0: usize, y_start: usize, data: &mut [u8]| {
             let mut y = y_start;
             let mut blocks = Vec::new();
@@ -661,7 +653,7 @@ impl Atlas {
             data[(sy + r) * width + sx + c] = SKY_LEVEL as u8;
         }
         Ok(Self {
-            mat,
+            image: Image::new(&texels, width, height),
             pad: pad_blocks,
             ground: ground_blocks,
             sky: (sx as f32 + 0.5, sy as f32 + 0.5),
@@ -834,7 +826,7 @@ impl DownCamera {
         while row < h {
             let rows = TILE_ROWS.min(h - row);
             let range = row * w..(row + rows) * w;
-            self.tile.resize(rows, w)?;
+            self.tile.resize(rows, w);
             let rays = self.rays.get(range.clone()).unwrap_or(&[]);
             let strips = row / STRIP_ROWS..(row + rows).div_ceil(STRIP_ROWS);
             let band = self.band_bounds.get(strips).unwrap_or(&[]);
@@ -844,17 +836,17 @@ impl DownCamera {
             if let [pass] = passes.as_slice() {
                 // One sub-exposure (the common case): noise and quantize straight
                 // from the sampled band, no f32 accumulator round trip.
-                let blend = self.tile.sample(&self.atlas, pass, rays, band)?;
+                let blend = self.tile.sample(&self.atlas, pass, rays, band);
                 let sigma = self.params.noise_sigma as f32;
                 let noise = self.noise.slice(rows * w);
-                let (fine, coarse) = self.tile.sampled()?;
+                let (fine, coarse) = self.tile.sampled();
                 quantize_sampled(out, channels, fine, coarse, blend, noise, sigma);
             } else {
                 self.accum.clear();
                 self.accum.resize(rows * w, 0.0);
                 for pass in &passes {
-                    let blend = self.tile.sample(&self.atlas, pass, rays, band)?;
-                    let (fine, coarse) = self.tile.sampled()?;
+                    let blend = self.tile.sample(&self.atlas, pass, rays, band);
+                    let (fine, coarse) = self.tile.sampled();
                     accumulate(&mut self.accum, fine, coarse, weight, blend);
                 }
                 self.finish_tile(out, channels);
@@ -1014,11 +1006,10 @@ impl DownCamera {
     }
 }
 
-/// Rows rendered together. `remap` splits its work over OpenCV's threads only
-/// when a call covers more than 2^16 pixels: with 16-row bands it ran on one
-/// core while the other idled. 240 rows (a half 640x480 frame, a third of a
-/// 1280x720 one) lets it use both, which outweighs the maps no longer
-/// fitting in L1/L2 (measured with `landing bench sim`). Divides 480 and 720.
+/// Rows rendered together: a band blends every sub-exposure before the next band,
+/// its coordinates filled and sampled strip by strip ([`STRIP_ROWS`]). Divides 480
+/// and 720 (sized when OpenCV's `remap` sampled whole bands on both cores; the
+/// strip sampler runs on the caller's core, as a campaign's worker does).
 pub const TILE_ROWS: usize = 240;
 
 /// Rows whose maps are filled together, each strip tested on its own for
@@ -1055,14 +1046,18 @@ struct PadPass {
     view_max: [f32; 2],
 }
 
-/// Scratch OpenCV images for one band: atlas coordinates at the fine and the
-/// coarse pad level, and what `remap` sampled there.
+/// Scratch for one band: the atlas coordinates of one strip at the fine and the
+/// coarse pad level (filled and sampled strip by strip, so they stay in cache), and
+/// what was sampled there for the whole band.
 #[derive(Debug, Clone)]
 struct Tile {
     rows: usize,
     cols: usize,
-    maps: [Mat; 4],
-    sampled: [Mat; 2],
+    /// Integer texel and fraction index of each pixel of a strip: fine, coarse.
+    xy: [Vec<[i16; 2]>; 2],
+    fxy: [Vec<u16>; 2],
+    /// The band sampled at the fine and the coarse level.
+    sampled: [Vec<u8>; 2],
     /// Whether `sampled[1]` holds the coarse level of the last band.
     coarse_valid: bool,
 }
@@ -1072,44 +1067,27 @@ impl Tile {
         Self {
             rows: 0,
             cols: 0,
-            maps: [
-                Mat::default(),
-                Mat::default(),
-                Mat::default(),
-                Mat::default(),
-            ],
-            sampled: [Mat::default(), Mat::default()],
+            xy: [Vec::new(), Vec::new()],
+            fxy: [Vec::new(), Vec::new()],
+            sampled: [Vec::new(), Vec::new()],
             coarse_valid: false,
         }
     }
 
-    fn resize(&mut self, rows: usize, cols: usize) -> Result<(), CameraError> {
+    fn resize(&mut self, rows: usize, cols: usize) {
         if (rows, cols) != (self.rows, self.cols) {
-            for (k, m) in self.maps.iter_mut().enumerate() {
-                let kind = if k % 2 == 0 { CV_16SC2 } else { CV_16UC1 };
-                *m = Mat::new_rows_cols_with_default(
-                    rows as i32,
-                    cols as i32,
-                    kind,
-                    Scalar::all(0.0),
-                )?;
-            }
-            for m in &mut self.sampled {
-                *m = Mat::new_rows_cols_with_default(
-                    rows as i32,
-                    cols as i32,
-                    CV_8UC1,
-                    Scalar::all(0.0),
-                )?;
+            for k in 0..2 {
+                self.xy[k] = vec![[0; 2]; STRIP_ROWS * cols];
+                self.fxy[k] = vec![0; STRIP_ROWS * cols];
+                self.sampled[k] = vec![0; rows * cols];
             }
             (self.rows, self.cols) = (rows, cols);
         }
-        Ok(())
     }
 
-    /// Maps every ray of the band into the atlas and samples it with one `remap`
-    /// per pad level; returns the weight of the coarse level (0: only the fine
-    /// level was sampled, and [`Tile::sampled`] returns it twice). `band`
+    /// Maps every ray of the band into the atlas and samples it at each pad
+    /// level the band needs; returns the weight of the coarse level (0: only the
+    /// fine level was sampled, and [`Tile::sampled`] returns it twice). `band`
     /// holds the smallest and largest ray (x, y) of each [`STRIP_ROWS`]-row
     /// strip of the band (a missing strip is taken to see the pad).
     fn sample(
@@ -1118,12 +1096,12 @@ impl Tile {
         pass: &Pass,
         rays: &[[f32; 2]],
         band: &[[[f32; 2]; 2]],
-    ) -> Result<f32, CameraError> {
+    ) -> f32 {
         let strip = STRIP_ROWS * self.cols.max(1);
         let strips = rays.len().div_ceil(strip).min(STRIPS_PER_TILE);
         // Which strips can see the board; the coarse level is needed only
         // from the first to the last of them (the pad is usually a small part
-        // of the frame, and a second full-band remap was a third of the render).
+        // of the frame, and sampling every pixel twice was a third of the render).
         let mut pad_in = [false; STRIPS_PER_TILE];
         for (k, seen) in pad_in.iter_mut().enumerate().take(strips) {
             *seen = pass.pad.is_some_and(|p| {
@@ -1135,88 +1113,60 @@ impl Tile {
         let first = pad_in.iter().position(|&b| b).unwrap_or(strips);
         let last = pad_in.iter().rposition(|&b| b).map_or(first, |k| k + 1);
         let blended = pass.pad.is_some_and(|p| p.blend > 0.0);
-        let [mfx, mfy, mcx, mcy] = &mut self.maps;
-        let (fx, fy) = (mfx.data_typed_mut::<Vec2s>()?, mfy.data_typed_mut::<u16>()?);
-        let (cx, cy) = (mcx.data_typed_mut::<Vec2s>()?, mcy.data_typed_mut::<u16>()?);
+        let [fxy, cxy] = &mut self.xy;
+        let [ff, cf] = &mut self.fxy;
+        let [fine, coarse] = &mut self.sampled;
         // Strip by strip, so the pad arithmetic is skipped where it cannot be
-        // and the strip's rays and maps are still in cache for the next loop.
+        // and the strip's coordinates are still in cache when it is sampled.
         let mut any_pad = false;
-        for (k, ((((rays, fx), fy), cx), cy)) in rays
+        for (k, ((rays, fine), coarse)) in rays
             .chunks(strip)
-            .zip(fx.chunks_mut(strip))
-            .zip(fy.chunks_mut(strip))
-            .zip(cx.chunks_mut(strip))
-            .zip(cy.chunks_mut(strip))
+            .zip(fine.chunks_mut(strip))
+            .zip(coarse.chunks_mut(strip))
             .enumerate()
         {
+            let n = rays.len();
             let pad_in_strip = pad_in.get(k).copied().unwrap_or(true);
-            let coarse = blended && (first..last).contains(&k);
+            let two_levels = blended && (first..last).contains(&k);
             any_pad |= fill_maps(
                 atlas,
                 pass,
                 rays,
-                Maps { fx, fy, cx, cy },
+                Maps {
+                    fx: &mut fxy[..n],
+                    fy: &mut ff[..n],
+                    cx: &mut cxy[..n],
+                    cy: &mut cf[..n],
+                },
                 pad_in_strip,
-                coarse,
+                two_levels,
             );
+            bilinear::sample(&atlas.image, &fxy[..n], &ff[..n], fine);
+            if two_levels {
+                bilinear::sample(&atlas.image, &cxy[..n], &cf[..n], coarse);
+            } else if blended {
+                // The ground has one level: coarse = fine off the pad's strips.
+                coarse.copy_from_slice(fine);
+            }
         }
-        let blend = if any_pad && blended {
+        self.coarse_valid = any_pad && blended;
+        if self.coarse_valid {
             pass.pad.map_or(0.0, |p| p.blend)
         } else {
             0.0
-        };
-        let [fine, coarse] = &mut self.sampled;
-        fn remap(
-            atlas: &Mat,
-            mx: &impl ToInputArray,
-            my: &impl ToInputArray,
-            dst: &mut impl ToOutputArray,
-        ) -> opencv::Result<()> {
-            imgproc::remap(
-                atlas,
-                dst,
-                mx,
-                my,
-                imgproc::INTER_LINEAR,
-                BORDER_REPLICATE,
-                Scalar::all(0.0),
-            )
         }
-        remap(&atlas.mat, &self.maps[0], &self.maps[1], fine)?;
-        self.coarse_valid = blend > 0.0;
-        if self.coarse_valid {
-            // Coarse = fine outside the strips that can see the pad (the
-            // ground has one level), so only those rows are sampled twice.
-            let (r0, r1) = (first * STRIP_ROWS, (last * STRIP_ROWS).min(self.rows));
-            let rows = opencv::core::Range::new(r0 as i32, r1 as i32)?;
-            let mut dst = coarse.row_range_mut(&rows)?;
-            remap(
-                &atlas.mat,
-                &self.maps[2].row_range(&rows)?,
-                &self.maps[3].row_range(&rows)?,
-                &mut dst,
-            )?;
-            let cols = self.cols;
-            let (src, dst) = (fine.data_bytes()?, coarse.data_bytes_mut()?);
-            for range in [0..r0 * cols, r1 * cols..self.rows * cols] {
-                if let (Some(d), Some(s)) = (dst.get_mut(range.clone()), src.get(range)) {
-                    d.copy_from_slice(s);
-                }
-            }
-        }
-        Ok(if self.coarse_valid { blend } else { 0.0 })
     }
 
     /// The band sampled at the fine and the coarse level by the last
     /// [`Tile::sample`] (the fine one twice when the coarse was not needed).
-    fn sampled(&self) -> Result<(&[u8], &[u8]), CameraError> {
-        let fine = self.sampled[0].data_bytes()?;
+    fn sampled(&self) -> (&[u8], &[u8]) {
+        let fine = self.sampled[0].as_slice();
         let coarse = if self.coarse_valid {
-            self.sampled[1].data_bytes()?
+            self.sampled[1].as_slice()
         } else {
             fine
         };
-        Ok((fine, coarse))
+        (fine, coarse)
     }
 }
 
@@ -1404,14 +1354,13 @@ fn fill_maps_generic<const PAD: bool, const COARSE: bool>(
     any_pad
 }
 
-/// Atlas coordinates of one pixel for every map of a band, in the fixed-point
-/// form `remap` samples directly: integer (x, y) and the 1/32-pixel
-/// fraction index. Float maps made OpenCV convert them to this on every call,
-/// which was about a third of the remap time.
+/// Atlas coordinates of every pixel of a strip, in the fixed-point form OpenCV's
+/// `remap` samples (and [`bilinear::sample`] with it): integer (x, y) and the
+/// 1/32-pixel fraction index; fine and coarse pad level.
 struct Maps<'a> {
-    fx: &'a mut [Vec2s],
+    fx: &'a mut [[i16; 2]],
     fy: &'a mut [u16],
-    cx: &'a mut [Vec2s],
+    cx: &'a mut [[i16; 2]],
     cy: &'a mut [u16],
 }
 
@@ -1419,10 +1368,10 @@ struct Maps<'a> {
 const REMAP_FRACTION_BITS: u32 = 5;
 
 /// Atlas point (u, v) (both >= 0 and far below 2^16, as every atlas
-/// coordinate is) to `remap`'s fixed-point pair, rounded as `convertMaps`
+/// coordinate is) to the sampler's fixed-point pair, rounded as `convertMaps`
 /// rounds (to nearest, ties to even) so the image is the one float maps gave.
 #[inline(always)]
-fn fixed_point(u: f32, v: f32) -> (Vec2s, u16) {
+fn fixed_point(u: f32, v: f32) -> ([i16; 2], u16) {
     const ROUND: f32 = 12_582_912.0;
     const SCALE: f32 = (1u32 << REMAP_FRACTION_BITS) as f32;
     const MASK: u32 = (1 << 22) - 1;
@@ -1430,10 +1379,10 @@ fn fixed_point(u: f32, v: f32) -> (Vec2s, u16) {
     let x = ((u * SCALE).max(0.0) + ROUND).to_bits() & MASK;
     let y = ((v * SCALE).max(0.0) + ROUND).to_bits() & MASK;
     (
-        Vec2s::from([
+        [
             (x >> REMAP_FRACTION_BITS) as i16,
             (y >> REMAP_FRACTION_BITS) as i16,
-        ]),
+        ],
         (((y & FRACTION) << REMAP_FRACTION_BITS) | (x & FRACTION)) as u16,
     )
 }

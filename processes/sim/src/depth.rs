@@ -265,7 +265,12 @@ impl DepthCamera {
             let bm = box_from_world.matrix() * rot.matrix();
             let rb: [[f32; 3]; 3] =
                 std::array::from_fn(|i| std::array::from_fn(|j| bm[(i, j)] as f32));
-            let slab = Slab { half, origin, rb, far };
+            let slab = Slab {
+                half,
+                origin,
+                rb,
+                far,
+            };
             for v in v0..=v1 {
                 let row = v * w + u0..v * w + u1 + 1;
                 if let (Some(rays), Some(depth)) =
@@ -359,7 +364,12 @@ impl Slab {
     /// so the row vectorizes.
     #[inline]
     fn cast_row(&self, rays: &[[f32; 2]], depth: &mut [f32]) {
-        let Self { half, origin, rb, far } = self;
+        let Self {
+            half,
+            origin,
+            rb,
+            far,
+        } = self;
         for (d, &[rx, ry]) in depth.iter_mut().zip(rays) {
             let dir = [
                 rb[0][0] * rx + rb[0][1] * ry + rb[0][2],

@@ -39,14 +39,25 @@ fn the_slab_loop_gives_parrys_depths_bit_for_bit() {
         };
         // Rays across a 90 deg view, an exact zero direction component among them.
         let rays: Vec<[f32; 2]> = (0..64)
-            .map(|k| if k == 0 { [0.0, 0.0] } else { [u(-1.0, 1.0), u(-1.0, 1.0)] })
+            .map(|k| {
+                if k == 0 {
+                    [0.0, 0.0]
+                } else {
+                    [u(-1.0, 1.0), u(-1.0, 1.0)]
+                }
+            })
             .collect();
         let before: Vec<f32> = rays.iter().map(|_| u(0.1, 20.0)).collect();
         let mut depth = before.clone();
         slab.cast_row(&rays, &mut depth);
         for ((ray, &d0), &d) in rays.iter().zip(&before).zip(&depth) {
             let want = parry_depth(&slab, *ray, d0);
-            assert_eq!(d.to_bits(), want.to_bits(), "ray {ray:?} from {:?}", slab.origin);
+            assert_eq!(
+                d.to_bits(),
+                want.to_bits(),
+                "ray {ray:?} from {:?}",
+                slab.origin
+            );
             hits += usize::from(d < d0);
             inside += usize::from(d == 0.0);
         }

@@ -21,6 +21,7 @@
 
 pub mod autopilot;
 pub mod autopilot_params;
+mod bilinear;
 pub mod camera;
 pub mod depth;
 pub mod estimator_noise;
