@@ -285,18 +285,29 @@ impl DepthCamera {
             self.params.max_depth_m as f32,
         );
         let k = self.params.noise_k_per_m as f32;
+        // (z + noise) mm rounded half up, 1 to 65535, or 0 out of range: `floor` and
+        // the integer taken by the 1.5 * 2^23 trick (exact below 2^22), so the
+        // loop vectorizes where a float to int cast kept it scalar.
         let to_mm = |z: f32, n: f32| {
-            if z >= lo && z <= hi {
-                ((z + k * z * z * n) * 1000.0 + 0.5).clamp(1.0, 65535.0) as i32 as u16
-            } else {
-                0
-            }
+            const ROUND: f32 = 12_582_912.0;
+            #[allow(
+                clippy::manual_clamp,
+                reason = "max/min: NaN, never in range, reads 1 mm instead of passing through"
+            )]
+            let y = ((z + k * z * z * n) * 1000.0 + 0.5).max(1.0).min(65535.0);
+            let r = (y + ROUND) - ROUND;
+            let floor = if r > y { r - 1.0 } else { r };
+            let mm = ((floor + ROUND).to_bits() & 0xffff) as u16;
+            if (z >= lo) & (z <= hi) { mm } else { 0 }
         };
         self.noise.new_frame();
         for (o, d) in out.chunks_mut(MAX_SLICE).zip(self.depth.chunks(MAX_SLICE)) {
             let noise = self.noise.slice(d.len());
-            for ((o, &d), &n) in o.iter_mut().zip(d).zip(noise) {
-                *o = to_mm(d, n);
+            // Indexed over slices cut to one length: the three-way zip stayed scalar.
+            let n = o.len().min(d.len()).min(noise.len());
+            let (o, d, noise) = (&mut o[..n], &d[..n], &noise[..n]);
+            for i in 0..n {
+                o[i] = to_mm(d[i], noise[i]);
             }
         }
     }
@@ -381,22 +392,18 @@ impl Slab {
             let mut miss = false;
             for k in 0..3 {
                 let (lo, hi, o) = (-half[k], half[k], origin[k]);
-                if dir[k] == 0.0 {
-                    miss |= o < lo || o > hi;
-                } else {
-                    let denom = 1.0 / dir[k];
-                    let a = (lo - o) * denom;
-                    let b = (hi - o) * denom;
-                    let (near, far) = if a > b { (b, a) } else { (a, b) };
-                    tmin = tmin.max(near);
-                    tmax = tmax.min(far);
-                    // Once tmin passes tmax it stays past: parry returns here.
-                    miss |= tmin > tmax;
-                }
+                // Both branches computed and one kept, so the loop has no jumps.
+                let along = dir[k] != 0.0;
+                let denom = 1.0 / dir[k];
+                let a = (lo - o) * denom;
+                let b = (hi - o) * denom;
+                let (near, far) = if a > b { (b, a) } else { (a, b) };
+                tmin = if along { tmin.max(near) } else { tmin };
+                tmax = if along { tmax.min(far) } else { tmax };
+                // Once tmin passes tmax it stays past: parry returns there.
+                miss |= if along { tmin > tmax } else { o < lo || o > hi };
             }
-            if !miss {
-                *d = d.min(tmin);
-            }
+            *d = if miss { *d } else { d.min(tmin) };
         }
     }
 }

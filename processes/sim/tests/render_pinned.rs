@@ -68,3 +68,52 @@ fn the_down_camera_renders_the_recorded_images_byte_for_byte() {
     }
     assert_eq!(total, RECORDED, "got {total:#018x}");
 }
+
+/// The depth camera's frames among boxes near and far, the camera inside one of them
+/// for a frame, hashed as above (recorded before its slab loop replaced parry, b7d52f0
+/// and earlier).
+const RECORDED_DEPTH: u64 = 0x97f1_1946_e5ed_1778;
+
+#[test]
+fn the_depth_camera_renders_the_recorded_frames_byte_for_byte() {
+    use sim::depth::{DepthCamera, DepthCameraParams};
+    use sim::geometry::Obb;
+    let mut cam = DepthCamera::new(DepthCameraParams::default()).unwrap();
+    let boxes: Vec<Obb> = (0..6)
+        .map(|i| {
+            let f = f64::from(i);
+            Obb {
+                world_from_box: Isometry3::from_parts(
+                    Translation3::new(2.0 + 1.5 * f, -1.0 + 0.7 * f, 0.5 + 0.2 * f),
+                    UnitQuaternion::from_euler_angles(0.0, 0.1 * f, 0.4 * f),
+                ),
+                half_m: [0.3 + 0.1 * f, 0.5, 0.5 + 0.1 * f],
+            }
+        })
+        .collect();
+    let mut total = 0u64;
+    for k in 0..40u32 {
+        let kf = f64::from(k);
+        let world_from_body = if k == 7 {
+            // Inside the first box: every ray starts in it.
+            Isometry3::from_parts(
+                Translation3::new(2.0, -1.0, 0.5),
+                UnitQuaternion::identity(),
+            )
+        } else {
+            Isometry3::from_parts(
+                Translation3::new(-1.0 + 0.1 * kf, -0.5 + 0.05 * kf, 0.8 + 0.05 * kf),
+                UnitQuaternion::from_euler_angles(0.03 * (kf % 3.0), 0.02 * (kf % 5.0), 0.05 * kf),
+            )
+        };
+        let frame = cam.render(&world_from_body, &boxes);
+        let mut hsh = 0xcbf2_9ce4_8422_2325_u64;
+        for v in &frame.depth_mm {
+            for b in v.to_le_bytes() {
+                hsh = (hsh ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+            }
+        }
+        total ^= hsh.rotate_left(k);
+    }
+    assert_eq!(total, RECORDED_DEPTH, "got {total:#018x}");
+}
