@@ -45,10 +45,11 @@ impl Image {
     }
 }
 
-/// Samples `image` at every point: `xy` the integer texel (x, y), `fxy` the
-/// fraction index (`fy << 5 | fx`, 1/32 texel). Points are clamped to the image
+/// Samples `image` at every point: `xy` the integer texel (x, y) as two i16 in
+/// one word (x low, as OpenCV's 16SC2 map holds them), `fxy` the fraction index
+/// (`fy << 5 | fx`, 1/32 texel; a word, so the filler stores lanes as computed). Points are clamped to the image
 /// (one texel in from its last row and column), which in-range points never feel.
-pub(crate) fn sample(image: &Image, xy: &[[i16; 2]], fxy: &[u16], out: &mut [u8]) {
+pub(crate) fn sample(image: &Image, xy: &[u32], fxy: &[u32], out: &mut [u8]) {
     let n = xy.len().min(fxy.len()).min(out.len());
     if image.cols < 2 || image.rows < 2 || image.cols > i32::MAX as usize / (2 * image.rows) {
         out[..n].fill(0);
@@ -67,16 +68,15 @@ pub(crate) fn sample(image: &Image, xy: &[[i16; 2]], fxy: &[u16], out: &mut [u8]
 }
 
 /// One point at a time (the reference, and the tail of the vector path).
-pub(crate) fn sample_scalar(image: &Image, xy: &[[i16; 2]], fxy: &[u16], out: &mut [u8]) {
+pub(crate) fn sample_scalar(image: &Image, xy: &[u32], fxy: &[u32], out: &mut [u8]) {
     let (cols, pairs) = (image.cols, image.pairs.as_slice());
     let (xmax, ymax) = (cols as i32 - 2, image.rows as i32 - 2);
-    for ((o, &[x, y]), &f) in out.iter_mut().zip(xy).zip(fxy) {
+    for ((o, &p), &f) in out.iter_mut().zip(xy).zip(fxy) {
+        let (x, y) = (p as u16 as i16, (p >> 16) as u16 as i16);
         let x = i32::from(x).clamp(0, xmax) as usize;
         let y = i32::from(y).clamp(0, ymax) as usize;
-        let (fx, fy) = (
-            i32::from(f) & (ONE - 1),
-            (i32::from(f) >> FRACTION_BITS) & (ONE - 1),
-        );
+        let f = (f & 0x3ff) as i32;
+        let (fx, fy) = (f & (ONE - 1), (f >> FRACTION_BITS) & (ONE - 1));
         let p = 2 * (y * cols + x);
         let texel = |k: usize| i32::from(pairs.get(p + k).copied().unwrap_or(0));
         let left = (ONE - fy) * texel(0) + fy * texel(1);
@@ -90,7 +90,7 @@ pub(crate) fn sample_scalar(image: &Image, xy: &[[i16; 2]], fxy: &[u16], out: &m
 /// two `madd`s weigh them (columns, then across).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn sample_avx2(image: &Image, xy: &[[i16; 2]], fxy: &[u16], out: &mut [u8]) {
+unsafe fn sample_avx2(image: &Image, xy: &[u32], fxy: &[u32], out: &mut [u8]) {
     use std::arch::x86_64::*;
     let base = image.pairs.as_ptr().cast::<i32>();
     let cols = _mm256_set1_epi32(image.cols as i32);
@@ -121,7 +121,7 @@ unsafe fn sample_avx2(image: &Image, xy: &[[i16; 2]], fxy: &[u16], out: &mut [u8
         .zip(fxy.chunks_exact(8))
         .zip(out.chunks_exact_mut(8))
     {
-        // SAFETY: each chunk holds 8 points (32 bytes of xy, 16 of fxy) and 8
+        // SAFETY: each chunk holds 8 points (32 bytes of xy and of fxy) and 8
         // output bytes; loads and stores are unaligned; the gather reads 4 bytes at
         // a clamped texel, inside the buffer by its slack.
         unsafe {
@@ -134,7 +134,7 @@ unsafe fn sample_avx2(image: &Image, xy: &[[i16; 2]], fxy: &[u16], out: &mut [u8
             let at = _mm256_slli_epi32(_mm256_add_epi32(_mm256_mullo_epi32(y, cols), x), 1);
             // Bytes: (x, y), (x, y + 1), (x + 1, y), (x + 1, y + 1).
             let g = _mm256_i32gather_epi32::<1>(base, at);
-            let f = _mm256_cvtepu16_epi32(_mm_loadu_si128(f.as_ptr().cast()));
+            let f = _mm256_loadu_si256(f.as_ptr().cast());
             let fx = _mm256_and_si256(f, fraction);
             let fy = _mm256_and_si256(_mm256_srli_epi32(f, FRACTION_BITS as i32), fraction);
             // i16 pairs: (32 - fy, fy) and (32 - fx, fx).

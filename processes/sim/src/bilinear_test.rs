@@ -31,6 +31,16 @@ fn remap(image: &[u8], w: usize, h: usize, xy: &[[i16; 2]], fxy: &[u16]) -> Vec<
     dst.data_bytes().unwrap().to_vec()
 }
 
+/// The points as the sampler takes them: (x, y) in one word, the fraction in another.
+fn words(xy: &[[i16; 2]], fxy: &[u16]) -> (Vec<u32>, Vec<u32>) {
+    (
+        xy.iter()
+            .map(|&[x, y]| u32::from(x as u16) | u32::from(y as u16) << 16)
+            .collect(),
+        fxy.iter().map(|&f| u32::from(f)).collect(),
+    )
+}
+
 #[test]
 fn sampling_gives_the_bytes_opencvs_remap_gives() {
     let (w, h) = (301, 97);
@@ -50,6 +60,7 @@ fn sampling_gives_the_bytes_opencvs_remap_gives() {
         }
     }
     let want = remap(&texels, w, h, &xy, &fxy);
+    let (xy, fxy) = words(&xy, &fxy);
     let mut got = vec![0u8; xy.len()];
     sample(&image, &xy, &fxy, &mut got);
     let mut scalar = vec![0u8; xy.len()];
@@ -59,8 +70,7 @@ fn sampling_gives_the_bytes_opencvs_remap_gives() {
     assert_eq!(differ(&scalar), 0, "of {} points", want.len());
 
     let white = Image::new(&vec![255; w * h], w, h);
-    let all: Vec<u16> = (0..1024).collect();
-    let at = vec![[5i16, 7]; 1024];
+    let (at, all) = words(&[[5, 7]; 1024], &(0..1024).collect::<Vec<u16>>());
     let mut out = vec![0u8; 1024];
     sample(&white, &at, &all, &mut out);
     assert!(
@@ -85,6 +95,7 @@ fn points_off_the_image_are_clamped_never_read_outside_it() {
     ];
     let fxy = [1023u16, 0, 512, 77, 1, 2, 3, 65535, 4];
     let mut out = [0u8; 9];
+    let (xy, fxy) = words(&xy, &fxy);
     sample(&image, &xy, &fxy, &mut out);
     assert!(out.iter().all(|&v| v == 9), "{out:?}");
 }

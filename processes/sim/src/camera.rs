@@ -1054,8 +1054,8 @@ struct Tile {
     rows: usize,
     cols: usize,
     /// Integer texel and fraction index of each pixel of a strip: fine, coarse.
-    xy: [Vec<[i16; 2]>; 2],
-    fxy: [Vec<u16>; 2],
+    xy: [Vec<u32>; 2],
+    fxy: [Vec<u32>; 2],
     /// The band sampled at the fine and the coarse level.
     sampled: [Vec<u8>; 2],
     /// Whether `sampled[1]` holds the coarse level of the last band.
@@ -1077,7 +1077,7 @@ impl Tile {
     fn resize(&mut self, rows: usize, cols: usize) {
         if (rows, cols) != (self.rows, self.cols) {
             for k in 0..2 {
-                self.xy[k] = vec![[0; 2]; STRIP_ROWS * cols];
+                self.xy[k] = vec![0; STRIP_ROWS * cols];
                 self.fxy[k] = vec![0; STRIP_ROWS * cols];
                 self.sampled[k] = vec![0; rows * cols];
             }
@@ -1358,10 +1358,10 @@ fn fill_maps_generic<const PAD: bool, const COARSE: bool>(
 /// `remap` samples (and [`bilinear::sample`] with it): integer (x, y) and the
 /// 1/32-pixel fraction index; fine and coarse pad level.
 struct Maps<'a> {
-    fx: &'a mut [[i16; 2]],
-    fy: &'a mut [u16],
-    cx: &'a mut [[i16; 2]],
-    cy: &'a mut [u16],
+    fx: &'a mut [u32],
+    fy: &'a mut [u32],
+    cx: &'a mut [u32],
+    cy: &'a mut [u32],
 }
 
 /// `INTER_TAB_SIZE`: OpenCV's bilinear weights come in 1/32 pixel steps.
@@ -1371,7 +1371,7 @@ const REMAP_FRACTION_BITS: u32 = 5;
 /// coordinate is) to the sampler's fixed-point pair, rounded as `convertMaps`
 /// rounds (to nearest, ties to even) so the image is the one float maps gave.
 #[inline(always)]
-fn fixed_point(u: f32, v: f32) -> ([i16; 2], u16) {
+fn fixed_point(u: f32, v: f32) -> (u32, u32) {
     const ROUND: f32 = 12_582_912.0;
     const SCALE: f32 = (1u32 << REMAP_FRACTION_BITS) as f32;
     const MASK: u32 = (1 << 22) - 1;
@@ -1379,11 +1379,9 @@ fn fixed_point(u: f32, v: f32) -> ([i16; 2], u16) {
     let x = ((u * SCALE).max(0.0) + ROUND).to_bits() & MASK;
     let y = ((v * SCALE).max(0.0) + ROUND).to_bits() & MASK;
     (
-        [
-            (x >> REMAP_FRACTION_BITS) as i16,
-            (y >> REMAP_FRACTION_BITS) as i16,
-        ],
-        (((y & FRACTION) << REMAP_FRACTION_BITS) | (x & FRACTION)) as u16,
+        // (x, y) as two 16-bit halves, x low: the layout of OpenCV's 16SC2 map.
+        ((x >> REMAP_FRACTION_BITS) & 0xffff) | ((y >> REMAP_FRACTION_BITS) & 0xffff) << 16,
+        ((y & FRACTION) << REMAP_FRACTION_BITS) | (x & FRACTION),
     )
 }
 
