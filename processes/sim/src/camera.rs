@@ -1016,6 +1016,9 @@ pub const TILE_ROWS: usize = 240;
 /// whether it can see the pad. Divides [`TILE_ROWS`].
 const STRIP_ROWS: usize = 16;
 const _: () = assert!(TILE_ROWS.is_multiple_of(STRIP_ROWS));
+/// Pixels of a strip checked together for whether their coarse points are their fine
+/// ones (a multiple of the sampler's 8 lanes).
+const SAME_RUN: usize = 64;
 const STRIPS_PER_TILE: usize = TILE_ROWS / STRIP_ROWS;
 /// Widest image: a band of it must fit in one noise slice.
 const MAX_WIDTH: usize = 4096;
@@ -1143,7 +1146,21 @@ impl Tile {
             );
             bilinear::sample(&atlas.image, &fxy[..n], &ff[..n], fine);
             if two_levels {
-                bilinear::sample(&atlas.image, &cxy[..n], &cf[..n], coarse);
+                // Off the board the coarse point is the fine one, so is its sample:
+                // runs of such pixels are copied (the board is often a small part of
+                // the strips that can see it).
+                let runs = cxy[..n]
+                    .chunks(SAME_RUN)
+                    .zip(cf[..n].chunks(SAME_RUN))
+                    .zip(fxy[..n].chunks(SAME_RUN).zip(ff[..n].chunks(SAME_RUN)))
+                    .zip(coarse.chunks_mut(SAME_RUN).zip(fine.chunks(SAME_RUN)));
+                for (((cxy, cf), (fxy, ff)), (coarse, fine)) in runs {
+                    if cxy == fxy && cf == ff {
+                        coarse.copy_from_slice(fine);
+                    } else {
+                        bilinear::sample(&atlas.image, cxy, cf, coarse);
+                    }
+                }
             } else if blended {
                 // The ground has one level: coarse = fine off the pad's strips.
                 coarse.copy_from_slice(fine);
