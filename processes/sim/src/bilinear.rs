@@ -45,10 +45,30 @@ impl Image {
     }
 }
 
-/// Samples `image` at every point: `xy` the integer texel (x, y) as two i16 in
-/// one word (x low, as OpenCV's 16SC2 map holds them), `fxy` the fraction index
-/// (`fy << 5 | fx`, 1/32 texel; a word, so the filler stores lanes as computed). Points are clamped to the image
-/// (one texel in from its last row and column), which in-range points never feel.
+/// Image point (u, v) (both >= 0 and far below 2^15, as every atlas coordinate
+/// is) to the fixed-point pair [`sample`] takes, rounded as OpenCV's `convertMaps`
+/// rounds (to nearest, ties to even), so the image is the one float maps gave:
+/// the integer texel (x, y) as two 16-bit halves, x low (the layout of OpenCV's
+/// 16SC2 map), and the fraction index `fy << 5 | fx`. Words, not 16-bit lanes, so
+/// a vectorized filler stores them as computed.
+#[inline(always)]
+pub(crate) fn point(u: f32, v: f32) -> (u32, u32) {
+    // 1.5 * 2^23: adding it leaves the rounded value in the low mantissa bits.
+    const ROUND: f32 = 12_582_912.0;
+    const SCALE: f32 = ONE as f32;
+    const MASK: u32 = (1 << 22) - 1;
+    const FRACTION: u32 = (1 << FRACTION_BITS) - 1;
+    let x = ((u * SCALE).max(0.0) + ROUND).to_bits() & MASK;
+    let y = ((v * SCALE).max(0.0) + ROUND).to_bits() & MASK;
+    (
+        ((x >> FRACTION_BITS) & 0xffff) | ((y >> FRACTION_BITS) & 0xffff) << 16,
+        ((y & FRACTION) << FRACTION_BITS) | (x & FRACTION),
+    )
+}
+
+/// Samples `image` at every point, as [`point`] gives them: `xy` the integer texel,
+/// `fxy` the fraction index. Points are clamped to the image (one texel in from its
+/// last row and column), which in-range points never feel.
 pub(crate) fn sample(image: &Image, xy: &[u32], fxy: &[u32], out: &mut [u8]) {
     let n = xy.len().min(fxy.len()).min(out.len());
     if image.cols < 2 || image.rows < 2 || image.cols > i32::MAX as usize / (2 * image.rows) {

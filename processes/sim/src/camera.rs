@@ -1356,12 +1356,12 @@ fn fill_maps_generic<const PAD: bool, const COARSE: bool>(
         } else {
             skyy
         };
-        (fx[i], fy[i]) = fixed_point(
+        (fx[i], fy[i]) = bilinear::point(
             if on_pad { ufine } else { ug },
             if on_pad { vfine } else { vg },
         );
         if COARSE {
-            (cx[i], cy[i]) = fixed_point(
+            (cx[i], cy[i]) = bilinear::point(
                 if on_pad { ucoarse } else { ug },
                 if on_pad { vcoarse } else { vg },
             );
@@ -1372,34 +1372,13 @@ fn fill_maps_generic<const PAD: bool, const COARSE: bool>(
 }
 
 /// Atlas coordinates of every pixel of a strip, in the fixed-point form OpenCV's
-/// `remap` samples (and [`bilinear::sample`] with it): integer (x, y) and the
+/// `remap` samples (and [`bilinear::sample`] with it, made by [`bilinear::point`]): integer (x, y) and the
 /// 1/32-pixel fraction index; fine and coarse pad level.
 struct Maps<'a> {
     fx: &'a mut [u32],
     fy: &'a mut [u32],
     cx: &'a mut [u32],
     cy: &'a mut [u32],
-}
-
-/// `INTER_TAB_SIZE`: OpenCV's bilinear weights come in 1/32 pixel steps.
-const REMAP_FRACTION_BITS: u32 = 5;
-
-/// Atlas point (u, v) (both >= 0 and far below 2^16, as every atlas
-/// coordinate is) to the sampler's fixed-point pair, rounded as `convertMaps`
-/// rounds (to nearest, ties to even) so the image is the one float maps gave.
-#[inline(always)]
-fn fixed_point(u: f32, v: f32) -> (u32, u32) {
-    const ROUND: f32 = 12_582_912.0;
-    const SCALE: f32 = (1u32 << REMAP_FRACTION_BITS) as f32;
-    const MASK: u32 = (1 << 22) - 1;
-    const FRACTION: u32 = (1 << REMAP_FRACTION_BITS) - 1;
-    let x = ((u * SCALE).max(0.0) + ROUND).to_bits() & MASK;
-    let y = ((v * SCALE).max(0.0) + ROUND).to_bits() & MASK;
-    (
-        // (x, y) as two 16-bit halves, x low: the layout of OpenCV's 16SC2 map.
-        ((x >> REMAP_FRACTION_BITS) & 0xffff) | ((y >> REMAP_FRACTION_BITS) & 0xffff) << 16,
-        ((y & FRACTION) << REMAP_FRACTION_BITS) | (x & FRACTION),
-    )
 }
 
 /// Rounds (half to even) and saturates a grey level to a byte. Adding

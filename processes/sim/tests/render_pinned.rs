@@ -13,6 +13,13 @@ fn config(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// FNV-1a over a frame's bytes.
+fn fnv1a(bytes: impl IntoIterator<Item = u8>) -> u64 {
+    bytes.into_iter().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
 /// Sixty frames of each shipped calibration, over the pad and without it, still and
 /// blurred, hashed (FNV-1a) and folded together: a faster renderer must give these
 /// bytes. Recorded before the strip sampler replaced OpenCV's `remap` (bdfcf08);
@@ -59,11 +66,7 @@ fn the_down_camera_renders_the_recorded_images_byte_for_byte() {
             let frame = cam
                 .render(&body, if k % 5 == 4 { None } else { Some(&pad) })
                 .unwrap();
-            let mut hsh = 0xcbf29ce484222325u64;
-            for b in &frame.data {
-                hsh = (hsh ^ u64::from(*b)).wrapping_mul(0x100000001b3);
-            }
-            total ^= hsh.rotate_left(k);
+            total ^= fnv1a(frame.data.iter().copied()).rotate_left(k);
         }
     }
     assert_eq!(total, RECORDED, "got {total:#018x}");
@@ -107,13 +110,7 @@ fn the_depth_camera_renders_the_recorded_frames_byte_for_byte() {
             )
         };
         let frame = cam.render(&world_from_body, &boxes);
-        let mut hsh = 0xcbf2_9ce4_8422_2325_u64;
-        for v in &frame.depth_mm {
-            for b in v.to_le_bytes() {
-                hsh = (hsh ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
-            }
-        }
-        total ^= hsh.rotate_left(k);
+        total ^= fnv1a(frame.depth_mm.iter().flat_map(|v| v.to_le_bytes())).rotate_left(k);
     }
     assert_eq!(total, RECORDED_DEPTH, "got {total:#018x}");
 }
