@@ -96,7 +96,8 @@ impl Stack {
             &deploy,
             (free_udp_port(), free_udp_port()),
             "",
-        );
+        )
+        .unwrap_or_else(|e| panic!("run values: {e}"));
         Self {
             graph,
             values,

@@ -21,6 +21,13 @@ pub struct FsmConfig {
     pub search_after_s: f64,
     /// WaitForPad: climb at most this much above the preset point, m.
     pub search_climb_m: f64,
+    /// Never wait for the pad higher than this, m: above it the camera cannot resolve
+    /// the pad's largest marker (`optics::PadModel::detection_depth_m`). A preset
+    /// point higher up is flown to at this height, and the search climb stops here.
+    /// Unset (the default), `landing run` and `fsm --search-height-max` derive it from
+    /// the camera's calibration and the pad; on a vehicle set it from `landing config
+    /// check`'s line for the camera and pad it flies.
+    pub search_height_max_m: Option<f64>,
     /// Highest take-off altitude, climbed to in OFFBOARD; the planner flies the rest, m.
     pub takeoff_altitude_m: f64,
     /// Take-off climb speed of the setpoint ramp, m/s (PX4's MPC_TKO_SPEED is 1.5).
@@ -32,6 +39,14 @@ pub struct FsmConfig {
     pub direct_range_m: f64,
     /// Speed used to predict the rendezvous time (distance / this), m/s.
     pub approach_speed_m_s: f64,
+    /// A pad faster than this, m/s, is chased with pad-relative setpoints at any range:
+    /// the planner's trajectories (its `max_vel`) cannot catch it, and a road vehicle's
+    /// own path is the free space to fly in. Lost at this speed, the vehicle keeps its
+    /// height while it follows (climbing, the pad's markers would shrink out of range).
+    pub chase_speed_m_s: f64,
+    /// Chasing, each metre off the pad while descending adds this much velocity per second
+    /// (1/s^2): an integral that holds station over the pad against the relative wind.
+    pub chase_trim_gain: f64,
     /// Horizontal error below which descent may start, m.
     pub align_m: f64,
     /// Horizontal speed relative to the pad below which descent may start, m/s.
@@ -129,11 +144,14 @@ impl Default for FsmConfig {
             preset_tolerance_m: 0.3,
             search_after_s: 2.0,
             search_climb_m: 1.5,
+            search_height_max_m: None,
             takeoff_altitude_m: 2.0,
             takeoff_climb_m_s: 1.0,
             track_height_max_m: 3.0,
             direct_range_m: 1.5,
             approach_speed_m_s: 2.0,
+            chase_speed_m_s: 2.0,
+            chase_trim_gain: 1.0,
             align_m: 0.3,
             align_speed_m_s: 0.4,
             align_hold_s: 0.5,
@@ -256,6 +274,9 @@ impl Validate for FsmConfig {
             check_range(&format!("preset_m[{i}]"), *v, -1000.0, 1000.0)?;
         }
         check_range("preset_m[2]", self.preset_m[2], 0.3, 100.0)?;
+        if let Some(h) = self.search_height_max_m {
+            check_range("search_height_max_m", h, 0.3, 100.0)?;
+        }
         let positive = [
             ("preset_tolerance_m", self.preset_tolerance_m, 0.05, 5.0),
             ("search_after_s", self.search_after_s, 0.0, 600.0),
@@ -265,6 +286,8 @@ impl Validate for FsmConfig {
             ("track_height_max_m", self.track_height_max_m, 0.3, 50.0),
             ("direct_range_m", self.direct_range_m, 0.2, 20.0),
             ("approach_speed_m_s", self.approach_speed_m_s, 0.1, 30.0),
+            ("chase_speed_m_s", self.chase_speed_m_s, 0.1, 100.0),
+            ("chase_trim_gain", self.chase_trim_gain, 0.0, 10.0),
             ("align_m", self.align_m, 0.01, 5.0),
             ("align_speed_m_s", self.align_speed_m_s, 0.01, 10.0),
             ("align_hold_s", self.align_hold_s, 0.0, 10.0),

@@ -25,6 +25,10 @@ struct Args {
     /// [fsm] commit_height_m.
     #[arg(long)]
     commit_height: Option<f64>,
+    /// Never search for the pad higher than this, m (where the camera still reads the
+    /// pad's largest marker); the lower of this and [fsm] search_height_max_m holds.
+    #[arg(long)]
+    search_height_max: Option<f64>,
 }
 
 fn main() -> ExitCode {
@@ -45,8 +49,16 @@ fn run(args: &Args) -> Result<()> {
     if let Some(h) = args.commit_height {
         cfg.commit_height_m = h;
     }
-    cfg.validate()
-        .map_err(|e| anyhow!("--preset/--commit-height: fsm.{}: {}", e.key, e.message))?;
+    if let Some(h) = args.search_height_max {
+        cfg.search_height_max_m = Some(cfg.search_height_max_m.map_or(h, |c| c.min(h)));
+    }
+    cfg.validate().map_err(|e| {
+        anyhow!(
+            "--preset/--commit-height/--search-height-max: fsm.{}: {}",
+            e.key,
+            e.message
+        )
+    })?;
     tracing::info!(preset = ?cfg.preset_m, commit_height_m = cfg.commit_height_m, "fsm");
     runtime::serve(
         &args.stage,

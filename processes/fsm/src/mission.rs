@@ -134,6 +134,9 @@ pub struct Fsm {
     align_since: Option<u64>,
     track_height: f64,
     h_cmd: f64,
+    /// Chasing a fast pad: the velocity, m/s, added to the pad's to hold station over
+    /// it against the relative wind's drag (integrated from the pad-relative error).
+    chase_trim: Vector3<f64>,
     z_cmd: f64,
     go_arounds: u32,
     dropping: bool,
@@ -186,6 +189,7 @@ impl Fsm {
             align_since: None,
             track_height: 1.0,
             h_cmd: 1.0,
+            chase_trim: Vector3::zeros(),
             z_cmd: 0.0,
             go_arounds: 0,
             dropping: false,
@@ -607,7 +611,7 @@ impl Fsm {
     }
 
     fn takeoff_altitude(&self) -> f64 {
-        self.cfg.preset_m[2].min(self.cfg.takeoff_altitude_m)
+        self.preset_point().z.min(self.cfg.takeoff_altitude_m)
     }
 
     fn takeoff(&mut self, now_ns: u64, out: &mut Outputs) {
@@ -701,8 +705,18 @@ impl Fsm {
         (est.age_s <= self.cfg.lost_after_s).then_some(est)
     }
 
+    /// The preset point at a height the camera can see the pad from.
+    fn preset_point(&self) -> Vector3<f64> {
+        let [x, y, z] = self.cfg.preset_m;
+        Vector3::new(x, y, z.min(self.search_ceiling()))
+    }
+
+    fn search_ceiling(&self) -> f64 {
+        self.cfg.search_height_max_m.unwrap_or(f64::INFINITY)
+    }
+
     fn preset(&mut self, now_ns: u64, out: &mut Outputs) {
-        let preset = Vector3::from(self.cfg.preset_m);
+        let preset = self.preset_point();
         let limit = if self.state == MissionState::GoToPreset {
             self.cfg.goto_timeout_s
         } else {
@@ -724,9 +738,14 @@ impl Fsm {
         }
         let waited = self.elapsed_s(now_ns) - self.cfg.search_after_s;
         if self.state == MissionState::WaitForPad && waited > 0.0 {
-            // Not in view from the preset point: climb over it to see more ground.
-            let climb = (waited * self.cfg.lost_climb_m_s).min(self.cfg.search_climb_m);
-            let vz = if climb < self.cfg.search_climb_m {
+            // Not in view from the preset point: climb over it to see more ground, never
+            // above the height the pad's markers can be read from.
+            let most = self
+                .cfg
+                .search_climb_m
+                .min((self.search_ceiling() - preset.z).max(0.0));
+            let climb = (waited * self.cfg.lost_climb_m_s).min(most);
+            let vz = if climb < most {
                 self.cfg.lost_climb_m_s
             } else {
                 0.0
@@ -781,11 +800,12 @@ impl Fsm {
         let Some(p) = self.position() else { return };
         let e = (est.position - p).xy();
         let dist = e.norm();
+        let chase = est.velocity.xy().norm() > self.cfg.chase_speed_m_s;
         match self.guidance {
-            Guidance::Planner if dist <= self.cfg.direct_range_m => {
+            Guidance::Planner if dist <= self.cfg.direct_range_m || chase => {
                 self.guidance = Guidance::Direct
             }
-            Guidance::Direct if dist > 1.5 * self.cfg.direct_range_m => {
+            Guidance::Direct if dist > 1.5 * self.cfg.direct_range_m && !chase => {
                 self.guidance = Guidance::Planner;
                 self.new_goal_epoch(now_ns);
             }
@@ -841,6 +861,7 @@ impl Fsm {
             return;
         };
         let Some(p) = self.position() else { return };
+        self.integrate_chase_trim(&est, &p, dt);
         let e = (est.position - p).xy().norm();
         if e > self.cfg.go_around_m {
             self.go_around(now_ns, format!("{e:.2} m off the pad while descending"));
@@ -912,6 +933,9 @@ impl Fsm {
             return;
         };
         let p = Vector3::from(v.world_from_body.translation);
+        if !self.dropping {
+            self.integrate_chase_trim(&est, &p, dt);
+        }
         let e = (est.position - p).xy().norm();
         let height = p.z - est.position.z;
         if !on_ground && e > self.cfg.go_around_m && height > 0.15 {
@@ -1025,6 +1049,12 @@ impl Fsm {
             .map(|e| Vector3::new(e.velocity.x, e.velocity.y, 0.0))
             .filter(|v| v.iter().all(|c| c.is_finite()))
             .unwrap_or_else(Vector3::zeros);
+        // Follow where the pad should be, not the vehicle's own offset from it: a pad
+        // that outran the camera (a chase at speed) is caught up with, not trailed.
+        let predicted = estimate
+            .as_ref()
+            .map(|e| Vector3::new(e.position.x, e.position.y, z0))
+            .filter(|p| p.iter().all(|c| c.is_finite()));
         let why = match estimate {
             Some(e) => format!("no pad for {:.1} s", e.age_s),
             None => "pad estimate restarted (observations jumped)".to_string(),
@@ -1032,7 +1062,7 @@ impl Fsm {
         self.go(now_ns, MissionState::Lost, why);
         self.lost_z0 = z0;
         self.lost_since_update = self.filter.last_update_ns().unwrap_or(0);
-        if let Some(p) = self.position() {
+        if let Some(p) = predicted.or_else(|| self.position()) {
             self.hold = p;
         }
     }
@@ -1055,9 +1085,15 @@ impl Fsm {
             self.enter_track(now_ns, "pad regained".into());
             return;
         }
-        let climb = ((t - self.cfg.lost_hold_s).max(0.0) * self.cfg.lost_climb_m_s)
-            .min(self.cfg.lost_climb_max_m);
-        let climbing = t > self.cfg.lost_hold_s && climb < self.cfg.lost_climb_max_m;
+        // Chasing a fast pad, the height that saw it is kept while following.
+        let hold_s = if self.lost_velocity.norm() > self.cfg.chase_speed_m_s {
+            self.cfg.lost_hold_s.max(self.cfg.lost_follow_s)
+        } else {
+            self.cfg.lost_hold_s
+        };
+        let climb =
+            ((t - hold_s).max(0.0) * self.cfg.lost_climb_m_s).min(self.cfg.lost_climb_max_m);
+        let climbing = t > hold_s && climb < self.cfg.lost_climb_max_m;
         // Where the pad would be had it kept its velocity (for `lost_follow_s`), above it.
         let follow = t.min(self.cfg.lost_follow_s);
         let drift = self.lost_velocity * follow;
@@ -1217,9 +1253,29 @@ impl Fsm {
     /// Descending, the horizontal error also feeds the velocity (`relative_gain`): the
     /// autopilot's own position gain alone lets a gust carry the vehicle off while it
     /// descends.
+    /// Chasing, integrates the pad-relative horizontal error into `chase_trim`: at 30 km/h
+    /// the relative wind's drag held the racer 5-10 cm behind the pad, outside the flare
+    /// gate, for the whole touchdown (highspeed-30). Below the chase speed it stays zero,
+    /// so the paper's flights are flown as before.
+    fn integrate_chase_trim(&mut self, est: &PadEstimate, p: &Vector3<f64>, dt: f64) {
+        if est.velocity.xy().norm() <= self.cfg.chase_speed_m_s {
+            self.chase_trim = Vector3::zeros();
+            return;
+        }
+        let e = est.position - p;
+        let step = Vector3::new(e.x, e.y, 0.0) * (self.cfg.chase_trim_gain * dt);
+        let trim = (self.chase_trim + step).cap_magnitude(CHASE_TRIM_MAX_M_S);
+        if trim.iter().all(|c| c.is_finite()) {
+            self.chase_trim = trim;
+        }
+    }
+
     fn pad_setpoint(&self, now_ns: u64, est: &PadEstimate, z: f64, vz: f64) -> Setpoint {
         let p = Vector3::new(est.position.x, est.position.y, z);
         let mut v = Vector3::new(est.velocity.x, est.velocity.y, est.velocity.z + vz);
+        if matches!(self.state, MissionState::Descend | MissionState::Land) {
+            v += self.chase_trim;
+        }
         // Touching down, never ask to descend faster than the touchdown's own rate: a pad
         // seen sinking is more often an estimate dragged down by late telemetry (a
         // --processes flight on a loaded machine: -0.28 m/s at contact, the pad's truth 0)
@@ -1254,6 +1310,9 @@ impl Fsm {
 /// long the drop (paper-sim: 0.86 m/s at contact from the flare height, 0.96 from 20 cm
 /// higher, and 1.05 once in CI with the pad estimate 11 cm low).
 const TOUCHDOWN_LEAD_M: f64 = 0.1;
+
+/// The most velocity the chase trim may add, m/s: drag at 14 m/s needs a few tenths.
+const CHASE_TRIM_MAX_M_S: f64 = 1.0;
 
 /// Touchdown: the drop has stopped (vertical speed relative to the pad above minus
 /// this, m/s) ...

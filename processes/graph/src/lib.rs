@@ -54,6 +54,7 @@ pub const PLACEHOLDERS: &[&str] = &[
     "link_addr",
     "preset",
     "commit_height",
+    "search_height_max",
     "signing_key",
 ];
 
@@ -317,6 +318,9 @@ pub struct RunValues {
     pub preset: String,
     /// `{commit_height}`: the mission's commit height, m.
     pub commit_height: String,
+    /// `{search_height_max}`: the highest the mission may search for the pad from, m
+    /// (where the camera still reads the pad's largest marker).
+    pub search_height_max: String,
     /// `{signing_key}`: the MAVLink signing key file (`[px4_link] signing_key`,
     /// resolved), empty for an unsigned link; the simulated autopilot holds it as PX4
     /// holds a key installed before the flight.
@@ -338,6 +342,7 @@ impl RunValues {
             "link_addr" => &self.link_addr,
             "preset" => &self.preset,
             "commit_height" => &self.commit_height,
+            "search_height_max" => &self.search_height_max,
             "signing_key" => &self.signing_key,
             _ => return None,
         })

@@ -212,6 +212,7 @@ fn landing_run_processes_starts_the_stack_as_it_did_before_the_graph() {
         link_addr: "127.0.0.1:40002".into(),
         preset: "-4,-2,4.5".into(),
         commit_height: "0.6".into(),
+        search_height_max: "6.33".into(),
         signing_key: "/d/config/mavlink.key".into(),
     };
     // The list `landing run --processes` had hard-coded (tools/landing/src/run_processes.rs
@@ -263,6 +264,7 @@ fn landing_run_processes_starts_the_stack_as_it_did_before_the_graph() {
                 &v.config,
                 "--preset=-4,-2,4.5",
                 "--commit-height=0.6",
+                "--search-height-max=6.33",
             ],
         ),
         (

@@ -30,6 +30,11 @@ pub const MARKER_CELLS: usize = 7;
 /// hand-written file, not a design choice.
 const BOARD_CENTRE_TOLERANCE_M: f64 = 1e-9;
 
+/// The smallest marker side, px, the detector reads reliably: about 2 px per cell of an
+/// ARUCO_ORIGINAL marker's 7. The 25.7 cm marker on the 640x480 120 deg camera was read
+/// from 3.1 m (15.3 px) and never from 3.6 m (13.2 px) (highspeed-10, docs/highspeed.md).
+pub const MIN_MARKER_PX: f64 = 15.0;
+
 /// Texture scales [`PadModel::render_texture`] accepts (pixels per metre): from a
 /// coarse mip level to a 1200 dpi print (47 244 px/m).
 pub const TEXTURE_PX_PER_M: std::ops::RangeInclusive<f64> = 100.0..=50_000.0;
@@ -285,6 +290,14 @@ impl PadModel {
             }
         }
         Ok(())
+    }
+
+    /// The farthest depth (along the optical axis, m) at which a camera of focal length
+    /// `focal_px` still reads the pad's largest marker: where that marker's side spans
+    /// [`MIN_MARKER_PX`]. A search for the pad beyond it cannot succeed.
+    pub fn detection_depth_m(&self, focal_px: f64) -> f64 {
+        let largest = self.markers.iter().map(|m| m.size_m).fold(0.0, f64::max);
+        focal_px * largest / MIN_MARKER_PX
     }
 
     /// The marker with this id, if it is on the pad.

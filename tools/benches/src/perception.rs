@@ -70,7 +70,7 @@ pub fn run(args: &PerceptionArgs, prefix: Option<&str>) -> Result<()> {
         &deploy,
         (free_udp_port()?, free_udp_port()?),
         "",
-    );
+    )?;
     let ipc = Ipc::open("bench-perception", &prefix)?;
     let observations = ipc.subscriber::<PadObservation>(services::PAD_OBSERVATION)?;
     let mut requests = ipc.publisher::<LinkRequest>(services::PX4_REQUEST)?;

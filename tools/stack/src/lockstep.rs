@@ -48,6 +48,9 @@ pub fn mission(config: &StackConfig, scenario: &LoadedScenario) -> Result<FsmCon
     let mut fsm = config.fsm.clone();
     fsm.preset_m = scenario.scenario.mission.preset_m;
     fsm.commit_height_m = scenario.scenario.mission.commit_height_m;
+    // The lower of the configured ceiling and the camera's, as `fsm --search-height-max`.
+    let camera = search_height_max_m(scenario)?;
+    fsm.search_height_max_m = Some(fsm.search_height_max_m.map_or(camera, |c| c.min(camera)));
     if let Err(e) = stack_config::Validate::validate(&fsm) {
         bail!(
             "scenario {} gives the mission fsm.{}: {}",
@@ -57,6 +60,14 @@ pub fn mission(config: &StackConfig, scenario: &LoadedScenario) -> Result<FsmCon
         );
     }
     Ok(fsm)
+}
+
+/// The highest the mission of `scenario` may search from: where the camera it flies
+/// still reads the pad's largest marker.
+pub fn search_height_max_m(scenario: &LoadedScenario) -> Result<f64> {
+    let camera = CameraCalibration::load(scenario.calibration_path())?;
+    let pad = PadModel::load(scenario.pad_path())?;
+    Ok(pad.detection_depth_m(camera.fx.min(camera.fy)))
 }
 
 /// The stage of one graph node, built from the stack configuration and the scenario

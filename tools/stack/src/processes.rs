@@ -92,9 +92,10 @@ pub fn run_values(
     deploy: &Path,
     (sim_port, link_port): (u16, u16),
     signing_key: &str,
-) -> RunValues {
+) -> Result<RunValues> {
     let preset = scn.scenario.mission.preset_m;
-    RunValues {
+    let search_height_max = crate::lockstep::search_height_max_m(scn)?;
+    Ok(RunValues {
         config: config.display().to_string(),
         deploy: deploy.display().to_string(),
         calibration: scn.calibration_path().display().to_string(),
@@ -108,8 +109,9 @@ pub fn run_values(
         // with a minus sign.
         preset: format!("{},{},{}", preset[0], preset[1], preset[2]),
         commit_height: scn.scenario.mission.commit_height_m.to_string(),
+        search_height_max: search_height_max.to_string(),
         signing_key: signing_key.to_string(),
-    }
+    })
 }
 
 /// The command line of graph node `node` for one run: its binary (beside this
@@ -189,7 +191,7 @@ pub fn run(
         launch.deploy,
         (free_udp_port()?, free_udp_port()?),
         launch.signing_key,
-    );
+    )?;
     std::fs::create_dir_all(launch.log_dir)
         .with_context(|| format!("creating {}", launch.log_dir.display()))?;
     let mut children = Children::default();
