@@ -364,7 +364,7 @@ impl Fsm {
             MissionState::Idle => self.idle(now_ns, &mut out),
             MissionState::Takeoff => self.takeoff(now_ns, &mut out),
             MissionState::GoToPreset | MissionState::WaitForPad => self.preset(now_ns, &mut out),
-            MissionState::Track => self.track(now_ns, &mut out),
+            MissionState::Track => self.track(now_ns, dt, &mut out),
             MissionState::Descend => self.descend(now_ns, dt, &mut out),
             MissionState::Land => self.land(now_ns, dt, &mut out),
             MissionState::Lost => self.lost(now_ns, &mut out),
@@ -733,7 +733,7 @@ impl Fsm {
         }
         if self.pad(now_ns).is_some() {
             self.enter_track(now_ns, "pad seen".into());
-            self.track(now_ns, out);
+            self.track(now_ns, 0.0, out);
             return;
         }
         let waited = self.elapsed_s(now_ns) - self.cfg.search_after_s;
@@ -788,7 +788,7 @@ impl Fsm {
         }
     }
 
-    fn track(&mut self, now_ns: u64, out: &mut Outputs) {
+    fn track(&mut self, now_ns: u64, dt: f64, out: &mut Outputs) {
         if self.elapsed_s(now_ns) > self.cfg.track_timeout_s {
             self.go(now_ns, MissionState::SafeLand, "tracking timed out".into());
             return;
@@ -820,6 +820,7 @@ impl Fsm {
             out.setpoint = Some(self.trajectory_setpoint(now_ns));
             return;
         }
+        self.integrate_chase_trim(&est, &p, dt);
         out.setpoint =
             Some(self.pad_setpoint(now_ns, &est, est.position.z + self.track_height, 0.0));
         let rel_v = (self.velocity() - est.velocity).xy().norm();
@@ -1253,7 +1254,8 @@ impl Fsm {
     /// Descending, the horizontal error also feeds the velocity (`relative_gain`): the
     /// autopilot's own position gain alone lets a gust carry the vehicle off while it
     /// descends.
-    /// Chasing, integrates the pad-relative horizontal error into `chase_trim`: at 30 km/h
+    /// Chasing, integrates the pad-relative horizontal error into `chase_trim` (tracking,
+    /// descending, touching down until the drop): at 30 km/h
     /// the relative wind's drag held the racer 5-10 cm behind the pad, outside the flare
     /// gate, for the whole touchdown (highspeed-30). Below the chase speed it stays zero,
     /// so the paper's flights are flown as before.
@@ -1273,9 +1275,7 @@ impl Fsm {
     fn pad_setpoint(&self, now_ns: u64, est: &PadEstimate, z: f64, vz: f64) -> Setpoint {
         let p = Vector3::new(est.position.x, est.position.y, z);
         let mut v = Vector3::new(est.velocity.x, est.velocity.y, est.velocity.z + vz);
-        if matches!(self.state, MissionState::Descend | MissionState::Land) {
-            v += self.chase_trim;
-        }
+        v += self.chase_trim;
         // Touching down, never ask to descend faster than the touchdown's own rate: a pad
         // seen sinking is more often an estimate dragged down by late telemetry (a
         // --processes flight on a loaded machine: -0.28 m/s at contact, the pad's truth 0)
@@ -1283,7 +1283,16 @@ impl Fsm {
         if self.state == MissionState::Land {
             v.z = v.z.max(vz.min(0.0));
         }
-        let mut a = Vector3::zeros();
+        // A fast pad on a curve turns its velocity at its heading rate: that acceleration
+        // fed forward, or the vehicle trails outside the curve by the distance the
+        // autopilot's position and velocity gains need to make it (0.7 m at 30 km/h on a
+        // 60 m radius).
+        let mut a = if est.velocity.xy().norm() > self.cfg.chase_speed_m_s {
+            let turn = Vector3::new(-est.velocity.y, est.velocity.x, 0.0) * est.yaw_rate;
+            turn.cap_magnitude(CHASE_TURN_ACCEL_MAX_M_S2)
+        } else {
+            Vector3::zeros()
+        };
         // Dropping, the vehicle only matches the pad's velocity: it was over the pad when
         // the drop began, and chasing the last centimetres now only adds sideways speed
         // at contact.
@@ -1299,7 +1308,7 @@ impl Fsm {
         if self.state == MissionState::Land {
             let dv = (v - self.velocity()).xy() * self.cfg.relative_velocity_gain;
             let dv = dv.cap_magnitude(self.cfg.relative_accel_max_m_s2);
-            a = Vector3::new(dv.x, dv.y, 0.0);
+            a += Vector3::new(dv.x, dv.y, 0.0);
         }
         self.setpoint(now_ns, p, v, a)
     }
@@ -1310,6 +1319,10 @@ impl Fsm {
 /// long the drop (paper-sim: 0.86 m/s at contact from the flare height, 0.96 from 20 cm
 /// higher, and 1.05 once in CI with the pad estimate 11 cm low).
 const TOUCHDOWN_LEAD_M: f64 = 0.1;
+
+/// The most turning acceleration fed forward, m/s^2 (a car at 50 km/h on a 30 m radius
+/// pulls 6.4; a misread heading rate must not tilt the vehicle further).
+const CHASE_TURN_ACCEL_MAX_M_S2: f64 = 6.0;
 
 /// The most velocity the chase trim may add, m/s: drag at 14 m/s needs a few tenths.
 const CHASE_TRIM_MAX_M_S: f64 = 1.0;

@@ -110,6 +110,30 @@ fn obstacle_demo_lands_without_touching_the_box() {
 }
 
 #[test]
+fn a_pad_at_30_km_h_is_chased_and_landed_on_vision_only() {
+    // The preset is 4 m up, where the 640x480 camera cannot read the pad's largest marker:
+    // the mission searches from its ceiling (3.17 m), chases the pad as it passes and
+    // lands on it at its speed (docs/highspeed.md).
+    let s = lands(&["run", "--scenario", "highspeed-30", "--json"]);
+    let v = s["target_speed_kmh"].as_f64().unwrap();
+    assert!((v - 30.0).abs() < 0.5, "{v}");
+    for (key, limit) in [
+        ("touchdown_vertical_speed_mps", 1.0),
+        ("touchdown_horizontal_speed_mps", 0.5),
+        ("touchdown_tilt_deg", 15.0),
+    ] {
+        let x = s[key].as_f64().unwrap();
+        assert!(x < limit, "{key} {x}: {s}");
+    }
+}
+
+#[test]
+fn a_pad_at_50_km_h_is_chased_and_landed_on_vision_only() {
+    // Within 25 cm, every foot on the 84 cm board (the referee's `landed`).
+    lands_within(&["run", "--scenario", "highspeed-50", "--json"], 0.25);
+}
+
+#[test]
 fn paper_sim_lands_with_every_stage_its_own_process() {
     let _stack = common::one_stack();
     let logs = std::env::temp_dir().join(format!("landing-run-logs-{}", std::process::id()));
