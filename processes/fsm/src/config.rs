@@ -151,7 +151,7 @@ impl Default for FsmConfig {
             direct_range_m: 1.5,
             approach_speed_m_s: 2.0,
             chase_speed_m_s: 2.0,
-            chase_trim_gain: 1.0,
+            chase_trim_gain: 0.3,
             align_m: 0.3,
             align_speed_m_s: 0.4,
             align_hold_s: 0.5,

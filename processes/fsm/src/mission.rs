@@ -854,7 +854,15 @@ impl Fsm {
 
     fn descend(&mut self, now_ns: u64, dt: f64, out: &mut Outputs) {
         if self.elapsed_s(now_ns) > self.cfg.descend_timeout_s {
-            self.go(now_ns, MissionState::SafeLand, "descent timed out".into());
+            // Over a fast pad, landing in place is landing in the road: try again.
+            let fast = self
+                .pad(now_ns)
+                .is_some_and(|e| e.velocity.xy().norm() > self.cfg.chase_speed_m_s);
+            if fast {
+                self.go_around(now_ns, "descent timed out over a moving pad".into());
+            } else {
+                self.go(now_ns, MissionState::SafeLand, "descent timed out".into());
+            }
             return;
         }
         let Some(est) = self.pad(now_ns) else {
@@ -1265,6 +1273,11 @@ impl Fsm {
             return;
         }
         let e = est.position - p;
+        // Only once caught up: a catch-up from metres behind would wind it up and
+        // overshoot the pad.
+        if e.xy().norm() > self.cfg.direct_range_m {
+            return;
+        }
         let step = Vector3::new(e.x, e.y, 0.0) * (self.cfg.chase_trim_gain * dt);
         let trim = (self.chase_trim + step).cap_magnitude(CHASE_TRIM_MAX_M_S);
         if trim.iter().all(|c| c.is_finite()) {
