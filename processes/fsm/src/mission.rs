@@ -9,7 +9,7 @@ use ipc_types::msg::{
     LinkRequest, LinkRequestKind, MissionState, PadObservation, PlannerGoal, SafetyAction,
     SafetyCommand, Setpoint, Stage, Text, Trajectory, VehicleState,
 };
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 
 use crate::config::FsmConfig;
 use crate::odometry::Odometry;
@@ -135,7 +135,9 @@ pub struct Fsm {
     track_height: f64,
     h_cmd: f64,
     /// Chasing a fast pad: the velocity, m/s, added to the pad's to hold station over
-    /// it against the relative wind's drag (integrated from the pad-relative error).
+    /// it against the relative wind's drag (integrated from the pad-relative error), in
+    /// the pad's heading frame (along, across): on a curve what it must make up turns
+    /// with the pad, and a world-frame integral would forever lag it.
     chase_trim: Vector3<f64>,
     z_cmd: f64,
     go_arounds: u32,
@@ -1278,7 +1280,9 @@ impl Fsm {
         if e.xy().norm() > self.cfg.direct_range_m {
             return;
         }
-        let step = Vector3::new(e.x, e.y, 0.0) * (self.cfg.chase_trim_gain * dt);
+        let pad_from_world = Rotation3::from_axis_angle(&Vector3::z_axis(), -est.yaw);
+        let e = pad_from_world * Vector3::new(e.x, e.y, 0.0);
+        let step = e * (self.cfg.chase_trim_gain * dt);
         let trim = (self.chase_trim + step).cap_magnitude(CHASE_TRIM_MAX_M_S);
         if trim.iter().all(|c| c.is_finite()) {
             self.chase_trim = trim;
@@ -1288,7 +1292,7 @@ impl Fsm {
     fn pad_setpoint(&self, now_ns: u64, est: &PadEstimate, z: f64, vz: f64) -> Setpoint {
         let p = Vector3::new(est.position.x, est.position.y, z);
         let mut v = Vector3::new(est.velocity.x, est.velocity.y, est.velocity.z + vz);
-        v += self.chase_trim;
+        v += Rotation3::from_axis_angle(&Vector3::z_axis(), est.yaw) * self.chase_trim;
         // Touching down, never ask to descend faster than the touchdown's own rate: a pad
         // seen sinking is more often an estimate dragged down by late telemetry (a
         // --processes flight on a loaded machine: -0.28 m/s at contact, the pad's truth 0)
