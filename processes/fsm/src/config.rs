@@ -24,9 +24,9 @@ pub struct FsmConfig {
     /// Never wait for the pad higher than this, m: above it the camera cannot resolve
     /// the pad's largest marker (`optics::PadModel::detection_depth_m`). A preset
     /// point higher up is flown to at this height, and the search climb stops here.
-    /// Unset (the default), `landing run` and `fsm --search-height-max` derive it from
-    /// the camera's calibration and the pad; on a vehicle set it from `landing config
-    /// check`'s line for the camera and pad it flies.
+    /// Unset (the default), `landing run` derives it from the scenario's camera and pad
+    /// and hands it to the fsm process as `--search-height-max`; on a vehicle set it for
+    /// the camera it flies (focal length x largest marker / 15 px).
     pub search_height_max_m: Option<f64>,
     /// Highest take-off altitude, climbed to in OFFBOARD; the planner flies the rest, m.
     pub takeoff_altitude_m: f64,

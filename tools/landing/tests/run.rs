@@ -128,6 +128,12 @@ fn a_pad_at_30_km_h_is_chased_and_landed_on_vision_only() {
 }
 
 #[test]
+fn a_pad_at_30_km_h_on_a_curve_is_chased_and_landed_on() {
+    // A 60 m radius at 8.3 m/s: the pad turns under the vehicle the whole time.
+    lands(&["run", "--scenario", "highspeed-30-curve", "--json"]);
+}
+
+#[test]
 fn a_pad_at_50_km_h_is_chased_and_landed_on_vision_only() {
     // Within 25 cm, every foot on the 84 cm board (the referee's `landed`).
     lands_within(&["run", "--scenario", "highspeed-50", "--json"], 0.25);
