@@ -44,8 +44,9 @@ pub struct FsmConfig {
     /// own path is the free space to fly in. Lost at this speed, the vehicle keeps its
     /// height while it follows (climbing, the pad's markers would shrink out of range).
     pub chase_speed_m_s: f64,
-    /// Chasing, each metre off the pad while descending adds this much velocity per second
-    /// (1/s^2): an integral that holds station over the pad against the relative wind.
+    /// Chasing, within `direct_range_m` of the pad, each metre off it adds this much
+    /// velocity per second (1/s^2), in the pad's heading frame: an integral that holds
+    /// station over the pad against the relative wind and a curve's pull.
     pub chase_trim_gain: f64,
     /// Horizontal error below which descent may start, m.
     pub align_m: f64,
@@ -133,6 +134,50 @@ pub struct FsmConfig {
     pub goal_period_s: f64,
     /// The pad motion filter.
     pub pad_filter: PadFilterConfig,
+}
+
+/// A command-line override of the fsm binary that cannot be taken.
+#[derive(Debug, thiserror::Error)]
+pub enum OverrideError {
+    /// `--preset` is not three numbers.
+    #[error("--preset `{0}` is not allowed (allowed: three numbers x,y,z in m)")]
+    Preset(String),
+    /// The overridden section does not validate.
+    #[error("--preset/--commit-height/--search-height-max: fsm.{}: {}", .0.key, .0.message)]
+    Invalid(Invalid),
+}
+
+impl FsmConfig {
+    /// The fsm binary's overrides (`--preset x,y,z`, `--commit-height`,
+    /// `--search-height-max`, which only lowers the ceiling), checked.
+    pub fn with_overrides(
+        mut self,
+        preset: Option<&str>,
+        commit_height_m: Option<f64>,
+        search_height_max_m: Option<f64>,
+    ) -> Result<Self, OverrideError> {
+        if let Some(p) = preset {
+            let v: Vec<f64> = p.split(',').filter_map(|s| s.trim().parse().ok()).collect();
+            let [x, y, z] = v[..] else {
+                return Err(OverrideError::Preset(p.to_string()));
+            };
+            self.preset_m = [x, y, z];
+        }
+        if let Some(h) = commit_height_m {
+            self.commit_height_m = h;
+        }
+        if let Some(h) = search_height_max_m {
+            self.lower_search_ceiling(h);
+        }
+        self.validate().map_err(OverrideError::Invalid)?;
+        Ok(self)
+    }
+
+    /// Lowers the search ceiling to `h` (the camera's, from its calibration and the pad):
+    /// the lower of the configured one and `h` holds.
+    pub fn lower_search_ceiling(&mut self, h: f64) {
+        self.search_height_max_m = Some(self.search_height_max_m.map_or(h, |c| c.min(h)));
+    }
 }
 
 impl Default for FsmConfig {

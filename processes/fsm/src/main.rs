@@ -5,11 +5,10 @@
 
 use std::process::ExitCode;
 
-use anyhow::{Result, anyhow};
+use anyhow::Result;
 use clap::Parser;
 use fsm::{FsmConfig, FsmStage};
 use runtime::StageArgs;
-use stack_config::Validate;
 
 /// Flies the landing mission: take off, find the pad, track it, descend, land on it.
 #[derive(Debug, Parser)]
@@ -36,29 +35,12 @@ fn main() -> ExitCode {
 }
 
 fn run(args: &Args) -> Result<()> {
-    let (ipc, mut cfg): (_, FsmConfig) = args.stage.load("fsm")?;
-    if let Some(p) = &args.preset {
-        let v: Vec<f64> = p.split(',').filter_map(|s| s.trim().parse().ok()).collect();
-        let [x, y, z] = v[..] else {
-            return Err(anyhow!(
-                "--preset `{p}` is not allowed (allowed: three numbers x,y,z in m)"
-            ));
-        };
-        cfg.preset_m = [x, y, z];
-    }
-    if let Some(h) = args.commit_height {
-        cfg.commit_height_m = h;
-    }
-    if let Some(h) = args.search_height_max {
-        cfg.search_height_max_m = Some(cfg.search_height_max_m.map_or(h, |c| c.min(h)));
-    }
-    cfg.validate().map_err(|e| {
-        anyhow!(
-            "--preset/--commit-height/--search-height-max: fsm.{}: {}",
-            e.key,
-            e.message
-        )
-    })?;
+    let (ipc, cfg): (_, FsmConfig) = args.stage.load("fsm")?;
+    let cfg = cfg.with_overrides(
+        args.preset.as_deref(),
+        args.commit_height,
+        args.search_height_max,
+    )?;
     tracing::info!(preset = ?cfg.preset_m, commit_height_m = cfg.commit_height_m, "fsm");
     runtime::serve(
         &args.stage,

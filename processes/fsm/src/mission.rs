@@ -1260,15 +1260,11 @@ impl Fsm {
         self.hold_setpoint(now_ns, self.hold)
     }
 
-    /// Over the pad at height `z`, moving with it (velocity feed-forward), `vz` down.
-    /// Descending, the horizontal error also feeds the velocity (`relative_gain`): the
-    /// autopilot's own position gain alone lets a gust carry the vehicle off while it
-    /// descends.
     /// Chasing, integrates the pad-relative horizontal error into `chase_trim` (tracking,
-    /// descending, touching down until the drop): at 30 km/h
-    /// the relative wind's drag held the racer 5-10 cm behind the pad, outside the flare
-    /// gate, for the whole touchdown (highspeed-30). Below the chase speed it stays zero,
-    /// so the paper's flights are flown as before.
+    /// descending, touching down until the drop): at 30 km/h the relative wind's drag
+    /// held the racer 5-10 cm behind the pad, outside the flare gate, for the whole
+    /// touchdown (highspeed-30). Below the chase speed it stays zero, so the paper's
+    /// flights are flown as before.
     fn integrate_chase_trim(&mut self, est: &PadEstimate, p: &Vector3<f64>, dt: f64) {
         if est.velocity.xy().norm() <= self.cfg.chase_speed_m_s {
             self.chase_trim = Vector3::zeros();
@@ -1289,6 +1285,10 @@ impl Fsm {
         }
     }
 
+    /// Over the pad at height `z`, moving with it (velocity feed-forward), `vz` down.
+    /// Descending, the horizontal error also feeds the velocity (`relative_gain`): the
+    /// autopilot's own position gain alone lets a gust carry the vehicle off while it
+    /// descends.
     fn pad_setpoint(&self, now_ns: u64, est: &PadEstimate, z: f64, vz: f64) -> Setpoint {
         let p = Vector3::new(est.position.x, est.position.y, z);
         let mut v = Vector3::new(est.velocity.x, est.velocity.y, est.velocity.z + vz);

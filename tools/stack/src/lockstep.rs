@@ -49,8 +49,7 @@ pub fn mission(config: &StackConfig, scenario: &LoadedScenario) -> Result<FsmCon
     fsm.preset_m = scenario.scenario.mission.preset_m;
     fsm.commit_height_m = scenario.scenario.mission.commit_height_m;
     // The lower of the configured ceiling and the camera's, as `fsm --search-height-max`.
-    let camera = search_height_max_m(scenario)?;
-    fsm.search_height_max_m = Some(fsm.search_height_max_m.map_or(camera, |c| c.min(camera)));
+    fsm.lower_search_ceiling(search_height_max_m(scenario)?);
     if let Err(e) = stack_config::Validate::validate(&fsm) {
         bail!(
             "scenario {} gives the mission fsm.{}: {}",
