@@ -802,7 +802,7 @@ impl Fsm {
         let Some(p) = self.position() else { return };
         let e = (est.position - p).xy();
         let dist = e.norm();
-        let chase = est.velocity.xy().norm() > self.cfg.chase_speed_m_s;
+        let chase = self.chasing(&est.velocity);
         match self.guidance {
             Guidance::Planner if dist <= self.cfg.direct_range_m || chase => {
                 self.guidance = Guidance::Direct
@@ -857,9 +857,7 @@ impl Fsm {
     fn descend(&mut self, now_ns: u64, dt: f64, out: &mut Outputs) {
         if self.elapsed_s(now_ns) > self.cfg.descend_timeout_s {
             // Over a fast pad, landing in place is landing in the road: try again.
-            let fast = self
-                .pad(now_ns)
-                .is_some_and(|e| e.velocity.xy().norm() > self.cfg.chase_speed_m_s);
+            let fast = self.pad(now_ns).is_some_and(|e| self.chasing(&e.velocity));
             if fast {
                 self.go_around(now_ns, "descent timed out over a moving pad".into());
             } else {
@@ -1097,7 +1095,7 @@ impl Fsm {
             return;
         }
         // Chasing a fast pad, the height that saw it is kept while following.
-        let hold_s = if self.lost_velocity.norm() > self.cfg.chase_speed_m_s {
+        let hold_s = if self.chasing(&self.lost_velocity) {
             self.cfg.lost_hold_s.max(self.cfg.lost_follow_s)
         } else {
             self.cfg.lost_hold_s
@@ -1260,13 +1258,19 @@ impl Fsm {
         self.hold_setpoint(now_ns, self.hold)
     }
 
+    /// A pad moving this fast (horizontal `velocity`) is chased: faster than the planner
+    /// flies (`chase_speed_m_s`). The one test every chase behaviour is gated on.
+    fn chasing(&self, velocity: &Vector3<f64>) -> bool {
+        velocity.xy().norm() > self.cfg.chase_speed_m_s
+    }
+
     /// Chasing, integrates the pad-relative horizontal error into `chase_trim` (tracking,
     /// descending, touching down until the drop): at 30 km/h the relative wind's drag
     /// held the racer 5-10 cm behind the pad, outside the flare gate, for the whole
     /// touchdown (highspeed-30). Below the chase speed it stays zero, so the paper's
     /// flights are flown as before.
     fn integrate_chase_trim(&mut self, est: &PadEstimate, p: &Vector3<f64>, dt: f64) {
-        if est.velocity.xy().norm() <= self.cfg.chase_speed_m_s {
+        if !self.chasing(&est.velocity) {
             self.chase_trim = Vector3::zeros();
             return;
         }
@@ -1304,7 +1308,7 @@ impl Fsm {
         // fed forward, or the vehicle trails outside the curve by the distance the
         // autopilot's position and velocity gains need to make it (0.7 m at 30 km/h on a
         // 60 m radius).
-        let mut a = if est.velocity.xy().norm() > self.cfg.chase_speed_m_s {
+        let mut a = if self.chasing(&est.velocity) {
             let turn = Vector3::new(-est.velocity.y, est.velocity.x, 0.0) * est.yaw_rate;
             turn.cap_magnitude(CHASE_TURN_ACCEL_MAX_M_S2)
         } else {
