@@ -55,7 +55,8 @@ fuzz:
 	./target/release/landing-fuzz --seconds $(FUZZ_SECONDS)
 
 # Independent MAVLink peers fly the simulator as they fly PX4 SITL: pymavlink, and
-# MAVSDK (PyPI `mavsdk` 4.x, the native library, no server to download). An independent
+# MAVSDK (PyPI `mavsdk` 4.x, the native library, no server to download); pymavlink
+# plays PX4's side of `sim --px4-sitl` (HIL_SENSOR / HIL_ACTUATOR_CONTROLS lockstep). An independent
 # reader (PyPI `mcap` and `foxglove-schemas-protobuf`) decodes every channel of a
 # recording of each mode, against the schemas Foxglove ships.
 peers:
@@ -64,6 +65,7 @@ peers:
 	$(CARGO) build --release -p sim
 	python3 tests/peers/pymavlink_flight.py target/release/sim
 	python3 tests/peers/mavsdk_flight.py target/release/sim
+	python3 tests/peers/px4_sitl_peer.py target/release/sim
 	@python3 -c 'import mcap, foxglove_schemas_protobuf' 2>/dev/null || python3 -m pip install --quiet --disable-pip-version-check mcap foxglove-schemas-protobuf
 	$(CARGO) build --release -p landing -p recorder
 	@rm -rf target/peers && mkdir -p target/peers

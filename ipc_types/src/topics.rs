@@ -90,6 +90,11 @@ pub const MAVLINK_TO_PX4: &str = "mavlink/to-px4";
 /// Datagrams on a MAVLink link from an address other than the configured peer's: a
 /// stage counts them and never decodes them. Served by the UDP link, not iceoryx2.
 pub const MAVLINK_FOREIGN: &str = "mavlink/foreign";
+/// PX4 SITL's simulator link, PX4 to the simulator (HIL_ACTUATOR_CONTROLS, HEARTBEAT):
+/// a TCP byte stream the simulator serves with `--px4-sitl`, not iceoryx2.
+pub const HIL_FROM_PX4: &str = "hil/from-px4";
+/// PX4 SITL's simulator link, the simulator to PX4 (HIL_SENSOR, HIL_STATE_QUATERNION).
+pub const HIL_TO_PX4: &str = "hil/to-px4";
 /// Frames from a camera device, a GStreamer pipeline or a recording, read by
 /// camera-ingest itself (OpenCV, on its capture thread): not iceoryx2. camera-ingest
 /// reads this instead of `sim/camera` when its source is not the simulator.
@@ -168,6 +173,18 @@ pub const TABLE: &[TopicInfo] = &[
     },
     TopicInfo {
         name: MAVLINK_FOREIGN,
+        service: None,
+        payload: Payload::Mavlink,
+        evaluator_only: false,
+    },
+    TopicInfo {
+        name: HIL_FROM_PX4,
+        service: None,
+        payload: Payload::Mavlink,
+        evaluator_only: false,
+    },
+    TopicInfo {
+        name: HIL_TO_PX4,
         service: None,
         payload: Payload::Mavlink,
         evaluator_only: false,

@@ -30,6 +30,7 @@ pub fn text(graph: &Graph) -> String {
             let to = names(graph.readers(o));
             let to = match graph.topic(o) {
                 Some(t) if t.evaluator_only => "the evaluator only".to_string(),
+                Some(t) if t.external && to.is_empty() => "external".to_string(),
                 _ if to.is_empty() => "no node".to_string(),
                 _ => to,
             };

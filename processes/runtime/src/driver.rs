@@ -524,6 +524,16 @@ pub fn run(
             .as_deref()
             .is_some_and(|e| e.topics().contains(&topic))
     };
+    // A stage with its own I/O serves the outside protocol of the mode it runs in (the
+    // simulator: its autopilot's MAVLink on UDP, or PX4 SITL's simulator API on TCP); a
+    // byte topic of the other mode is not opened (publishing on it is an error).
+    let unserved_bytes = |info: &topics::TopicInfo| {
+        let skip = external.is_some() && info.service.is_none() && !served(info.name);
+        if skip {
+            tracing::debug!(node = %spec.name, topic = info.name, "not served in this mode");
+        }
+        skip
+    };
     let mut inputs = Vec::new();
     for i in &spec.inputs {
         let info = topics::find(&i.topic).ok_or_else(|| node_err(&i.topic))?;
@@ -533,7 +543,7 @@ pub fn run(
                 topic: i.topic.clone(),
             });
         }
-        if served(info.name) {
+        if served(info.name) || unserved_bytes(info) {
             continue;
         }
         let port = match info.service {
@@ -560,6 +570,9 @@ pub fn run(
     let mut outputs = Vec::new();
     for o in &spec.outputs {
         let info = topics::find(o).ok_or_else(|| node_err(o))?;
+        if unserved_bytes(info) {
+            continue;
+        }
         let port = if served(info.name) {
             Some(OutPort::External)
         } else {

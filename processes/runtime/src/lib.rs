@@ -16,6 +16,7 @@ pub mod process_main;
 pub mod serve;
 pub mod shutdown;
 pub mod supervise;
+pub mod tcp;
 pub mod threads;
 pub mod udp;
 
@@ -33,5 +34,6 @@ pub use ipc::{
 pub use process_main::process_main;
 pub use serve::{ServeError, StageArgs, serve, serve_spec};
 pub use supervise::{Supervision, SupervisionError};
+pub use tcp::{TcpError, TcpServerLink, TcpStats};
 pub use threads::{JOIN_TIMEOUT, JoinError, StopFlag, ThreadRole, Worker};
 pub use udp::{Reply, UdpLink, UdpStats};

@@ -27,6 +27,7 @@ pub mod depth;
 pub mod estimator_noise;
 pub mod geometry;
 pub mod ground_vehicle;
+pub mod hil;
 pub mod hover_thrust;
 pub mod hysteresis;
 pub mod land_detector;

@@ -19,6 +19,7 @@ use crate::depth::DepthCamera;
 use crate::ground_vehicle::PadState;
 use crate::params::ParamError;
 use crate::px4::commander::{Commander, VehicleStatus};
+use crate::quadrotor::MotorCommands;
 use crate::scenario::LoadedScenario;
 use crate::world::{Event, TimedEvent, World, WorldError};
 
@@ -354,6 +355,19 @@ impl Simulator {
         self.world.set_armed(self.commander.armed());
         self.world.set_setpoint(self.commander.setpoint());
         self.world.step(PHYSICS_STEP_NS)?;
+        Ok(self.report())
+    }
+
+    /// Advances physics by one step with the motors another autopilot commands (real PX4
+    /// through `sim --px4-sitl`): this simulator's commander and autopilot stay idle.
+    pub fn step_with_motors(&mut self, motors: &MotorCommands) -> Result<StepReport, SimError> {
+        self.world.set_armed(motors.armed);
+        self.world.step_with_motors(PHYSICS_STEP_NS, motors)?;
+        Ok(self.report())
+    }
+
+    /// What the step just taken produced: new truth events, sensors due.
+    fn report(&mut self) -> StepReport {
         let now = self.world.time_ns();
         let events = self.world.events();
         let truth = events[self.events_seen.min(events.len())..]
@@ -361,11 +375,11 @@ impl Simulator {
             .map(truth_event)
             .collect();
         self.events_seen = events.len();
-        Ok(StepReport {
+        StepReport {
             camera_due: self.camera.due(now),
             depth_due: self.depth.due(now),
             truth,
-        })
+        }
     }
 
     /// The world (ground truth: for the simulator's own sensors and the evaluator).

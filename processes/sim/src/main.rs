@@ -1,8 +1,6 @@
-//! `sim`: the simulator as its own process, standing in for the world and for PX4.
-//! Steps the scenario's world on the wall clock at 500 Hz, speaks MAVLink 2 on UDP as
-//! PX4 SITL's onboard link does toward px4-link, publishes sim/camera, sim/depth and the
-//! evaluator-only truth (deploy/graph.toml). Everything it does is `sim::stage::SimStage`
-//! paced by the wall clock; this file binds the UDP socket and hands both to the driver.
+//! `sim`: the world and PX4 as a process: `sim::stage::SimStage` on the wall clock, its
+//! autopilot's MAVLink on UDP toward px4-link, or with `--px4-sitl` PX4 SITL's simulator
+//! API on TCP for real PX4; frames and truth on iceoryx2 (deploy/graph.toml).
 
 use std::net::SocketAddr;
 use std::process::ExitCode;
@@ -10,7 +8,7 @@ use std::process::ExitCode;
 use anyhow::Result;
 use clap::Parser;
 use ipc_types::topics;
-use runtime::{Reply, StageArgs, UdpLink};
+use runtime::{Reply, StageArgs, TcpServerLink, UdpLink};
 use sim::stage::SimFlags;
 
 /// The landing stack's simulator: quadrotor, PX4-like autopilot over MAVLink, moving pad.
@@ -38,15 +36,26 @@ fn run(args: &Args) -> Result<()> {
     let ipc = args.stage.ipc()?;
     let zero = runtime::unix_ns_at_monotonic_zero();
     let mut stage = args.sim.stage(&args.stage.deploy(), zero)?;
-    let mut link = UdpLink::bind(
-        args.mavlink_listen,
-        Some(args.mavlink_remote),
-        Reply::OnlyRemote,
-        topics::MAVLINK_TO_PX4,
-        topics::MAVLINK_FROM_PX4,
-    )?
-    .with_foreign_topic(topics::MAVLINK_FOREIGN);
-    tracing::info!(mavlink = %link.local_addr(), "sim");
-    runtime::serve(&args.stage, &ipc, &mut stage, Some(&mut link), None)?;
+    let mut link: Box<dyn stage::External> = match args.sim.px4_sitl {
+        Some(addr) => {
+            let tcp = TcpServerLink::bind(addr, topics::HIL_FROM_PX4, topics::HIL_TO_PX4)?;
+            tracing::info!(px4_sitl = %tcp.local_addr(), "sim waits for PX4");
+            Box::new(tcp)
+        }
+        None => {
+            let (local, remote) = (args.mavlink_listen, Some(args.mavlink_remote));
+            let udp = UdpLink::bind(
+                local,
+                remote,
+                Reply::OnlyRemote,
+                topics::MAVLINK_TO_PX4,
+                topics::MAVLINK_FROM_PX4,
+            )?
+            .with_foreign_topic(topics::MAVLINK_FOREIGN);
+            tracing::info!(mavlink = %udp.local_addr(), "sim");
+            Box::new(udp)
+        }
+    };
+    runtime::serve(&args.stage, &ipc, &mut stage, Some(link.as_mut()), None)?;
     Ok(())
 }

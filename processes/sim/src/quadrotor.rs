@@ -118,6 +118,10 @@ pub struct AirframeParams {
     pub gear_restitution: f64,
     /// Coulomb friction coefficient between a foot and a surface.
     pub gear_friction: f64,
+    /// Each motor's axis in body FLU (x, y), m, in [`QUAD_X_MOTORS`] order, for a frame
+    /// that is not a symmetric X (PX4's iris: `CA_ROTORn_PX/PY`, with y negated from
+    /// PX4's FRD). Absent: on the diagonals at `arm_length_m`.
+    pub motor_positions_m: Option<[[f64; 2]; 4]>,
 }
 
 impl Default for AirframeParams {
@@ -151,6 +155,7 @@ impl Default for AirframeParams {
             gear_restitution: 0.3,
             // Plastic skid on a printed board.
             gear_friction: 0.5,
+            motor_positions_m: None,
         }
     }
 }
@@ -183,6 +188,7 @@ impl AirframeParams {
             gear_stiffness_n_m: 1500.0,
             gear_restitution: 0.3,
             gear_friction: 0.5,
+            motor_positions_m: None,
         }
     }
 
@@ -243,6 +249,23 @@ impl AirframeParams {
         )?;
         params::in_range("gear_restitution", self.gear_restitution, 0.0, 0.95)?;
         params::in_range("gear_friction", self.gear_friction, 0.0, 2.0)?;
+        if let Some(positions) = &self.motor_positions_m {
+            for (i, (xy, g)) in positions.iter().zip(QUAD_X_MOTORS.iter()).enumerate() {
+                params::finite_all(&format!("motor_positions_m[{i}]"), xy)?;
+                // The mixers (this simulator's and PX4's quad X) need each motor in its
+                // quadrant: front-right, rear-left, front-left, rear-right.
+                let in_quadrant = xy[0] * g.x_sign > 0.01
+                    && xy[1] * g.y_sign > 0.01
+                    && xy.iter().all(|c| c.abs() <= 2.0);
+                if !in_quadrant {
+                    return Err(ParamError::new(
+                        format!("motor_positions_m[{i}]"),
+                        format!("{xy:?}"),
+                        "motors 1-4 must be front-right, rear-left, front-left, rear-right (body FLU), at least 1 cm off each axis and within 2 m",
+                    ));
+                }
+            }
+        }
         let ratio = self.thrust_to_weight();
         if ratio <= 1.2 {
             return Err(ParamError::new(
@@ -303,6 +326,9 @@ impl AirframeParams {
 
     /// Body position of motor `i` (in [`QUAD_X_MOTORS`] order) in m.
     pub fn motor_position_body(&self, i: usize) -> Vector3<f64> {
+        if let Some(xy) = self.motor_positions_m.as_ref().and_then(|p| p.get(i % 4)) {
+            return Vector3::new(xy[0], xy[1], 0.0);
+        }
         let g = QUAD_X_MOTORS[i % 4];
         let d = self.motor_offset_m();
         Vector3::new(g.x_sign * d, g.y_sign * d, 0.0)

@@ -464,6 +464,8 @@ struct AirframeFile {
     px4: Px4Params,
     #[serde(default)]
     touchdown: TouchdownLimits,
+    #[serde(default)]
+    sensors: crate::hil::HilSensorParams,
 }
 
 /// What the referee accepts at a touchdown, relative to the surface touched. Written
@@ -569,6 +571,9 @@ impl Validate for AirframeFile {
         self.touchdown
             .validate()
             .map_err(|e| from_param("touchdown", e))?;
+        self.sensors
+            .validate()
+            .map_err(|e| from_param("sensors", e))?;
         self.px4.validate().map_err(|e| from_param("px4", e))
     }
 }
@@ -588,6 +593,8 @@ pub struct LoadedScenario {
     pub px4: Px4Params,
     /// The referee's touchdown limits for this airframe (`[touchdown]`).
     pub touchdown: TouchdownLimits,
+    /// Its IMU, magnetometer and barometer as PX4 SITL reads them (`[sensors]`).
+    pub sensors: crate::hil::HilSensorParams,
     /// `deploy/config/` (calibration files are resolved against it).
     pub config_dir: PathBuf,
 }
@@ -720,25 +727,7 @@ pub fn load(name_or_path: &str, deploy_dir: &Path) -> Result<LoadedScenario, Sce
     };
     let scenario: Scenario = config::load(&path)?;
     let config_dir = deploy_dir.join("config");
-    let airframe_path = config_dir
-        .join("airframes")
-        .join(format!("{}.toml", scenario.airframe));
-    if !scenario
-        .airframe
-        .bytes()
-        .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
-        || !airframe_path.is_file()
-    {
-        return Err(ScenarioError::Airframe {
-            scenario: path,
-            name: scenario.airframe.clone(),
-            message: format!(
-                "no such profile in {} (allowed: p450, racer)",
-                config_dir.join("airframes").display()
-            ),
-        });
-    }
-    let airframe: AirframeFile = config::load(&airframe_path)?;
+    let airframe = load_airframe(&config_dir, &scenario.airframe, &path)?;
     let mut autopilot = AutopilotParams::tuned_for(&airframe.airframe);
     airframe.limits.apply(&mut autopilot);
     Ok(LoadedScenario {
@@ -747,9 +736,52 @@ pub fn load(name_or_path: &str, deploy_dir: &Path) -> Result<LoadedScenario, Sce
         autopilot,
         px4: airframe.px4,
         touchdown: airframe.touchdown,
+        sensors: airframe.sensors,
         airframe: airframe.airframe,
         config_dir,
     })
+}
+
+impl LoadedScenario {
+    /// The same world flown by another vehicle: the airframe profile `name` from
+    /// `deploy/config/airframes/` in place of the scenario's (`sim --airframe iris` flies
+    /// PX4's SITL vehicle through any scenario).
+    pub fn with_airframe(mut self, name: &str) -> Result<Self, ScenarioError> {
+        let airframe = load_airframe(&self.config_dir, name, &self.path)?;
+        let mut autopilot = AutopilotParams::tuned_for(&airframe.airframe);
+        airframe.limits.apply(&mut autopilot);
+        self.scenario.airframe = name.to_string();
+        self.autopilot = autopilot;
+        self.px4 = airframe.px4;
+        self.touchdown = airframe.touchdown;
+        self.sensors = airframe.sensors;
+        self.airframe = airframe.airframe;
+        Ok(self)
+    }
+}
+
+/// The airframe profile `name` in `config_dir/airframes/`, for the scenario at `scenario`.
+fn load_airframe(
+    config_dir: &Path,
+    name: &str,
+    scenario: &Path,
+) -> Result<AirframeFile, ScenarioError> {
+    let airframe_path = config_dir.join("airframes").join(format!("{name}.toml"));
+    if !name
+        .bytes()
+        .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
+        || !airframe_path.is_file()
+    {
+        return Err(ScenarioError::Airframe {
+            scenario: scenario.to_path_buf(),
+            name: name.to_string(),
+            message: format!(
+                "no such profile in {} (allowed: p450, racer, iris)",
+                config_dir.join("airframes").display()
+            ),
+        });
+    }
+    Ok(config::load(&airframe_path)?)
 }
 
 #[cfg(test)]

@@ -53,6 +53,15 @@ pub struct SimFlags {
     /// signing on from the start. Empty or absent: off until SETUP_SIGNING installs one.
     #[arg(long, default_value = "")]
     pub signing_key: String,
+    /// Real PX4 flies instead of the built-in autopilot: serve PX4 SITL's simulator API
+    /// on this TCP address (PX4 connects to 4560 + instance), lockstep at 250 Hz. PX4
+    /// then talks MAVLink to px4-link itself.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:4560")]
+    pub px4_sitl: Option<std::net::SocketAddr>,
+    /// Fly this airframe profile (deploy/config/airframes/) instead of the scenario's:
+    /// `iris` is PX4 SITL's vehicle.
+    #[arg(long, value_name = "NAME")]
+    pub airframe: Option<String>,
 }
 
 /// Why the flags make no simulator.
@@ -96,6 +105,9 @@ impl SimFlags {
             return Err(SimFlagsError::Speed(self.speed));
         }
         let mut scenario = crate::scenario::load(&self.scenario, deploy)?;
+        if let Some(name) = &self.airframe {
+            scenario = scenario.with_airframe(name)?;
+        }
         if let Some(rate) = self.autopilot_clock_rate {
             let clock = &mut scenario.scenario.autopilot_clock;
             clock.rate = rate;
@@ -113,7 +125,11 @@ impl SimFlags {
             Pace::realtime(self.speed),
             Some((end_s * 1e9) as u64),
         )?;
-        Ok(stage.with_signing(key, unix_ns_at_zero))
+        let stage = stage.with_signing(key, unix_ns_at_zero);
+        Ok(match self.px4_sitl {
+            Some(_) => stage.with_px4_sitl(scenario.sensors.clone(), scenario.px4.sih_loc_h0),
+            None => stage,
+        })
     }
 }
 
@@ -247,6 +263,67 @@ pub struct SimStage {
     spare_u16: Vec<Vec<u16>>,
     next_truth_state_ns: u64,
     counts: Counts,
+    /// With `--px4-sitl`: real PX4 flies the vehicle through its simulator API.
+    px4_sitl: Option<Box<SitlBridge>>,
+}
+
+/// How often HIL_STATE_QUATERNION (ground truth for PX4's logs) goes out: 50 Hz.
+const HIL_STATE_PERIOD_NS: u64 = 20_000_000;
+
+/// PX4 SITL's side of the simulator: its sensors, the lockstep, its byte stream.
+struct SitlBridge {
+    sensors: crate::hil::HilSensors,
+    lockstep: crate::hil::Lockstep,
+    home_amsl_m: f64,
+    decoder: StreamDecoder,
+    guard: Guard,
+    decoded: Vec<(MavHeader, MavMessage)>,
+    sequence: u8,
+    /// PX4 has spoken (its first HEARTBEAT): time starts.
+    connected: bool,
+    next_state_ns: u64,
+    /// Velocity at the last HIL_STATE_QUATERNION, for its acceleration.
+    last_velocity: nalgebra::Vector3<f64>,
+    sensors_out: u64,
+    answers: u64,
+    other_in: u64,
+}
+
+impl SitlBridge {
+    /// Bytes of PX4's stream: its motor outputs answer the lockstep; its first message
+    /// (a HEARTBEAT, sent on connecting) starts simulated time.
+    fn receive(&mut self, bytes: &[u8], now_ns: u64) {
+        self.decoded.clear();
+        self.decoder
+            .push(bytes, now_ns, &mut self.guard, &mut self.decoded);
+        for (_, m) in &self.decoded {
+            self.connected = true;
+            match m {
+                MavMessage::HIL_ACTUATOR_CONTROLS(c) => {
+                    self.lockstep.answered(c);
+                    self.answers += 1;
+                }
+                // HEARTBEAT, PX4's request for HIL_STATE_QUATERNION at 200 Hz (this
+                // simulator sends it at 50 Hz; PX4 only logs it).
+                _ => self.other_in += 1,
+            }
+        }
+    }
+
+    /// One message to PX4, MAVLink 2 from this simulator (system 1, component 51: a
+    /// simulator's id, not the autopilot's).
+    fn send(&mut self, msg: &MavMessage, out: &mut dyn Outbox) -> Result<(), StageError> {
+        let header = MavHeader {
+            system_id: 1,
+            component_id: 51,
+            sequence: self.sequence,
+        };
+        self.sequence = self.sequence.wrapping_add(1);
+        let mut wire = Vec::with_capacity(96);
+        px4_protocol::codec::encode(&mut wire, header, msg)
+            .map_err(|e| StageError::Transport(e.to_string()))?;
+        out.publish(topics::HIL_TO_PX4, Message::Mavlink(&wire))
+    }
 }
 
 #[derive(Debug, Default, Clone, Copy)]
@@ -301,7 +378,33 @@ impl SimStage {
             spare_u16: Vec::new(),
             next_truth_state_ns: 0,
             counts: Counts::default(),
+            px4_sitl: None,
         }
+    }
+
+    /// Real PX4 flies instead of this simulator's autopilot: the vehicle's sensors go to
+    /// it as HIL_SENSOR on `hil/to-px4` at 250 Hz in lockstep, its HIL_ACTUATOR_CONTROLS
+    /// from `hil/from-px4` drive the motors (`sensors`: the airframe's `[sensors]`; the
+    /// barometer reads `home_amsl_m` at the ground). Simulated time starts when PX4 first
+    /// speaks.
+    pub fn with_px4_sitl(mut self, sensors: crate::hil::HilSensorParams, home_amsl_m: f64) -> Self {
+        let seed = self.sim.seed().wrapping_add(7);
+        self.px4_sitl = Some(Box::new(SitlBridge {
+            sensors: crate::hil::HilSensors::new(sensors, home_amsl_m, seed),
+            lockstep: crate::hil::Lockstep::default(),
+            home_amsl_m,
+            decoder: StreamDecoder::new(),
+            guard: Guard::open(),
+            decoded: Vec::with_capacity(8),
+            sequence: 0,
+            connected: false,
+            next_state_ns: 0,
+            last_velocity: nalgebra::Vector3::zeros(),
+            sensors_out: 0,
+            answers: 0,
+            other_in: 0,
+        }));
+        self
     }
 
     /// The same, paced by `pace` and finished at simulated time `end_ns`.
@@ -439,6 +542,91 @@ impl SimStage {
         }
     }
 
+    /// What a physics step produced: its truth events out, its sensors rendered.
+    fn absorb(
+        &mut self,
+        report: crate::lockstep::StepReport,
+        out: &mut dyn Outbox,
+    ) -> Result<(), StageError> {
+        self.counts.steps += 1;
+        for t in &report.truth {
+            out.publish(topics::SIM_TRUTH, Message::TruthEvent(t))?;
+            self.counts.truth_events += 1;
+        }
+        if report.camera_due {
+            self.render()?;
+        }
+        if report.depth_due {
+            self.render_depth();
+        }
+        Ok(())
+    }
+
+    /// The autopilot's MAVLink that has reached the companion by now, on the wire.
+    fn send_telemetry(&mut self, now_ns: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
+        for m in self.sim.take_mavlink() {
+            let header = MavHeader {
+                system_id: 1,
+                component_id: 1,
+                sequence: self.sequence,
+            };
+            self.sequence = self.sequence.wrapping_add(1);
+            self.wire.clear();
+            self.guard
+                .encode(&mut self.wire, header, &m, now_ns)
+                .map_err(|e| StageError::Transport(e.to_string()))?;
+            out.publish(topics::MAVLINK_FROM_PX4, Message::Mavlink(&self.wire))?;
+            self.counts.mavlink_out += 1;
+        }
+        Ok(())
+    }
+
+    /// Lockstep with PX4: while it owes no answer and simulated time is behind `target`,
+    /// one HIL step (two physics steps on PX4's motors), then the sensors at the new
+    /// time on `hil/to-px4`.
+    fn step_px4_sitl(&mut self, target: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
+        let Some(mut b) = self.px4_sitl.take() else {
+            return Ok(());
+        };
+        let result = self.lockstep_px4(&mut b, target, out);
+        self.px4_sitl = Some(b);
+        result
+    }
+
+    fn lockstep_px4(
+        &mut self,
+        b: &mut SitlBridge,
+        target: u64,
+        out: &mut dyn Outbox,
+    ) -> Result<(), StageError> {
+        use crate::hil::{HIL_STEP_NS, state_quaternion};
+        while b.connected && b.lockstep.may_step() && self.sim.time_ns() < target {
+            for _ in 0..HIL_STEP_NS / PHYSICS_STEP_NS {
+                let motors = *b.lockstep.motors();
+                let report = self
+                    .sim
+                    .step_with_motors(&motors)
+                    .map_err(|e| StageError::Failed(e.to_string()))?;
+                self.absorb(report, out)?;
+            }
+            let now = self.sim.time_ns();
+            let truth = *self.sim.world().truth();
+            let sensor = MavMessage::HIL_SENSOR(b.sensors.sample(&truth, now));
+            b.send(&sensor, out)?;
+            b.sensors_out += 1;
+            b.lockstep.sent();
+            if now >= b.next_state_ns {
+                let dt = (now + HIL_STATE_PERIOD_NS - b.next_state_ns) as f64 * 1e-9;
+                let accel = (truth.velocity - b.last_velocity) / dt.max(1e-3);
+                b.last_velocity = truth.velocity;
+                b.next_state_ns = now + HIL_STATE_PERIOD_NS;
+                let state = state_quaternion(&truth, &accel, b.home_amsl_m, now);
+                b.send(&MavMessage::HIL_STATE_QUATERNION(state), out)?;
+            }
+        }
+        Ok(())
+    }
+
     /// Frames whose latency has passed, in order.
     fn release(&mut self, now_ns: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
         while self.camera.front().is_some_and(|f| f.publish_ns <= now_ns) {
@@ -540,6 +728,12 @@ impl Stage for SimStage {
         input: Input<'_>,
         out: &mut dyn Outbox,
     ) -> Result<(), StageError> {
+        if let (Message::Mavlink(bytes), Some(b)) = (&input.msg, self.px4_sitl.as_deref_mut()) {
+            if input.topic == topics::HIL_FROM_PX4 {
+                b.receive(bytes, now_ns);
+            }
+            return Ok(());
+        }
         if let Message::Mavlink(bytes) = input.msg {
             if input.topic == topics::MAVLINK_FOREIGN {
                 self.counts.wrong_address += 1;
@@ -565,49 +759,41 @@ impl Stage for SimStage {
         Ok(())
     }
 
+    fn on_inputs_done(&mut self, now_ns: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
+        // PX4's answer lets the next lockstep step run at once, not at the next tick.
+        if self.px4_sitl.is_some() && !self.finished() {
+            let target = self.pace.target(now_ns, self.sim.time_ns());
+            self.step_px4_sitl(target, out)?;
+        }
+        Ok(())
+    }
+
     fn on_tick(&mut self, now_ns: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
         let target = self.pace.target(now_ns, self.sim.time_ns());
         if self.finished() {
             return Ok(());
         }
-        self.sim
-            .commander_mut()
-            .set_boot_clock(self.pace.boot_clock());
-        while self.sim.time_ns() < target {
-            let report = self
-                .sim
-                .step()
-                .map_err(|e| StageError::Failed(e.to_string()))?;
-            self.counts.steps += 1;
-            for t in &report.truth {
-                out.publish(topics::SIM_TRUTH, Message::TruthEvent(t))?;
-                self.counts.truth_events += 1;
+        if self.px4_sitl.is_some() {
+            self.step_px4_sitl(target, out)?;
+        } else {
+            self.sim
+                .commander_mut()
+                .set_boot_clock(self.pace.boot_clock());
+            while self.sim.time_ns() < target {
+                let report = self
+                    .sim
+                    .step()
+                    .map_err(|e| StageError::Failed(e.to_string()))?;
+                self.absorb(report, out)?;
             }
-            if report.camera_due {
-                self.render()?;
-            }
-            if report.depth_due {
-                self.render_depth();
-            }
+            self.send_telemetry(now_ns, out)?;
         }
-        for m in self.sim.take_mavlink() {
-            let header = MavHeader {
-                system_id: 1,
-                component_id: 1,
-                sequence: self.sequence,
-            };
-            self.sequence = self.sequence.wrapping_add(1);
-            self.wire.clear();
-            self.guard
-                .encode(&mut self.wire, header, &m, now_ns)
-                .map_err(|e| StageError::Transport(e.to_string()))?;
-            out.publish(topics::MAVLINK_FROM_PX4, Message::Mavlink(&self.wire))?;
-            self.counts.mavlink_out += 1;
-        }
-        self.release(target, out)?;
-        if target >= self.next_truth_state_ns {
-            self.next_truth_state_ns = target + TRUTH_STATE_PERIOD_NS;
-            let s = truth_state(&self.sim, self.pace.driver_time_of(target));
+        // Behind the target only while PX4 owes a lockstep answer.
+        let reached = target.min(self.sim.time_ns());
+        self.release(reached, out)?;
+        if reached >= self.next_truth_state_ns {
+            self.next_truth_state_ns = reached + TRUTH_STATE_PERIOD_NS;
+            let s = truth_state(&self.sim, self.pace.driver_time_of(reached));
             out.publish(topics::SIM_TRUTH_STATE, Message::TruthState(&s))?;
         }
         Ok(())
@@ -627,7 +813,7 @@ impl Stage for SimStage {
 
     fn counters(&self) -> Vec<Counter> {
         let c = self.counts;
-        vec![
+        let mut counters = vec![
             ("steps", c.steps),
             ("camera_frames", c.camera_frames),
             ("depth_frames", c.depth_frames),
@@ -646,6 +832,15 @@ impl Stage for SimStage {
             ("dropped", c.dropped),
             ("renders", c.renders),
             ("depth_renders", c.depth_renders),
-        ]
+        ];
+        if let Some(b) = &self.px4_sitl {
+            counters.extend([
+                ("hil_sensors_out", b.sensors_out),
+                ("hil_answers", b.answers),
+                ("hil_other_in", b.other_in),
+                ("hil_parse_errors", b.decoder.parse_errors()),
+            ]);
+        }
+        counters
     }
 }
