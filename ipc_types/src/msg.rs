@@ -510,6 +510,35 @@ pub struct VehicleState {
     pub link: LinkHealth,
 }
 
+/// A visual-inertial odometry sample (a tracking camera such as the paper's T265, or the
+/// simulator's model of one), for the autopilot to fuse (px4-link forwards it as
+/// MAVLink ODOMETRY). Its frame is the odometry's own: ENU-like, from where the VIO
+/// started, drifting from the world; a reset makes it jump and increments the counter.
+#[repr(C)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("landing::VioOdometry/v1")]
+pub struct VioOdometry {
+    /// Sequence, the sample's time (`capture_ns`: when its camera saw it), stage stamps.
+    pub msg: Header,
+    /// Body (FLU) in the odometry frame (ENU axes at its start).
+    pub odom_from_body: Pose,
+    /// Velocity in the odometry frame, m/s.
+    pub velocity: [f64; 3],
+    /// Body rates (FLU), rad/s.
+    pub body_rates: [f64; 3],
+    /// Variance of the position along x, y, z of the odometry frame, m^2.
+    pub position_variance: [f64; 3],
+    /// Variance of roll, pitch and yaw, rad^2.
+    pub orientation_variance: [f64; 3],
+    /// Variance of the velocity along x, y, z, (m/s)^2.
+    pub velocity_variance: [f64; 3],
+    /// Incremented at each reset of the odometry frame (wraps at 256 on the wire).
+    pub reset_counter: u32,
+    /// Confidence 0 (unknown) to 100 (best), -1 lost (MAVLink ODOMETRY's `quality`).
+    pub quality: i32,
+}
+
 /// State of one occupancy cell on the wire.
 #[repr(u8)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

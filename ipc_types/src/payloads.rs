@@ -61,6 +61,9 @@ macro_rules! for_each_payload {
                 /// The vehicle's estimated state (px4-link).
                 VehicleState($crate::msg::VehicleState => $crate::msg::VehicleState)
                     = "landing::VehicleState/v2",
+                /// A visual-inertial odometry sample (sim, a tracking camera).
+                VioOdometry($crate::msg::VioOdometry => $crate::msg::VioOdometry)
+                    = "landing::VioOdometry/v1",
                 /// A pad observation (aruco-pnp).
                 PadObservation($crate::msg::PadObservation => $crate::msg::PadObservation)
                     = "landing::PadObservation/v1",

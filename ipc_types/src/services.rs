@@ -22,6 +22,8 @@ pub const DEPTH_FRAME: &str = "landing/depth/frame";
 pub const PAD_OBSERVATION: &str = "landing/pad/observation";
 /// Estimated vehicle state (px4-link).
 pub const VEHICLE_STATE: &str = "landing/vehicle/state";
+/// Visual-inertial odometry (the simulator's VIO, or a tracking camera's driver).
+pub const VIO_ODOMETRY: &str = "landing/vio/odometry";
 /// Local occupancy window (depth-map).
 pub const MAP_OCCUPANCY: &str = "landing/map/occupancy";
 /// Goals for the planner (fsm).
@@ -66,6 +68,7 @@ pub const PIPELINE_TOPICS: &[&str] = &[
     DEPTH_FRAME,
     PAD_OBSERVATION,
     VEHICLE_STATE,
+    VIO_ODOMETRY,
     MAP_OCCUPANCY,
     PLANNER_GOAL,
     PLANNER_TRAJECTORY,

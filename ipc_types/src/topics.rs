@@ -107,6 +107,8 @@ pub const DEPTH_FRAME: &str = "depth/frame";
 pub const PAD_OBSERVATION: &str = "pad/observation";
 /// The estimated vehicle state.
 pub const VEHICLE_STATE: &str = "vehicle/state";
+/// Visual-inertial odometry, for the autopilot's estimator.
+pub const VIO_ODOMETRY: &str = "vio/odometry";
 /// The occupancy window.
 pub const MAP_OCCUPANCY: &str = "map/occupancy";
 /// Planner goals.
@@ -207,6 +209,7 @@ pub const TABLE: &[TopicInfo] = &[
         services::VEHICLE_STATE,
         Payload::VehicleState,
     ),
+    row(VIO_ODOMETRY, services::VIO_ODOMETRY, Payload::VioOdometry),
     row(
         MAP_OCCUPANCY,
         services::MAP_OCCUPANCY,

@@ -92,6 +92,10 @@ pub struct Px4LinkConfig {
     /// permissions), relative to this config file; empty: the link is not signed.
     /// Install the same key on the autopilot with `landing link setup-signing`.
     pub signing_key: String,
+    /// Forward `vio/odometry` to the autopilot as MAVLink ODOMETRY (a GPS-denied PX4 that
+    /// fuses vision: `EKF2_EV_CTRL`, docs/px4-sitl.md). Off: the autopilot has its own
+    /// estimate (the built-in simulator's, or PX4 with another source).
+    pub forward_vio: bool,
 }
 
 impl Default for Px4LinkConfig {
@@ -110,6 +114,7 @@ impl Default for Px4LinkConfig {
             geofence_radius_m: SetpointBounds::default().geofence_radius_m,
             geofence_height_m: SetpointBounds::default().geofence_height_m,
             signing_key: String::new(),
+            forward_vio: false,
         }
     }
 }
@@ -196,6 +201,7 @@ impl Px4LinkConfig {
                 geofence_radius_m: self.geofence_radius_m,
                 geofence_height_m: self.geofence_height_m,
             },
+            forward_vio: self.forward_vio,
             ..LinkSettings::default()
         }
     }

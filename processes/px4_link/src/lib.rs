@@ -11,6 +11,7 @@ pub mod clock;
 pub mod config;
 pub mod link;
 pub mod node;
+pub mod odometry;
 pub mod stage;
 
 pub use link::{LinkSettings, Outcome, Px4Link, Refusal, Request, SetpointBounds, Status};

@@ -114,6 +114,8 @@ pub struct LinkSettings {
     pub telemetry_hz: [f32; 3],
     /// What a setpoint may ask; beyond it the setpoint is refused and counted.
     pub bounds: SetpointBounds,
+    /// VIO samples go to the autopilot as ODOMETRY.
+    pub forward_vio: bool,
 }
 
 /// The envelope px4-link lets a setpoint ask for, whatever the planner or fsm says:
@@ -216,6 +218,7 @@ impl Default for LinkSettings {
             heartbeat_timeout_ns: 3_500_000_000,
             telemetry_hz: [30.0, 50.0, 5.0],
             bounds: SetpointBounds::default(),
+            forward_vio: false,
         }
     }
 }
@@ -314,6 +317,9 @@ pub struct Px4Link {
     parse_errors: u32,
     state_seq: u64,
     out: Vec<MavMessage>,
+    /// VIO samples waiting for the next poll, and how many were not sendable.
+    vio: Vec<MavMessage>,
+    vio_refused: u64,
 }
 
 impl Px4Link {
@@ -339,7 +345,26 @@ impl Px4Link {
             parse_errors: 0,
             state_seq: 0,
             out: Vec::new(),
+            vio: Vec::new(),
+            vio_refused: 0,
         }
+    }
+
+    /// A VIO sample for the autopilot: sent as ODOMETRY on the next poll when
+    /// forwarding is on; one with a value that is not finite is counted and dropped.
+    pub fn set_vio(&mut self, vio: &ipc_types::msg::VioOdometry) {
+        if !self.settings.forward_vio {
+            return;
+        }
+        match crate::odometry::odometry_from_vio(vio) {
+            Some(o) => self.vio.push(MavMessage::ODOMETRY(o)),
+            None => self.vio_refused += 1,
+        }
+    }
+
+    /// VIO samples dropped because a value was not finite.
+    pub fn vio_refused(&self) -> u64 {
+        self.vio_refused
     }
 
     /// The MAVLink header our messages carry (the sequence is the transport's business).
@@ -627,6 +652,7 @@ impl Px4Link {
                 ));
             }
         }
+        self.out.append(&mut self.vio);
         self.stream(now_ns);
         self.commands(now_ns);
         &self.out

@@ -152,6 +152,17 @@ impl LinkNode {
         self.link.set_setpoint(now_ns, setpoint);
     }
 
+    /// VIO samples dropped because a value was not finite.
+    pub fn vio_refused(&self) -> u64 {
+        self.link.vio_refused()
+    }
+
+    /// Takes a VIO sample to forward (when `forward_vio` is on).
+    pub fn on_vio(&mut self, now_ns: u64, vio: &ipc_types::msg::VioOdometry) {
+        self.advance(now_ns);
+        self.link.set_vio(vio);
+    }
+
     /// The last new setpoint that went out since the last call, and when it was taken in.
     pub fn take_sent_setpoint(&mut self) -> Option<(u64, Setpoint)> {
         self.link.take_sent_setpoint()

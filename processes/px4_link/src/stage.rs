@@ -52,6 +52,7 @@ struct Counts {
     setpoints: u64,
     requests: u64,
     safety: u64,
+    vio: u64,
 }
 
 /// The link id px4-link signs with (one link per companion).
@@ -182,6 +183,10 @@ impl Stage for LinkStage {
                     tracing::warn!(refused, ?why, "setpoint beyond the bounds refused");
                 }
             }
+            Message::VioOdometry(v) => {
+                self.counts.vio += 1;
+                self.node.on_vio(now_ns, v);
+            }
             Message::LinkRequest(r) => {
                 self.counts.requests += 1;
                 self.node.on_request(now_ns, r);
@@ -223,6 +228,8 @@ impl Stage for LinkStage {
             ("setpoints_refused", self.node.refused_setpoints().0),
             ("requests", c.requests),
             ("safety", c.safety),
+            ("vio", c.vio),
+            ("vio_refused", self.node.vio_refused()),
         ]
     }
 }

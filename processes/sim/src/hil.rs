@@ -20,6 +20,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use serde::Deserialize;
 
 use crate::params::{self, ParamError};
+use crate::px4::frames::{self, enu_to_ned as ned_from_enu, flu_to_frd as frd_from_flu, quaternion_wxyz};
 use crate::quadrotor::{GRAVITY_M_S2, MotorCommands, VehicleState};
 use crate::rng::Pcg32;
 
@@ -108,35 +109,9 @@ impl HilSensorParams {
     }
 }
 
-/// NED from ENU (and FRD from FLU is the same swap-free flip on y and z): the one place
-/// the simulator's frames meet PX4's.
-fn ned_from_enu(v: &Vector3<f64>) -> Vector3<f64> {
-    Vector3::new(v.y, v.x, -v.z)
-}
-
-/// FRD from FLU.
-fn frd_from_flu(v: &Vector3<f64>) -> Vector3<f64> {
-    Vector3::new(v.x, -v.y, -v.z)
-}
-
-/// The attitude PX4 means, NED from FRD, as `[w, x, y, z]`.
+/// The attitude PX4 means, NED from FRD, as MAVLink's `[w, x, y, z]`.
 pub fn ned_from_frd(world_from_body: &UnitQuaternion<f64>) -> [f32; 4] {
-    // ned_from_frd = ned_from_enu * enu_from_flu * flu_from_frd; both flips are proper
-    // rotations (180 deg about (1,1,0)/sqrt2 and about x).
-    let ned_from_enu = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
-        0.0,
-        std::f64::consts::FRAC_1_SQRT_2,
-        std::f64::consts::FRAC_1_SQRT_2,
-        0.0,
-    ));
-    let flu_from_frd = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
-    let q = ned_from_enu * world_from_body * flu_from_frd;
-    let q = if q.w < 0.0 {
-        -q.into_inner()
-    } else {
-        q.into_inner()
-    };
-    [q.w as f32, q.i as f32, q.j as f32, q.k as f32]
+    quaternion_wxyz(&frames::ned_from_frd(world_from_body))
 }
 
 /// Pressure of the International Standard Atmosphere at `altitude_m` above mean sea
@@ -223,8 +198,7 @@ impl HilSensors {
             + noise(p.accel_noise_m_s2);
         let gyro = frd_from_flu(&truth.body_rates) + self.gyro_bias + noise(p.gyro_noise_rad_s);
         // The field in FRD: NED -> ENU -> FLU -> FRD.
-        let field_ned = Vector3::from(p.earth_field_ned_gauss);
-        let field_enu = Vector3::new(field_ned.y, field_ned.x, -field_ned.z);
+        let field_enu = frames::ned_to_enu(&Vector3::from(p.earth_field_ned_gauss));
         let mag = frd_from_flu(&(body_from_world * field_enu)) + noise(p.mag_noise_gauss);
         let altitude = self.home_amsl_m + truth.position.z + p.baro_noise_m * self.rng.normal();
         let sample = HIL_SENSOR_DATA {

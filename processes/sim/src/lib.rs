@@ -39,5 +39,6 @@ pub mod quadrotor;
 pub mod rng;
 pub mod scenario;
 pub mod stage;
+pub mod vio;
 pub mod wind;
 pub mod world;

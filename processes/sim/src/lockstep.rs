@@ -165,6 +165,8 @@ pub struct Simulator {
     telemetry: TelemetryDelay,
     /// The boxes the depth camera renders, refilled per frame.
     boxes: Vec<crate::geometry::Obb>,
+    /// The visual-inertial odometry (for an autopilot that fuses it).
+    vio: crate::vio::Vio,
 }
 
 impl Simulator {
@@ -197,6 +199,7 @@ impl Simulator {
         let mut camera = DownCamera::new(down, truth, &pad)?;
         camera.set_mount_error(mount_error);
         sim.down_camera = Some(Box::new(camera));
+        sim.vio = crate::vio::Vio::new(scenario.scenario.vio.clone(), seed.wrapping_add(8));
         let errors = &scenario.scenario.camera.errors;
         sim.camera_clock.offset_ns = errors.draw_clock_offset_ns(seed.wrapping_add(4));
         sim.camera_clock.jitter_ns = errors.clock_jitter_ms * 1e6;
@@ -243,6 +246,13 @@ impl Simulator {
                 held: std::collections::VecDeque::new(),
             },
             boxes: Vec::new(),
+            vio: crate::vio::Vio::new(
+                crate::vio::VioParams {
+                    rate_hz: 0.0,
+                    ..Default::default()
+                },
+                seed,
+            ),
         }
     }
 
@@ -273,6 +283,11 @@ impl Simulator {
         let fresh = self.commander.take_outgoing();
         self.telemetry.hold(now, fresh);
         self.telemetry.release(now)
+    }
+
+    /// The next VIO sample that has arrived by now (simulated time in its header).
+    pub fn take_vio(&mut self) -> Option<ipc_types::msg::VioOdometry> {
+        self.vio.take_due(self.world.time_ns())
     }
 
     /// The downward camera, if this simulator has one.
@@ -369,6 +384,7 @@ impl Simulator {
     /// What the step just taken produced: new truth events, sensors due.
     fn report(&mut self) -> StepReport {
         let now = self.world.time_ns();
+        self.vio.step(self.world.truth(), now);
         let events = self.world.events();
         let truth = events[self.events_seen.min(events.len())..]
             .iter()

@@ -160,6 +160,10 @@ pub struct Scenario {
     /// where the vehicle takes off from.
     #[serde(default)]
     pub variation: Variation,
+    /// The vehicle's visual-inertial odometry (for an autopilot that fuses it: real PX4
+    /// through `sim --px4-sitl`).
+    #[serde(default)]
+    pub vio: crate::vio::VioParams,
 }
 
 /// What a flight-test engineer varies from one run to the next besides the weather and
@@ -386,6 +390,7 @@ impl Validate for Scenario {
         self.variation
             .validate()
             .map_err(|e| from_param("scenario", e))?;
+        self.vio.validate().map_err(|e| from_param("scenario", e))?;
         for (i, b) in self.obstacles.iter().enumerate() {
             for k in 0..3 {
                 let ok =

@@ -344,6 +344,7 @@ struct Counts {
     /// Camera and depth renders (at capture; a frame goes out after its latency).
     renders: u64,
     depth_renders: u64,
+    vio: u64,
 }
 
 impl SimStage {
@@ -788,6 +789,11 @@ impl Stage for SimStage {
             }
             self.send_telemetry(now_ns, out)?;
         }
+        while let Some(mut v) = self.sim.take_vio() {
+            v.msg = Header::captured_at(self.pace.driver_time_of(v.msg.capture_ns));
+            out.publish(topics::VIO_ODOMETRY, Message::VioOdometry(&v))?;
+            self.counts.vio += 1;
+        }
         // Behind the target only while PX4 owes a lockstep answer.
         let reached = target.min(self.sim.time_ns());
         self.release(reached, out)?;
@@ -832,6 +838,7 @@ impl Stage for SimStage {
             ("dropped", c.dropped),
             ("renders", c.renders),
             ("depth_renders", c.depth_renders),
+            ("vio", c.vio),
         ];
         if let Some(b) = &self.px4_sitl {
             counters.extend([

@@ -30,6 +30,7 @@ pub fn recorded_json(topic: &str, msg: &Message<'_>) -> Option<(String, Value)> 
         Message::DepthFrame(h, _) => header(serde_json::to_value(h)),
         Message::OccupancyMap(h, _) => header(serde_json::to_value(h)),
         Message::VehicleState(m) => whole(serde_json::to_value(m)),
+        Message::VioOdometry(m) => whole(serde_json::to_value(m)),
         Message::PadObservation(m) => whole(serde_json::to_value(m)),
         Message::Trajectory(m) => whole(serde_json::to_value(m)),
         Message::FsmStatus(m) => whole(serde_json::to_value(m)),
