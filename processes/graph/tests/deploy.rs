@@ -167,7 +167,11 @@ fn every_topic_names_the_type_its_service_carries() {
             type_name::<msg::PlannerStats>(),
             None,
         ),
-        (services::VIO_ODOMETRY, type_name::<msg::VioOdometry>(), None),
+        (
+            services::VIO_ODOMETRY,
+            type_name::<msg::VioOdometry>(),
+            None,
+        ),
         (services::PX4_REQUEST, type_name::<msg::LinkRequest>(), None),
         (services::PX4_OUTCOME, type_name::<msg::LinkOutcome>(), None),
         (services::FSM_SETPOINT, type_name::<msg::Setpoint>(), None),

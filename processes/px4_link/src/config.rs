@@ -119,6 +119,38 @@ impl Default for Px4LinkConfig {
     }
 }
 
+/// What the `px4-link` command line may override in `[px4_link]`.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct Px4LinkFlags {
+    /// Link to open, overriding the config: udp:HOST:PORT to listen on, or
+    /// serial:DEVICE:BAUD (e.g. serial:/dev/ttyTHS1:921600).
+    #[arg(long)]
+    pub link: Option<String>,
+    /// Where to send before the autopilot is heard, HOST:PORT (UDP only).
+    #[arg(long)]
+    pub remote: Option<String>,
+    /// Forward vio/odometry to the autopilot as ODOMETRY, whatever the config says
+    /// (`landing run --autopilot px4-sitl` sets it: PX4 flies on the VIO).
+    #[arg(long)]
+    pub forward_vio: bool,
+}
+
+impl Px4LinkFlags {
+    /// `cfg` with the flags applied, checked.
+    pub fn apply(&self, mut cfg: Px4LinkConfig) -> Result<Px4LinkConfig, Invalid> {
+        if let Some(l) = &self.link {
+            cfg.link = l.clone();
+        }
+        if let Some(r) = &self.remote {
+            cfg.remote = r.clone();
+        }
+        cfg.forward_vio |= self.forward_vio;
+        cfg.validate()
+            .map_err(|e| Invalid::new(e.key, format!("--link/--remote: {}", e.message)))?;
+        Ok(cfg)
+    }
+}
+
 /// Links this build can open.
 pub const ALLOWED_LINKS: &str = "udp:HOST:PORT or serial:DEVICE:BAUD";
 

@@ -11,10 +11,9 @@ use std::process::ExitCode;
 use anyhow::{Result, anyhow};
 use clap::Parser;
 use px4_link::LinkStage;
-use px4_link::config::Px4LinkConfig;
+use px4_link::config::{Px4LinkConfig, Px4LinkFlags};
 use px4_protocol::signing::SigningKey;
 use runtime::StageArgs;
-use stack_config::Validate;
 
 /// The MAVLink link between the stack and PX4 (or the simulator).
 #[derive(Debug, Parser)]
@@ -22,13 +21,8 @@ use stack_config::Validate;
 struct Args {
     #[command(flatten)]
     stage: StageArgs,
-    /// Link to open, overriding the config: udp:HOST:PORT to listen on, or
-    /// serial:DEVICE:BAUD (e.g. serial:/dev/ttyTHS1:921600).
-    #[arg(long)]
-    link: Option<String>,
-    /// Where to send before the autopilot is heard, HOST:PORT (UDP only).
-    #[arg(long)]
-    remote: Option<String>,
+    #[command(flatten)]
+    link: Px4LinkFlags,
 }
 
 fn main() -> ExitCode {
@@ -36,15 +30,8 @@ fn main() -> ExitCode {
 }
 
 fn run(args: &Args) -> Result<()> {
-    let (ipc, mut cfg): (_, Px4LinkConfig) = args.stage.load("px4_link")?;
-    if let Some(l) = &args.link {
-        cfg.link = l.clone();
-    }
-    if let Some(r) = &args.remote {
-        cfg.remote = r.clone();
-    }
-    cfg.validate()
-        .map_err(|e| anyhow!("--link/--remote: {}", e.message))?;
+    let (ipc, cfg): (_, Px4LinkConfig) = args.stage.load("px4_link")?;
+    let cfg = args.link.apply(cfg).map_err(|e| anyhow!(e.message))?;
     let address = cfg.address().map_err(|e| anyhow!(e.message))?;
     let remote = cfg.remote_address().map_err(|e| anyhow!(e.message))?;
     // The key is read before the link opens: a key others may read stops the start.

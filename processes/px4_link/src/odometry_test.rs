@@ -34,7 +34,11 @@ fn a_vio_sample_goes_to_px4_in_ned_with_its_covariances_where_px4_reads_them() {
     assert_eq!(o.pose_covariance[6], 0.01);
     assert_eq!(o.pose_covariance[11], 0.09);
     assert_eq!(
-        [o.pose_covariance[15], o.pose_covariance[18], o.pose_covariance[20]],
+        [
+            o.pose_covariance[15],
+            o.pose_covariance[18],
+            o.pose_covariance[20]
+        ],
         [1e-4, 2e-4, 3e-4]
     );
     assert_eq!(o.velocity_covariance[0], 0.002);

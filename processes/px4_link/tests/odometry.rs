@@ -101,7 +101,10 @@ fn vio_samples_go_to_the_autopilot_as_odometry_with_their_covariance_and_reset_c
         assert_eq!(o.child_frame_id, MavFrame::MAV_FRAME_LOCAL_NED);
         assert_eq!(o.estimator_type, MavEstimatorType::MAV_ESTIMATOR_TYPE_VIO);
         // ENU (x east, y north, z up) to NED.
-        assert_eq!((o.x, o.y, o.z), (2.0, s.odom_from_body.translation[0] as f32, -3.0));
+        assert_eq!(
+            (o.x, o.y, o.z),
+            (2.0, s.odom_from_body.translation[0] as f32, -3.0)
+        );
         assert_eq!((o.vx, o.vy, o.vz), (-0.25, 0.5, -0.1));
         let pc = o.pose_covariance;
         assert_eq!([pc[0], pc[6], pc[11]], [0.02, 0.01, 0.03]);

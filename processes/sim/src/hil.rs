@@ -20,7 +20,9 @@ use nalgebra::{UnitQuaternion, Vector3};
 use serde::Deserialize;
 
 use crate::params::{self, ParamError};
-use crate::px4::frames::{self, enu_to_ned as ned_from_enu, flu_to_frd as frd_from_flu, quaternion_wxyz};
+use crate::px4::frames::{
+    self, enu_to_ned as ned_from_enu, flu_to_frd as frd_from_flu, quaternion_wxyz,
+};
 use crate::quadrotor::{GRAVITY_M_S2, MotorCommands, VehicleState};
 use crate::rng::Pcg32;
 

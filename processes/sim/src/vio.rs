@@ -129,7 +129,8 @@ impl Vio {
             self.next_reset_ns = next_reset(p, &mut self.rng, now_ns);
         }
         let odom_from_world = UnitQuaternion::from_euler_angles(0.0, 0.0, self.yaw);
-        let mut noise = |s: f64| Vector3::new(self.rng.normal(), self.rng.normal(), self.rng.normal()) * s;
+        let mut noise =
+            |s: f64| Vector3::new(self.rng.normal(), self.rng.normal(), self.rng.normal()) * s;
         let position = odom_from_world * (truth.position - self.offset) + noise(p.position_std_m);
         let velocity = odom_from_world * truth.velocity + noise(p.velocity_std_m_s);
         let tilt = noise(p.attitude_std_rad);

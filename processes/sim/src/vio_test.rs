@@ -68,7 +68,10 @@ fn the_frame_drifts_and_resets_jump_it_with_the_counter() {
                 if s.reset_counter != counter {
                     jumps += 1;
                 } else {
-                    assert!(moved.abs() < 1e-9, "no drift configured, no reset: no motion");
+                    assert!(
+                        moved.abs() < 1e-9,
+                        "no drift configured, no reset: no motion"
+                    );
                 }
             }
             last = Some((s.reset_counter, s.odom_from_body.translation[0]));
@@ -85,5 +88,10 @@ fn a_vio_out_of_range_is_refused_naming_the_field() {
         latency_ms: -1.0,
         ..VioParams::default()
     };
-    assert!(bad.validate().unwrap_err().to_string().contains("vio.latency_ms"));
+    assert!(
+        bad.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("vio.latency_ms")
+    );
 }

@@ -81,6 +81,29 @@ pub struct RunArgs {
     /// when the watchdog found each and what it decided (docs/faults.md).
     #[arg(long, value_name = "FAULT:PROCESS@WHEN")]
     inject: Vec<stack::inject::Injection>,
+    /// --processes: who flies the vehicle: the built-in PX4-like autopilot, or real PX4
+    /// SITL (your own build, --px4) on the simulator's PX4 simulator API, GPS-denied on
+    /// the forwarded VIO, flying PX4's iris (docs/px4-sitl.md).
+    #[arg(
+        long,
+        value_enum,
+        default_value = "builtin",
+        requires_if("px4-sitl", "px4")
+    )]
+    autopilot: Autopilot,
+    /// --autopilot px4-sitl: the PX4 SITL build directory (PX4-Autopilot/build/
+    /// px4_sitl_default after `make px4_sitl_default`).
+    #[arg(long, value_name = "DIR")]
+    px4: Option<PathBuf>,
+}
+
+/// Who flies the vehicle in `landing run`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Autopilot {
+    /// The simulator's own PX4-like autopilot.
+    Builtin,
+    /// Real PX4 SITL through the simulator's PX4 simulator API.
+    Px4Sitl,
 }
 
 /// Runs the mission and reports; `Ok(false)` (exit code 1) when it did not land on the pad.
@@ -99,6 +122,10 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         log_dir: args.log_dir.clone(),
         inject: args.inject.clone(),
         ipc_prefix: ipc_prefix.map(str::to_string),
+        px4: match args.autopilot {
+            Autopilot::Px4Sitl => args.px4.clone(),
+            Autopilot::Builtin => None,
+        },
     };
     let mode = if args.processes {
         "processes"

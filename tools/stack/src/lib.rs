@@ -17,6 +17,7 @@ pub mod mapping;
 pub mod mission;
 pub mod processes;
 pub mod procs;
+pub mod px4_sitl;
 pub mod replay;
 
 pub use config::StackConfig;

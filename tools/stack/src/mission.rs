@@ -45,6 +45,8 @@ pub struct Mission {
     pub inject: Vec<Injection>,
     /// Processes: the iceoryx2 prefix (default: a fresh one).
     pub ipc_prefix: Option<String>,
+    /// Processes: this PX4 SITL build directory flies instead of the built-in autopilot.
+    pub px4: Option<PathBuf>,
 }
 
 /// What the caller is told while a mission flies.
@@ -137,6 +139,9 @@ impl Mission {
         // Faults go to processes of this graph, in the processes mode only.
         if !self.inject.is_empty() && !self.processes {
             bail!("--inject needs --processes (faults are done to the stage processes)");
+        }
+        if self.px4.is_some() && !self.processes {
+            bail!("--autopilot px4-sitl needs --processes (PX4 runs as its own process)");
         }
         let mut injections = self.inject.clone();
         for i in &mut injections {
@@ -241,6 +246,7 @@ impl Mission {
                 },
                 signing_key: &cfg.px4_link.signing_key,
                 realtime: self.realtime,
+                px4: self.px4.as_deref(),
             };
             let r = processes::run(&launch, &mut rec.truth, &mut progress)?;
             log_dir = Some(dir);

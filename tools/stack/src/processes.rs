@@ -23,6 +23,7 @@ use sim::scenario::LoadedScenario;
 
 use crate::inject::{Fault, FaultRecord, Injection};
 use crate::procs::{Children, binary, free_udp_port};
+use crate::px4_sitl::Px4Sitl;
 use evaluation::referee::stage_ms;
 use evaluation::{End, Referee};
 use recorder::Recorder;
@@ -57,6 +58,9 @@ pub struct Launch<'a> {
     /// `--realtime`: the deployment's SCHED_FIFO priorities on the processes that have
     /// them (deploy/systemd drop-ins).
     pub realtime: bool,
+    /// `--autopilot px4-sitl`: this PX4 SITL build flies instead of the built-in
+    /// autopilot.
+    pub px4: Option<&'a Path>,
 }
 
 /// What the `recorder` process is started for (not at all when both are off).
@@ -183,18 +187,38 @@ pub fn run(
     let mut fault_orders = ipc.publisher::<FaultOrder>(services::FAULT_INJECT)?;
 
     let scn = launch.scenario;
+    let px4 = launch.px4.map(Px4Sitl::at).transpose()?;
+    // PX4 talks to px4-link on its own fixed ports; the built-in autopilot on any.
+    let ports = match px4 {
+        Some(_) => crate::px4_sitl::PX4_ONBOARD_PORTS,
+        None => (free_udp_port()?, free_udp_port()?),
+    };
     let values = run_values(
         scn,
         launch.seed,
         scn.scenario.duration_s,
         launch.config,
         launch.deploy,
-        (free_udp_port()?, free_udp_port()?),
+        ports,
         launch.signing_key,
     )?;
     std::fs::create_dir_all(launch.log_dir)
         .with_context(|| format!("creating {}", launch.log_dir.display()))?;
     let mut children = Children::default();
+    if let Some(px4) = &px4 {
+        // First: it waits for the simulator, which starts last.
+        let log: PathBuf = launch.log_dir.join("px4.log");
+        let file = File::create(&log).with_context(|| format!("creating {}", log.display()))?;
+        let mut cmd = px4.command(&launch.log_dir.join("px4"), scn)?;
+        stop_with_parent(&mut cmd);
+        let child = cmd
+            .stdin(Stdio::null())
+            .stdout(file.try_clone()?)
+            .stderr(file)
+            .spawn()
+            .context("starting PX4 (--px4)")?;
+        children.push("px4", child);
+    }
     let r = launch.recorder;
     if r.out.is_some() || r.live {
         // First: it subscribes before anything is published.
@@ -447,6 +471,9 @@ fn start(
     log: File,
 ) -> Result<std::process::Child> {
     let mut cmd = command(node, values, prefix, launch.graph_path)?;
+    if launch.px4.is_some() {
+        cmd.args(Px4Sitl::extra_args(&node.name));
+    }
     if !launch.injections.is_empty() {
         cmd.env(runtime::port_faults::ENV, "1");
     }
