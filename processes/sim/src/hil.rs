@@ -13,7 +13,8 @@
 //! everywhere in the simulator; NED and FRD appear only in what goes on the wire.
 
 use mavlink::dialects::common::{
-    HIL_ACTUATOR_CONTROLS_DATA, HIL_SENSOR_DATA, HIL_STATE_QUATERNION_DATA, HilSensorUpdatedFlags,
+    HIL_ACTUATOR_CONTROLS_DATA, HIL_GPS_DATA, HIL_SENSOR_DATA, HIL_STATE_QUATERNION_DATA,
+    HilSensorUpdatedFlags,
     MavModeFlag,
 };
 use nalgebra::{UnitQuaternion, Vector3};
@@ -267,6 +268,91 @@ pub fn state_quaternion(
         xacc: cm(g.x),
         yacc: cm(g.y),
         zacc: cm(g.z),
+    }
+}
+
+/// A GPS receiver, for a scenario flown with one (`[gps]`; none by default: the missions
+/// are GPS-denied, and PX4 then gets no HIL_GPS at all).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GpsParams {
+    /// Fixes per second (0: no GPS; PX4's simulated receivers give 10).
+    pub rate_hz: f64,
+    /// White noise on each horizontal axis, m (one sigma; also the `eph` sent).
+    pub horizontal_std_m: f64,
+    /// White noise on the altitude, m (also the `epv` sent).
+    pub vertical_std_m: f64,
+    /// White noise on each velocity axis, m/s.
+    pub velocity_std_m_s: f64,
+    /// Where the world's origin is, latitude and longitude, deg (PX4 SITL's default home,
+    /// Zurich).
+    pub origin_deg: [f64; 2],
+}
+
+impl Default for GpsParams {
+    fn default() -> Self {
+        Self {
+            rate_hz: 0.0,
+            horizontal_std_m: 0.5,
+            vertical_std_m: 0.8,
+            velocity_std_m_s: 0.1,
+            origin_deg: [47.397_742, 8.545_594],
+        }
+    }
+}
+
+impl GpsParams {
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        params::in_range("gps.rate_hz", self.rate_hz, 0.0, 50.0)?;
+        params::in_range("gps.horizontal_std_m", self.horizontal_std_m, 0.01, 50.0)?;
+        params::in_range("gps.vertical_std_m", self.vertical_std_m, 0.01, 50.0)?;
+        params::in_range("gps.velocity_std_m_s", self.velocity_std_m_s, 0.0, 5.0)?;
+        params::in_range("gps.origin_deg[0]", self.origin_deg[0], -85.0, 85.0)?;
+        params::in_range("gps.origin_deg[1]", self.origin_deg[1], -180.0, 180.0)
+    }
+}
+
+/// A GPS fix of `truth` at `now_ns` (HIL_GPS: degE7, mm AMSL, cm/s NED, 3-D fix), from a
+/// receiver with `p` at a site whose ground is `home_amsl_m` above mean sea level;
+/// `noise` draws standard normals.
+pub fn gps_fix(
+    truth: &VehicleState,
+    p: &GpsParams,
+    home_amsl_m: f64,
+    now_ns: u64,
+    noise: &mut dyn FnMut() -> f64,
+) -> HIL_GPS_DATA {
+    /// WGS-84 equatorial radius, m (a flat Earth at the site is enough for a flight).
+    const EARTH_RADIUS_M: f64 = 6_378_137.0;
+    let east = truth.position.x + p.horizontal_std_m * noise();
+    let north = truth.position.y + p.horizontal_std_m * noise();
+    let up = truth.position.z + p.vertical_std_m * noise();
+    let [lat0, lon0] = p.origin_deg;
+    let lat = lat0 + (north / EARTH_RADIUS_M).to_degrees();
+    let lon = lon0 + (east / (EARTH_RADIUS_M * lat0.to_radians().cos())).to_degrees();
+    let v = ned_from_enu(&truth.velocity)
+        + Vector3::new(noise(), noise(), noise()) * p.velocity_std_m_s;
+    let cm_s = |x: f64| (x * 100.0).round().clamp(-32_767.0, 32_767.0) as i16;
+    let ground_speed = v.xy().norm();
+    let cog = v.y.atan2(v.x).to_degrees().rem_euclid(360.0);
+    let cm = |x: f64| (x * 100.0).round().clamp(0.0, 65_534.0) as u16;
+    HIL_GPS_DATA {
+        time_usec: now_ns / 1000,
+        lat: (lat * 1e7).round() as i32,
+        lon: (lon * 1e7).round() as i32,
+        alt: ((home_amsl_m + up) * 1000.0).round() as i32,
+        eph: cm(p.horizontal_std_m),
+        epv: cm(p.vertical_std_m),
+        vel: cm(ground_speed),
+        vn: cm_s(v.x),
+        ve: cm_s(v.y),
+        vd: cm_s(v.z),
+        cog: (cog * 100.0).round().min(35_999.0) as u16,
+        fix_type: 3,
+        satellites_visible: 12,
+        id: 0,
+        yaw: 0,
     }
 }
 

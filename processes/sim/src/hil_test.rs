@@ -174,3 +174,30 @@ fn sensor_parameters_out_of_range_are_refused_with_the_field_named() {
     );
     assert!(HilSensorParams::default().validate().is_ok());
 }
+
+#[test]
+fn a_gps_fix_is_in_degrees_e7_millimetres_and_cm_s_ned() {
+    let p = GpsParams {
+        rate_hz: 10.0,
+        ..GpsParams::default()
+    };
+    let mut v = at_rest(0.0);
+    // 100 m north, 50 m east, 10 m up, flying north-east at 1 m/s each way.
+    v.position = Vector3::new(50.0, 100.0, 10.0);
+    v.velocity = Vector3::new(1.0, 1.0, 0.0);
+    let fix = gps_fix(&v, &p, 488.0, 2_000_000_000, &mut || 0.0);
+    let dlat = (f64::from(fix.lat) * 1e-7 - p.origin_deg[0]).to_radians() * 6_378_137.0;
+    assert!((dlat - 100.0).abs() < 0.02, "{dlat}");
+    assert!(fix.lon > (p.origin_deg[1] * 1e7) as i32);
+    assert_eq!(fix.alt, 498_000);
+    assert_eq!((fix.vn, fix.ve, fix.vd), (100, 100, 0));
+    assert_eq!(fix.cog, 4500);
+    assert_eq!(fix.fix_type, 3);
+    assert_eq!(fix.time_usec, 2_000_000);
+    assert!(GpsParams::default().validate().is_ok());
+    let bad = GpsParams {
+        rate_hz: -1.0,
+        ..GpsParams::default()
+    };
+    assert!(bad.validate().unwrap_err().to_string().contains("gps.rate_hz"));
+}

@@ -167,6 +167,8 @@ pub struct Simulator {
     boxes: Vec<crate::geometry::Obb>,
     /// The visual-inertial odometry (for an autopilot that fuses it).
     vio: crate::vio::Vio,
+    /// The VIO's clock ahead of the world's: PX4's boot before the world started.
+    vio_ahead_ns: u64,
 }
 
 impl Simulator {
@@ -253,6 +255,7 @@ impl Simulator {
                 },
                 seed,
             ),
+            vio_ahead_ns: 0,
         }
     }
 
@@ -285,9 +288,20 @@ impl Simulator {
         self.telemetry.release(now)
     }
 
-    /// The next VIO sample that has arrived by now (simulated time in its header).
+    /// The next VIO sample that has arrived by now (its capture in simulated time; one
+    /// taken before the world started says 0).
     pub fn take_vio(&mut self) -> Option<ipc_types::msg::VioOdometry> {
-        self.vio.take_due(self.world.time_ns())
+        let mut v = self.vio.take_due(self.world.time_ns() + self.vio_ahead_ns)?;
+        v.msg.capture_ns = v.msg.capture_ns.saturating_sub(self.vio_ahead_ns);
+        Some(v)
+    }
+
+    /// Before the world's clock starts (an autopilot booting on the ground, [`Self::time_ns`]
+    /// still 0): the VIO runs on the autopilot's clock `boot_ns` and sees the vehicle at
+    /// rest; from then on it stays that far ahead of the world's clock.
+    pub fn step_vio_before_start(&mut self, boot_ns: u64) {
+        self.vio_ahead_ns = boot_ns;
+        self.vio.step(self.world.truth(), boot_ns);
     }
 
     /// The downward camera, if this simulator has one.
@@ -384,7 +398,7 @@ impl Simulator {
     /// What the step just taken produced: new truth events, sensors due.
     fn report(&mut self) -> StepReport {
         let now = self.world.time_ns();
-        self.vio.step(self.world.truth(), now);
+        self.vio.step(self.world.truth(), now + self.vio_ahead_ns);
         let events = self.world.events();
         let truth = events[self.events_seen.min(events.len())..]
             .iter()

@@ -164,6 +164,10 @@ pub struct Scenario {
     /// through `sim --px4-sitl`).
     #[serde(default)]
     pub vio: crate::vio::VioParams,
+    /// A GPS receiver for PX4 SITL (`sim --px4-sitl`): none by default, the missions are
+    /// GPS-denied.
+    #[serde(default)]
+    pub gps: crate::hil::GpsParams,
 }
 
 /// What a flight-test engineer varies from one run to the next besides the weather and
@@ -391,6 +395,7 @@ impl Validate for Scenario {
             .validate()
             .map_err(|e| from_param("scenario", e))?;
         self.vio.validate().map_err(|e| from_param("scenario", e))?;
+        self.gps.validate().map_err(|e| from_param("scenario", e))?;
         for (i, b) in self.obstacles.iter().enumerate() {
             for k in 0..3 {
                 let ok =

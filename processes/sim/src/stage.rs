@@ -127,7 +127,7 @@ impl SimFlags {
         )?;
         let stage = stage.with_signing(key, unix_ns_at_zero);
         Ok(match self.px4_sitl {
-            Some(_) => stage.with_px4_sitl(scenario.sensors.clone(), scenario.px4.sih_loc_h0),
+            Some(_) => stage.with_px4_sitl(&scenario),
             None => stage,
         })
     }
@@ -267,11 +267,23 @@ pub struct SimStage {
     px4_sitl: Option<Box<SitlBridge>>,
 }
 
+/// The longest PX4 may boot on the ground before the world's clock starts anyway.
+const MAX_PX4_BOOT_NS: u64 = 60_000_000_000;
+
 /// How often HIL_STATE_QUATERNION (ground truth for PX4's logs) goes out: 50 Hz.
 const HIL_STATE_PERIOD_NS: u64 = 20_000_000;
 
 /// PX4 SITL's side of the simulator: its sensors, the lockstep, its byte stream.
 struct SitlBridge {
+    /// PX4's clock at the world's time 0: how long it booted on the ground first.
+    boot_ns: u64,
+    /// The world's clock runs (PX4 armed, or booted for [`MAX_PX4_BOOT_NS`]).
+    world_started: bool,
+    /// The driver time of the next boot step (boot steps keep to the wall clock).
+    next_boot_step_ns: Option<u64>,
+    gps: crate::hil::GpsParams,
+    gps_rng: crate::rng::Pcg32,
+    next_gps_ns: u64,
     sensors: crate::hil::HilSensors,
     lockstep: crate::hil::Lockstep,
     home_amsl_m: f64,
@@ -383,14 +395,22 @@ impl SimStage {
         }
     }
 
-    /// Real PX4 flies instead of this simulator's autopilot: the vehicle's sensors go to
-    /// it as HIL_SENSOR on `hil/to-px4` at 250 Hz in lockstep, its HIL_ACTUATOR_CONTROLS
-    /// from `hil/from-px4` drive the motors (`sensors`: the airframe's `[sensors]`; the
-    /// barometer reads `home_amsl_m` at the ground). Simulated time starts when PX4 first
-    /// speaks.
-    pub fn with_px4_sitl(mut self, sensors: crate::hil::HilSensorParams, home_amsl_m: f64) -> Self {
+    /// Real PX4 flies instead of this simulator's autopilot: the vehicle's sensors (the
+    /// airframe's `[sensors]`, the barometer reading `[px4] SIH_LOC_H0` at the ground) go
+    /// to it as HIL_SENSOR on `hil/to-px4` at 250 Hz in lockstep, a GPS fix when the
+    /// scenario has a `[gps]`, and its HIL_ACTUATOR_CONTROLS from `hil/from-px4` drive the
+    /// motors. Simulated time starts when PX4 first speaks.
+    pub fn with_px4_sitl(mut self, scenario: &crate::scenario::LoadedScenario) -> Self {
         let seed = self.sim.seed().wrapping_add(7);
+        let home_amsl_m = scenario.px4.sih_loc_h0;
+        let sensors = scenario.sensors.clone();
         self.px4_sitl = Some(Box::new(SitlBridge {
+            boot_ns: 0,
+            world_started: false,
+            next_boot_step_ns: None,
+            gps: scenario.scenario.gps.clone(),
+            gps_rng: crate::rng::Pcg32::with_stream(seed, 67),
+            next_gps_ns: 0,
             sensors: crate::hil::HilSensors::new(sensors, home_amsl_m, seed),
             lockstep: crate::hil::Lockstep::default(),
             home_amsl_m,
@@ -585,23 +605,58 @@ impl SimStage {
     /// Lockstep with PX4: while it owes no answer and simulated time is behind `target`,
     /// one HIL step (two physics steps on PX4's motors), then the sensors at the new
     /// time on `hil/to-px4`.
-    fn step_px4_sitl(&mut self, target: u64, out: &mut dyn Outbox) -> Result<(), StageError> {
+    fn step_px4_sitl(
+        &mut self,
+        now_ns: u64,
+        target: u64,
+        out: &mut dyn Outbox,
+    ) -> Result<(), StageError> {
         let Some(mut b) = self.px4_sitl.take() else {
             return Ok(());
         };
-        let result = self.lockstep_px4(&mut b, target, out);
+        let result = self.lockstep_px4(&mut b, now_ns, target, out);
         self.px4_sitl = Some(b);
         result
     }
 
+    /// PX4 boots first, on the ground, before the world's clock starts: a crew powers the
+    /// vehicle and waits for its estimator before the pad vehicle drives off, and PX4
+    /// v1.16 refuses to arm for its first seconds ("heading estimate not stable"), where
+    /// this simulator's own autopilot is ready at once. Boot steps keep to the wall clock
+    /// (the VIO reaches PX4 by the wall clock); the world starts when PX4 arms.
     fn lockstep_px4(
         &mut self,
         b: &mut SitlBridge,
+        now_ns: u64,
         target: u64,
         out: &mut dyn Outbox,
     ) -> Result<(), StageError> {
-        use crate::hil::{HIL_STEP_NS, state_quaternion};
-        while b.connected && b.lockstep.may_step() && self.sim.time_ns() < target {
+        use crate::hil::HIL_STEP_NS;
+        while b.connected && b.lockstep.may_step() {
+            if !b.world_started {
+                let next = *b.next_boot_step_ns.get_or_insert(now_ns);
+                if now_ns < next {
+                    break;
+                }
+                // Not more than 0.1 s of catching up on a loaded machine.
+                let tick = 2 * self.pace.tick_ns();
+                b.next_boot_step_ns = Some(next.max(now_ns.saturating_sub(100_000_000)) + tick);
+                b.boot_ns += HIL_STEP_NS;
+                self.sim.step_vio_before_start(b.boot_ns);
+                self.send_px4(b, b.boot_ns, out)?;
+                if b.lockstep.motors().armed || b.boot_ns >= MAX_PX4_BOOT_NS {
+                    b.world_started = true;
+                    tracing::info!(
+                        boot_s = b.boot_ns as f64 * 1e-9,
+                        armed = b.lockstep.motors().armed,
+                        "PX4 booted: the world's clock starts"
+                    );
+                }
+                continue;
+            }
+            if self.sim.time_ns() >= target {
+                break;
+            }
             for _ in 0..HIL_STEP_NS / PHYSICS_STEP_NS {
                 let motors = *b.lockstep.motors();
                 let report = self
@@ -610,20 +665,38 @@ impl SimStage {
                     .map_err(|e| StageError::Failed(e.to_string()))?;
                 self.absorb(report, out)?;
             }
-            let now = self.sim.time_ns();
-            let truth = *self.sim.world().truth();
-            let sensor = MavMessage::HIL_SENSOR(b.sensors.sample(&truth, now));
-            b.send(&sensor, out)?;
-            b.sensors_out += 1;
-            b.lockstep.sent();
-            if now >= b.next_state_ns {
-                let dt = (now + HIL_STATE_PERIOD_NS - b.next_state_ns) as f64 * 1e-9;
-                let accel = (truth.velocity - b.last_velocity) / dt.max(1e-3);
-                b.last_velocity = truth.velocity;
-                b.next_state_ns = now + HIL_STATE_PERIOD_NS;
-                let state = state_quaternion(&truth, &accel, b.home_amsl_m, now);
-                b.send(&MavMessage::HIL_STATE_QUATERNION(state), out)?;
-            }
+            self.send_px4(b, b.boot_ns + self.sim.time_ns(), out)?;
+        }
+        Ok(())
+    }
+
+    /// PX4's sensors at its clock `px4_ns` (the world's time plus its boot): HIL_SENSOR,
+    /// a GPS fix when due, HIL_STATE_QUATERNION when due.
+    fn send_px4(
+        &mut self,
+        b: &mut SitlBridge,
+        px4_ns: u64,
+        out: &mut dyn Outbox,
+    ) -> Result<(), StageError> {
+        use crate::hil::{gps_fix, state_quaternion};
+        let truth = *self.sim.world().truth();
+        let sensor = MavMessage::HIL_SENSOR(b.sensors.sample(&truth, px4_ns));
+        b.send(&sensor, out)?;
+        b.sensors_out += 1;
+        if b.gps.rate_hz > 0.0 && px4_ns >= b.next_gps_ns {
+            b.next_gps_ns = px4_ns + (1e9 / b.gps.rate_hz) as u64;
+            let rng = &mut b.gps_rng;
+            let fix = gps_fix(&truth, &b.gps, b.home_amsl_m, px4_ns, &mut || rng.normal());
+            b.send(&MavMessage::HIL_GPS(fix), out)?;
+        }
+        b.lockstep.sent();
+        if px4_ns >= b.next_state_ns {
+            let dt = (px4_ns + HIL_STATE_PERIOD_NS - b.next_state_ns) as f64 * 1e-9;
+            let accel = (truth.velocity - b.last_velocity) / dt.max(1e-3);
+            b.last_velocity = truth.velocity;
+            b.next_state_ns = px4_ns + HIL_STATE_PERIOD_NS;
+            let state = state_quaternion(&truth, &accel, b.home_amsl_m, px4_ns);
+            b.send(&MavMessage::HIL_STATE_QUATERNION(state), out)?;
         }
         Ok(())
     }
@@ -764,7 +837,7 @@ impl Stage for SimStage {
         // PX4's answer lets the next lockstep step run at once, not at the next tick.
         if self.px4_sitl.is_some() && !self.finished() {
             let target = self.pace.target(now_ns, self.sim.time_ns());
-            self.step_px4_sitl(target, out)?;
+            self.step_px4_sitl(now_ns, target, out)?;
         }
         Ok(())
     }
@@ -775,7 +848,7 @@ impl Stage for SimStage {
             return Ok(());
         }
         if self.px4_sitl.is_some() {
-            self.step_px4_sitl(target, out)?;
+            self.step_px4_sitl(now_ns, target, out)?;
         } else {
             self.sim
                 .commander_mut()

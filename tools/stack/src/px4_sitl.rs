@@ -41,13 +41,14 @@ impl Px4Sitl {
     /// The parameters the stack needs on PX4, with why (also in docs/px4-sitl.md), for
     /// `scn`: set at boot through PX4's `PX4_PARAM_<NAME>` environment.
     pub fn params(scn: &LoadedScenario) -> Vec<(&'static str, String)> {
+        let gps = if scn.scenario.gps.rate_hz > 0.0 { "7" } else { "0" };
         vec![
             // Fuse the VIO: horizontal and vertical position, velocity and yaw.
             ("EKF2_EV_CTRL", "15".into()),
             // Height from vision, as the paper's T265 gave it (the barometer drifts).
             ("EKF2_HGT_REF", "3".into()),
-            // No GPS: the mission is GPS-denied.
-            ("EKF2_GPS_CTRL", "0".into()),
+            // No GPS unless the scenario has one (`[gps]`): the missions are GPS-denied.
+            ("EKF2_GPS_CTRL", gps.into()),
             // px4-link sends no TIMESYNC: PX4 stamps each sample on arrival, so the
             // VIO's own latency is the delay to compensate.
             (
