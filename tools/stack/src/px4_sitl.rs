@@ -57,6 +57,16 @@ impl Px4Sitl {
             ),
             // Land, not hover, when the companion's setpoints stop (deploy/README.md).
             ("COM_OBL_RC_ACT", "4".into()),
+            // The airframe's hover thrust (PX4's default 0.5 is another vehicle's): the
+            // hover thrust estimator then starts where the vehicle is.
+            (
+                "MPC_THR_HOVER",
+                format!("{:.3}", scn.airframe.hover_thrust_normalized()),
+            ),
+            // Off the ground at once: PX4's 3 s take-off ramp left the iris on the road
+            // 4 s after arming, where the outdoor scenarios' pad vehicle drives past
+            // (the built-in autopilot ends its ramp at lift-off).
+            ("MPC_TKO_RAMP_T", "0.5".into()),
             // No RC on this vehicle: no stick input, no RC-loss failsafe to trip.
             ("COM_RC_IN_MODE", "4".into()),
             ("NAV_RCL_ACT", "0".into()),
