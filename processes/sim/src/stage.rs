@@ -206,6 +206,23 @@ impl Pace {
         }
     }
 
+    /// Simulated time `sim_ns` is now, on the driver's clock at `now_ns`: a simulator held
+    /// back by real PX4's lockstep re-anchors at every step, so that what it stamps (the
+    /// cameras, the VIO) keeps to the wall clock PX4's own telemetry arrives by, rather
+    /// than jumping [`MAX_LAG_NS`] at a time.
+    fn follow(&mut self, now_ns: u64, sim_ns: u64) {
+        if let Self::Realtime {
+            speed,
+            start_ns,
+            skipped_ns,
+        } = self
+        {
+            let start = *start_ns.get_or_insert(now_ns);
+            let elapsed = (now_ns.saturating_sub(start) as f64 * *speed) as u64;
+            *skipped_ns = (*skipped_ns).max(elapsed.saturating_sub(sim_ns));
+        }
+    }
+
     /// The autopilot's boot clock: on the driver's clock, as the camera's stamps are.
     fn boot_clock(&self) -> BootClock {
         match self {
@@ -643,6 +660,7 @@ impl SimStage {
                 b.next_boot_step_ns = Some(next.max(now_ns.saturating_sub(100_000_000)) + tick);
                 b.boot_ns += HIL_STEP_NS;
                 self.sim.step_vio_before_start(b.boot_ns);
+                self.pace.follow(now_ns, 0);
                 self.send_px4(b, b.boot_ns, out)?;
                 if b.lockstep.motors().armed || b.boot_ns >= MAX_PX4_BOOT_NS {
                     b.world_started = true;
@@ -666,6 +684,7 @@ impl SimStage {
                 self.absorb(report, out)?;
             }
             self.send_px4(b, b.boot_ns + self.sim.time_ns(), out)?;
+            self.pace.follow(now_ns, self.sim.time_ns());
         }
         Ok(())
     }
