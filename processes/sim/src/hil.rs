@@ -14,8 +14,7 @@
 
 use mavlink::dialects::common::{
     HIL_ACTUATOR_CONTROLS_DATA, HIL_GPS_DATA, HIL_SENSOR_DATA, HIL_STATE_QUATERNION_DATA,
-    HilSensorUpdatedFlags,
-    MavModeFlag,
+    HilSensorUpdatedFlags, MavModeFlag,
 };
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::Deserialize;

@@ -199,5 +199,10 @@ fn a_gps_fix_is_in_degrees_e7_millimetres_and_cm_s_ned() {
         rate_hz: -1.0,
         ..GpsParams::default()
     };
-    assert!(bad.validate().unwrap_err().to_string().contains("gps.rate_hz"));
+    assert!(
+        bad.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("gps.rate_hz")
+    );
 }

@@ -291,7 +291,9 @@ impl Simulator {
     /// The next VIO sample that has arrived by now (its capture in simulated time; one
     /// taken before the world started says 0).
     pub fn take_vio(&mut self) -> Option<ipc_types::msg::VioOdometry> {
-        let mut v = self.vio.take_due(self.world.time_ns() + self.vio_ahead_ns)?;
+        let mut v = self
+            .vio
+            .take_due(self.world.time_ns() + self.vio_ahead_ns)?;
         v.msg.capture_ns = v.msg.capture_ns.saturating_sub(self.vio_ahead_ns);
         Some(v)
     }

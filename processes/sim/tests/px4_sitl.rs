@@ -45,12 +45,14 @@ fn answer(armed: bool) -> Vec<u8> {
     }
     let mut controls = [0.0; 16];
     controls[..4].copy_from_slice(&[0.3; 4]);
-    px4_bytes(&MavMessage::HIL_ACTUATOR_CONTROLS(HIL_ACTUATOR_CONTROLS_DATA {
-        time_usec: 0,
-        controls,
-        mode,
-        flags: HilActuatorControlsFlags::HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP,
-    }))
+    px4_bytes(&MavMessage::HIL_ACTUATOR_CONTROLS(
+        HIL_ACTUATOR_CONTROLS_DATA {
+            time_usec: 0,
+            controls,
+            mode,
+            flags: HilActuatorControlsFlags::HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP,
+        },
+    ))
 }
 
 /// The HIL_SENSOR times (us) the stage sent since the last call.
@@ -112,7 +114,10 @@ fn px4_boots_on_the_ground_before_the_world_starts_and_steps_in_lockstep() {
     now += 4 * ms;
     s.on_tick(now, &mut out).unwrap();
     s.on_tick(now + 2 * ms, &mut out).unwrap();
-    assert!(sensors(&mut out).is_empty(), "a step waits for PX4's answer");
+    assert!(
+        sensors(&mut out).is_empty(),
+        "a step waits for PX4's answer"
+    );
     // Armed: the world's clock starts; PX4's keeps its 4 ms steps.
     let mut after = Vec::new();
     for _ in 0..50 {
@@ -120,9 +125,15 @@ fn px4_boots_on_the_ground_before_the_world_starts_and_steps_in_lockstep() {
         input(&mut s, now, &answer(true), &mut out);
         after.extend(sensors(&mut out));
     }
-    assert!(s.simulator().time_ns() > 0, "the world's clock runs once PX4 armed");
+    assert!(
+        s.simulator().time_ns() > 0,
+        "the world's clock runs once PX4 armed"
+    );
     let last_boot = *booting.last().unwrap();
-    assert!(after.first().is_some_and(|t| *t == last_boot + 4000), "{after:?}");
+    assert!(
+        after.first().is_some_and(|t| *t == last_boot + 4000),
+        "{after:?}"
+    );
     assert!(after.windows(2).all(|w| w[1] - w[0] == 4000), "{after:?}");
     // PX4's clock is its boot (the last boot step included, where it armed) plus the
     // world's.

@@ -292,3 +292,39 @@ fn the_aruco_benchmark_prints_the_documented_json() {
     assert!(v["ours_found_640x480"].as_u64().unwrap_or(0) > 0);
     assert!(["subpix", "contour"].contains(&v["opencv_refinement_640x480"].as_str().unwrap_or("")));
 }
+
+#[test]
+fn real_px4_needs_the_processes_mode_and_a_px4_build_directory_each_said_in_one_line() {
+    let o = landing(&[
+        "run",
+        "--autopilot",
+        "px4-sitl",
+        "--px4",
+        "/nonexistent/build",
+    ]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(err.contains("--autopilot px4-sitl needs --processes"), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    let dir = std::env::temp_dir().join(format!("landing-no-px4-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let o = landing(&[
+        "run",
+        "--processes",
+        "--autopilot",
+        "px4-sitl",
+        "--px4",
+        dir.to_str().unwrap(),
+        "--log-dir",
+        dir.join("logs").to_str().unwrap(),
+    ]);
+    std::fs::remove_dir_all(&dir).ok();
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(
+        err.contains("not a PX4 SITL build directory (allowed: one holding bin/px4 and etc/"),
+        "{err}"
+    );
+    let o = landing(&["run", "--autopilot", "px4-sitl"]);
+    assert_eq!(o.status.code(), Some(2), "--px4 is required: {}", stderr(&o));
+}

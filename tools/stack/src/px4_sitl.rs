@@ -41,7 +41,11 @@ impl Px4Sitl {
     /// The parameters the stack needs on PX4, with why (also in docs/px4-sitl.md), for
     /// `scn`: set at boot through PX4's `PX4_PARAM_<NAME>` environment.
     pub fn params(scn: &LoadedScenario) -> Vec<(&'static str, String)> {
-        let gps = if scn.scenario.gps.rate_hz > 0.0 { "7" } else { "0" };
+        let gps = if scn.scenario.gps.rate_hz > 0.0 {
+            "7"
+        } else {
+            "0"
+        };
         vec![
             // Fuse the VIO: horizontal and vertical position, velocity and yaw.
             ("EKF2_EV_CTRL", "15".into()),
