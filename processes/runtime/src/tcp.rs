@@ -71,6 +71,7 @@ impl TcpServerLink {
         let listener = TcpListener::bind(listen).map_err(err)?;
         listener.set_nonblocking(true).map_err(err)?;
         let local = listener.local_addr().map_err(err)?;
+        tracing::info!(%local, "TCP link listening for its peer");
         Ok(Self {
             listener,
             local,

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use anyhow::Result;
 use clap::Parser;
-use ipc_types::topics;
+use ipc_types::topics::{self, HIL_FROM_PX4, HIL_TO_PX4};
 use runtime::{Reply, StageArgs, TcpServerLink, UdpLink};
 use sim::stage::SimFlags;
 
@@ -37,11 +37,7 @@ fn run(args: &Args) -> Result<()> {
     let zero = runtime::unix_ns_at_monotonic_zero();
     let mut stage = args.sim.stage(&args.stage.deploy(), zero)?;
     let mut link: Box<dyn stage::External> = match args.sim.px4_sitl {
-        Some(addr) => {
-            let tcp = TcpServerLink::bind(addr, topics::HIL_FROM_PX4, topics::HIL_TO_PX4)?;
-            tracing::info!(px4_sitl = %tcp.local_addr(), "sim waits for PX4");
-            Box::new(tcp)
-        }
+        Some(addr) => Box::new(TcpServerLink::bind(addr, HIL_FROM_PX4, HIL_TO_PX4)?),
         None => {
             let (local, remote) = (args.mavlink_listen, Some(args.mavlink_remote));
             let udp = UdpLink::bind(

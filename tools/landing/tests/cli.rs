@@ -304,7 +304,10 @@ fn real_px4_needs_the_processes_mode_and_a_px4_build_directory_each_said_in_one_
     ]);
     assert!(!o.status.success());
     let err = stderr(&o);
-    assert!(err.contains("--autopilot px4-sitl needs --processes"), "{err}");
+    assert!(
+        err.contains("--autopilot px4-sitl needs --processes"),
+        "{err}"
+    );
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
     let dir = std::env::temp_dir().join(format!("landing-no-px4-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -326,5 +329,10 @@ fn real_px4_needs_the_processes_mode_and_a_px4_build_directory_each_said_in_one_
         "{err}"
     );
     let o = landing(&["run", "--autopilot", "px4-sitl"]);
-    assert_eq!(o.status.code(), Some(2), "--px4 is required: {}", stderr(&o));
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "--px4 is required: {}",
+        stderr(&o)
+    );
 }
