@@ -9,9 +9,9 @@ import subprocess
 import sys
 
 
-def free_port():
-    """A free local UDP port (bound and released)."""
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+def free_port(kind=socket.SOCK_DGRAM):
+    """A free local UDP port (TCP with `kind=socket.SOCK_STREAM`), bound and released."""
+    s = socket.socket(socket.AF_INET, kind)
     s.bind(("127.0.0.1", 0))
     port = s.getsockname()[1]
     s.close()

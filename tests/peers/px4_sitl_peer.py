@@ -24,7 +24,7 @@ os.environ["MAVLINK20"] = "1"
 from pymavlink import mavutil  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(__file__))
-from peer_common import fail  # noqa: E402
+from peer_common import fail, free_port  # noqa: E402
 
 PEER = "px4-sitl"
 STEP_US = 4000
@@ -37,14 +37,6 @@ MASS = IRIS["mass_kg"]
 HOVER = MASS * G / (4 * IRIS["thrust_coefficient"] * IRIS["motor_speed_max_rad_s"] ** 2)
 DRAG_Z = IRIS["drag_coefficients_n_s_m"][2]
 ARMED = 128 | 1  # MAV_MODE_FLAG_SAFETY_ARMED | CUSTOM_MODE_ENABLED, as PX4 sends
-
-
-def free_tcp_port():
-    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def isa_hpa(alt_m):
@@ -104,7 +96,7 @@ def main():
     if len(sys.argv) != 2:
         print(__doc__)
         sys.exit(2)
-    port = free_tcp_port()
+    port = free_port(socket.SOCK_STREAM)
     env = dict(os.environ, LANDING_LOG="warn", LANDING_IPC_PREFIX=f"px4sitl_peer_{os.getpid()}_")
     # indoor-static flown by the nominal iris (no per-seed mass error: the hover throttle
     # checked is the airframe file's).
