@@ -307,6 +307,8 @@ struct SitlBridge {
     decoder: StreamDecoder,
     guard: Guard,
     decoded: Vec<(MavHeader, MavMessage)>,
+    /// One encoded message, reused (250 a second).
+    wire: Vec<u8>,
     sequence: u8,
     /// PX4 has spoken (its first HEARTBEAT): time starts.
     connected: bool,
@@ -348,10 +350,10 @@ impl SitlBridge {
             sequence: self.sequence,
         };
         self.sequence = self.sequence.wrapping_add(1);
-        let mut wire = Vec::with_capacity(96);
-        px4_protocol::codec::encode(&mut wire, header, msg)
+        self.wire.clear();
+        px4_protocol::codec::encode(&mut self.wire, header, msg)
             .map_err(|e| StageError::Transport(e.to_string()))?;
-        out.publish(topics::HIL_TO_PX4, Message::Mavlink(&wire))
+        out.publish(topics::HIL_TO_PX4, Message::Mavlink(&self.wire))
     }
 }
 
@@ -434,6 +436,7 @@ impl SimStage {
             decoder: StreamDecoder::new(),
             guard: Guard::open(),
             decoded: Vec::with_capacity(8),
+            wire: Vec::with_capacity(96),
             sequence: 0,
             connected: false,
             next_state_ns: 0,
