@@ -55,6 +55,8 @@ pub struct TcpServerLink {
     stats: TcpStats,
     /// Descriptors that end a wait early (the stage's iceoryx2 inputs).
     wake: Vec<i32>,
+    /// What a wait polls, reused (a wait every tick).
+    fds: Vec<i32>,
 }
 
 impl TcpServerLink {
@@ -80,6 +82,7 @@ impl TcpServerLink {
             buf: vec![0; READ_MAX],
             stats: TcpStats::default(),
             wake: Vec::new(),
+            fds: Vec::new(),
         })
     }
 
@@ -135,21 +138,24 @@ impl External for TcpServerLink {
         clock: &dyn Fn() -> u64,
         deliver: &mut dyn FnMut(Input<'_>, u64) -> Result<(), StageError>,
     ) -> Result<Flow, StageError> {
-        let mut fds = Vec::with_capacity(self.wake.len() + 2);
-        fds.push(self.listener.as_raw_fd());
-        if let Some(s) = &self.stream {
-            fds.push(s.as_raw_fd());
-        }
-        fds.extend_from_slice(&self.wake);
-        let ready = crate::ipc::wait_fds(&fds, timeout_ns);
+        // The listener, the peer (when there is one at the start of the wait: one accepted
+        // below is read on the next), then the stage's wake descriptors.
+        let peer = self.stream.as_ref().map(|s| s.as_raw_fd());
+        self.fds.clear();
+        self.fds.push(self.listener.as_raw_fd());
+        self.fds.extend(peer);
+        self.fds.extend_from_slice(&self.wake);
+        let ready = crate::ipc::wait_fds(&self.fds, timeout_ns);
         if ready.first().copied().unwrap_or(false) {
             self.accept();
         }
-        let readable = self.stream.is_some() && fds.len() > 1 && ready.get(1) == Some(&true);
-        if !readable {
-            return Ok(Flow::Open);
-        }
-        let Some(stream) = self.stream.as_mut() else {
+        let readable = peer.is_some() && ready.get(1) == Some(&true);
+        // Not the peer polled if `accept` replaced it.
+        let Some(stream) = self
+            .stream
+            .as_mut()
+            .filter(|s| readable && Some(s.as_raw_fd()) == peer)
+        else {
             return Ok(Flow::Open);
         };
         match stream.read(&mut self.buf) {

@@ -238,8 +238,8 @@ impl HilSensors {
 }
 
 /// The ground truth PX4 may log beside its estimate (HIL_STATE_QUATERNION), at a site
-/// `home_amsl_m` above mean sea level; latitude and longitude are those of the local
-/// origin (this simulator flies GPS-denied: it has none to give).
+/// `home_amsl_m` above mean sea level; latitude and longitude are left 0 (PX4 SITL only
+/// logs this message; a scenario's `[gps]` fix goes in HIL_GPS).
 pub fn state_quaternion(
     truth: &VehicleState,
     accel_world: &Vector3<f64>,
@@ -396,11 +396,6 @@ impl Lockstep {
     /// Answers received.
     pub fn answers(&self) -> u64 {
         self.answers
-    }
-
-    /// Whether PX4 has answered yet.
-    pub fn started(&self) -> bool {
-        self.started
     }
 }
 

@@ -738,35 +738,46 @@ pub fn load(name_or_path: &str, deploy_dir: &Path) -> Result<LoadedScenario, Sce
     let scenario: Scenario = config::load(&path)?;
     let config_dir = deploy_dir.join("config");
     let airframe = load_airframe(&config_dir, &scenario.airframe, &path)?;
-    let mut autopilot = AutopilotParams::tuned_for(&airframe.airframe);
-    airframe.limits.apply(&mut autopilot);
-    Ok(LoadedScenario {
-        scenario,
-        path,
-        autopilot,
-        px4: airframe.px4,
-        touchdown: airframe.touchdown,
-        sensors: airframe.sensors,
-        airframe: airframe.airframe,
-        config_dir,
-    })
+    Ok(LoadedScenario::assemble(
+        scenario, path, config_dir, airframe,
+    ))
 }
 
 impl LoadedScenario {
+    /// The scenario flown by `airframe`: the autopilot tuned for it, with its limits.
+    fn assemble(
+        scenario: Scenario,
+        path: PathBuf,
+        config_dir: PathBuf,
+        airframe: AirframeFile,
+    ) -> Self {
+        let mut autopilot = AutopilotParams::tuned_for(&airframe.airframe);
+        airframe.limits.apply(&mut autopilot);
+        Self {
+            scenario,
+            path,
+            autopilot,
+            px4: airframe.px4,
+            touchdown: airframe.touchdown,
+            sensors: airframe.sensors,
+            airframe: airframe.airframe,
+            config_dir,
+        }
+    }
+
     /// The same world flown by another vehicle: the airframe profile `name` from
     /// `deploy/config/airframes/` in place of the scenario's (`sim --airframe iris` flies
     /// PX4's SITL vehicle through any scenario).
-    pub fn with_airframe(mut self, name: &str) -> Result<Self, ScenarioError> {
+    pub fn with_airframe(self, name: &str) -> Result<Self, ScenarioError> {
         let airframe = load_airframe(&self.config_dir, name, &self.path)?;
-        let mut autopilot = AutopilotParams::tuned_for(&airframe.airframe);
-        airframe.limits.apply(&mut autopilot);
-        self.scenario.airframe = name.to_string();
-        self.autopilot = autopilot;
-        self.px4 = airframe.px4;
-        self.touchdown = airframe.touchdown;
-        self.sensors = airframe.sensors;
-        self.airframe = airframe.airframe;
-        Ok(self)
+        let mut scenario = self.scenario;
+        scenario.airframe = name.to_string();
+        Ok(Self::assemble(
+            scenario,
+            self.path,
+            self.config_dir,
+            airframe,
+        ))
     }
 }
 

@@ -316,7 +316,6 @@ struct SitlBridge {
     /// Velocity at the last HIL_STATE_QUATERNION, for its acceleration.
     last_velocity: nalgebra::Vector3<f64>,
     sensors_out: u64,
-    answers: u64,
     other_in: u64,
 }
 
@@ -330,10 +329,7 @@ impl SitlBridge {
         for (_, m) in &self.decoded {
             self.connected = true;
             match m {
-                MavMessage::HIL_ACTUATOR_CONTROLS(c) => {
-                    self.lockstep.answered(c);
-                    self.answers += 1;
-                }
+                MavMessage::HIL_ACTUATOR_CONTROLS(c) => self.lockstep.answered(c),
                 // HEARTBEAT, PX4's request for HIL_STATE_QUATERNION at 200 Hz (this
                 // simulator sends it at 50 Hz; PX4 only logs it).
                 _ => self.other_in += 1,
@@ -442,7 +438,6 @@ impl SimStage {
             next_state_ns: 0,
             last_velocity: nalgebra::Vector3::zeros(),
             sensors_out: 0,
-            answers: 0,
             other_in: 0,
         }));
         self
@@ -938,7 +933,7 @@ impl Stage for SimStage {
         if let Some(b) = &self.px4_sitl {
             counters.extend([
                 ("hil_sensors_out", b.sensors_out),
-                ("hil_answers", b.answers),
+                ("hil_answers", b.lockstep.answers()),
                 ("hil_other_in", b.other_in),
                 ("hil_parse_errors", b.decoder.parse_errors()),
             ]);

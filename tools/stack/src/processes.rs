@@ -6,7 +6,7 @@
 //! evaluator-only truth topics.
 
 use std::fs::File;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -207,8 +207,7 @@ pub fn run(
     let mut children = Children::default();
     if let Some(px4) = &px4 {
         // First: it waits for the simulator, which starts last.
-        let log: PathBuf = launch.log_dir.join("px4.log");
-        let file = File::create(&log).with_context(|| format!("creating {}", log.display()))?;
+        let file = log_file(launch.log_dir, "px4")?;
         let mut cmd = px4.command(&launch.log_dir.join("px4"), scn)?;
         stop_with_parent(&mut cmd);
         let child = cmd
@@ -222,8 +221,7 @@ pub fn run(
     let r = launch.recorder;
     if r.out.is_some() || r.live {
         // First: it subscribes before anything is published.
-        let log: PathBuf = launch.log_dir.join("recorder.log");
-        let file = File::create(&log).with_context(|| format!("creating {}", log.display()))?;
+        let file = log_file(launch.log_dir, "recorder")?;
         let mut cmd = Command::new(binary("recorder")?);
         cmd.arg("--config")
             .arg(launch.config)
@@ -257,8 +255,7 @@ pub fn run(
     // The graph's start order: the nodes marked start_last (the simulator, whose clock
     // starts the world) after the others.
     for node in launch.graph.start_order() {
-        let log: PathBuf = launch.log_dir.join(format!("{}.log", node.name));
-        let file = File::create(&log).with_context(|| format!("creating {}", log.display()))?;
+        let file = log_file(launch.log_dir, &node.name)?;
         let child = start(node, &values, &prefix, launch, file)?;
         children.push(&node.name, child);
         if !node.start_last {
@@ -494,6 +491,12 @@ fn start(
         })?;
     }
     Ok(child)
+}
+
+/// `dir/NAME.log`, created for a child's output.
+fn log_file(dir: &Path, name: &str) -> Result<File> {
+    let log = dir.join(format!("{name}.log"));
+    File::create(&log).with_context(|| format!("creating {}", log.display()))
 }
 
 fn fault_record(fault: &str, process: &str, at_s: f64) -> FaultRecord {
