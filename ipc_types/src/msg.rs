@@ -1086,8 +1086,8 @@ pub struct ProcessHealth {
     pub liveness: u32,
     /// Heartbeat deadlines missed since start.
     pub missed_deadlines: u32,
-    /// Keeps the layout free of implicit padding.
-    pub reserved: u32,
+    /// Times it came back after a death (restarted by systemd or `landing run`).
+    pub restarts: u32,
     /// When its last heartbeat arrived (monotonic ns); 0 before the first.
     pub last_heartbeat_ns: u64,
     /// When it was last found hung or dead (monotonic ns); 0 when never.
@@ -1103,7 +1103,7 @@ pub struct ProcessHealth {
 #[repr(C)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("landing::WatchdogView/v3")]
+#[type_name("landing::WatchdogView/v4")]
 pub struct WatchdogView {
     /// Sequence, time, stage stamps.
     pub msg: Header,

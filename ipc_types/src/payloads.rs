@@ -93,7 +93,7 @@ macro_rules! for_each_payload {
                     = "landing::FsmStatus/v1",
                 /// The watchdog's view of the stack; boxed when owned (1.7 kB).
                 WatchdogView($crate::msg::WatchdogView => Box<$crate::msg::WatchdogView>)
-                    = "landing::WatchdogView/v3",
+                    = "landing::WatchdogView/v4",
             ],
             truth: [
                 /// A ground-truth event (evaluator only).

@@ -102,7 +102,9 @@ pub struct FsmConfig {
     /// Lost: keep going with the pad's last estimated horizontal velocity this long, s:
     /// a pad on a moving vehicle is not where it was lost (0: hold where it was lost).
     pub lost_follow_s: f64,
-    /// Vehicle state older than this (or a link reported down) means telemetry is lost, s.
+    /// No new telemetry from a connected link this long means telemetry is lost, s: the
+    /// fsm's own backstop, above the watchdog's budgets (`[watchdog.ride_through]
+    /// telemetry_ms`), which judge a short outage from a lost link.
     pub telemetry_timeout_s: f64,
     /// The watchdog's view older than this (once one came) means the stack is no longer
     /// supervised: away from the pad the mission lands where it is, over it the descent
@@ -220,7 +222,7 @@ impl Default for FsmConfig {
             lost_climb_max_m: 2.0,
             lost_timeout_s: 10.0,
             lost_follow_s: 5.0,
-            telemetry_timeout_s: 0.5,
+            telemetry_timeout_s: 2.0,
             watchdog_timeout_s: 1.0,
             request_attempts: 3,
             request_retry_s: 1.0,

@@ -95,6 +95,10 @@ const NO_ANSWER_NS: u64 = 5_000_000_000;
 /// How long the autopilot may show another mode than OFFBOARD before the fsm yields.
 const MODE_LOSS_NS: u64 = 1_000_000_000;
 
+/// How long a restarted fsm waits for the watchdog's view (5 Hz) and the pad before it
+/// resumes the mission, ns.
+const RESUME_WAIT_NS: u64 = 300_000_000;
+
 /// How far a vehicle state is carried forward to now at most, s: older, it is stale
 /// (`telemetry_timeout_s` acts on it).
 const CARRY_MAX_S: f64 = 0.2;
@@ -119,6 +123,10 @@ pub struct Fsm {
     telemetry_arrived_ns: u64,
     /// When the watchdog's view last came.
     watchdog_seen_ns: Option<u64>,
+    /// The mission state the watchdog last saw the fsm in: a restarted fsm's checkpoint.
+    watchdog_phase: Option<MissionState>,
+    /// Since when a fresh fsm has seen the vehicle flying OFFBOARD (a restart in the air).
+    resume_since: Option<u64>,
     trajectory: Option<(u64, BSpline, u64)>,
     takeoff: TakeoffStep,
     pending: Option<Pending>,
@@ -209,6 +217,8 @@ impl Fsm {
             transitions: Vec::new(),
             safety_ordered: false,
             watchdog_seen_ns: None,
+            watchdog_phase: None,
+            resume_since: None,
         }
     }
 
@@ -263,7 +273,12 @@ impl Fsm {
                 t => t.min(now_ns),
             };
             let t = stamp(v.msg.capture_ns);
-            self.telemetry_arrived_ns = stamp(v.link.last_telemetry_ns);
+            // Only a link that has heard the autopilot's heartbeat counts: a restarted
+            // px4-link's first states (telemetry, no heartbeat yet) are flown on but do
+            // not make the link fresh, nor stale before its budget.
+            if v.link.connected != 0 {
+                self.telemetry_arrived_ns = stamp(v.link.last_telemetry_ns);
+            }
             self.vehicle = Some((t, *v));
             let p = Vector3::from(v.world_from_body.translation);
             self.odometry.on_state(t, p, Vector3::from(v.velocity));
@@ -346,9 +361,16 @@ impl Fsm {
         }
     }
 
-    /// The watchdog's view arrived at `now_ns`: the stack is supervised.
-    pub fn on_watchdog_view(&mut self, now_ns: u64) {
+    /// The watchdog's view arrived at `now_ns`: the stack is supervised, and `phase` is
+    /// the mission state it last saw (raw; what a restarted fsm resumes from).
+    pub fn on_watchdog_view(&mut self, now_ns: u64, phase: u32) {
         self.watchdog_seen_ns = Some(now_ns);
+        // A restarted fsm's own first status (Idle) soon reaches the watchdog: the state
+        // before it is the one to resume from.
+        match MissionState::from_raw(phase) {
+            Some(MissionState::Idle) if self.watchdog_phase.is_some() => {}
+            p => self.watchdog_phase = p,
+        }
     }
 
     /// One step at `now_ns` (call at `rate_hz`).
@@ -593,23 +615,76 @@ impl Fsm {
         Drive::Waiting
     }
 
-    /// The autopilot link is up and its newest telemetry arrived within
-    /// `telemetry_timeout_s`.
+    /// The newest telemetry of a connected link arrived within `telemetry_timeout_s`.
     pub fn link_fresh(&self, now_ns: u64) -> bool {
-        self.vehicle.as_ref().is_some_and(|(_, v)| {
-            v.link.connected != 0
-                && now_ns.saturating_sub(self.telemetry_arrived_ns) as f64 * 1e-9
-                    <= self.cfg.telemetry_timeout_s
-        })
+        self.telemetry_arrived_ns != 0
+            && now_ns.saturating_sub(self.telemetry_arrived_ns) as f64 * 1e-9
+                <= self.cfg.telemetry_timeout_s
     }
 
-    fn idle(&mut self, now_ns: u64, _out: &mut Outputs) {
+    fn idle(&mut self, now_ns: u64, out: &mut Outputs) {
+        if self.resume(now_ns, out) {
+            return;
+        }
         if !self.started {
             return;
         }
         if self.link_fresh(now_ns) {
             self.go(now_ns, MissionState::Takeoff, "started, link up".into());
         }
+    }
+
+    /// A fresh fsm that finds the vehicle armed, in the air and in OFFBOARD was restarted
+    /// in flight: it resumes the mission (never a second take-off) once it has waited
+    /// [`RESUME_WAIT_NS`] for the watchdog's view, which keeps the state it was in, and for
+    /// the pad. True while resuming (nothing else to do in Idle).
+    fn resume(&mut self, now_ns: u64, out: &mut Outputs) -> bool {
+        let flying = self.link_fresh(now_ns)
+            && self.vehicle().is_some_and(|v| {
+                v.armed != 0
+                    && LandedState::from_raw(v.landed_state) == LandedState::InAir
+                    && FlightMode::from_raw(v.flight_mode) == FlightMode::Offboard
+            });
+        if !self.transitions.is_empty() || !flying {
+            self.resume_since = None;
+            return false;
+        }
+        let (Some(p), Some(v)) = (self.position(), self.vehicle().copied()) else {
+            return false;
+        };
+        let since = *self.resume_since.get_or_insert(now_ns);
+        // Hold where it is meanwhile: px4-link repeats a dead fsm's last setpoint for a
+        // moment only, and PX4 leaves OFFBOARD a second after the last.
+        if !self.streaming {
+            self.hold = p;
+            self.yaw_sp = yaw_of(&v.world_from_body.rotation_xyzw);
+            self.streaming = true;
+        }
+        out.setpoint = Some(self.hold_setpoint(now_ns, self.hold));
+        let pad = self.pad(now_ns);
+        let waited = now_ns.saturating_sub(since) >= RESUME_WAIT_NS;
+        if !waited && (self.watchdog_phase.is_none() || pad.is_none()) {
+            return true;
+        }
+        let was = self.watchdog_phase.unwrap_or(MissionState::Idle);
+        let why = format!("restarted in flight (was {})", was.name());
+        use MissionState as M;
+        match (was, pad) {
+            (M::SafeLand | M::Abort | M::Landed, _) => self.go(now_ns, M::SafeLand, why),
+            (M::Descend | M::Land, Some(est)) => {
+                self.h_cmd = p.z - est.position.z;
+                self.track_height = self.h_cmd.max(self.cfg.commit_height_m + 0.3);
+                self.guidance = Guidance::Direct;
+                self.go(now_ns, M::Descend, why);
+            }
+            (_, Some(_)) => {
+                self.enter_track(now_ns, why);
+                self.guidance = Guidance::Direct;
+            }
+            (M::Track | M::Descend | M::Land | M::Lost, None) => self.enter_lost(now_ns),
+            (_, None) => self.enter_preset(now_ns, why),
+        }
+        true
     }
 
     fn takeoff_altitude(&self) -> f64 {

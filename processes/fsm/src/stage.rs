@@ -104,7 +104,7 @@ impl Stage for FsmStage {
                 self.counts.outcomes += 1;
                 self.fsm.on_outcome(o);
             }
-            Message::WatchdogView(_) => self.fsm.on_watchdog_view(now_ns),
+            Message::WatchdogView(v) => self.fsm.on_watchdog_view(now_ns, v.phase),
             Message::SafetyCommand(c) => {
                 self.counts.safety += 1;
                 self.fsm.on_safety(now_ns, c);

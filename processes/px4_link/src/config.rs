@@ -75,8 +75,8 @@ pub struct Px4LinkConfig {
     /// The autopilot counts as disconnected without a heartbeat this long, ms. PX4 beats
     /// at 1 Hz over a link that loses datagrams: the default lets two in a row go
     /// missing (a 5000-datagram flood at px4-link's port made the kernel drop one, and
-    /// 1.5 s turned that into a safe landing). Silence is found sooner anyway: the fsm
-    /// lands when the telemetry stream stops for `telemetry_timeout_s`.
+    /// 1.5 s turned that into a safe landing). Silence is found sooner anyway: the
+    /// watchdog, from the telemetry stream (`[watchdog.ride_through] telemetry_ms`).
     pub heartbeat_timeout_ms: u64,
     /// Setpoints asking more horizontal speed than this are refused, m/s.
     pub max_horizontal_speed_m_s: f64,

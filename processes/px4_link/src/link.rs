@@ -71,6 +71,9 @@ pub enum Outcome {
     NoAltitudeReference,
 }
 
+/// How often a link that hears the autopilot but no heartbeat asks for one, ns.
+const HEARTBEAT_ASK_NS: u64 = 200_000_000;
+
 /// How long a mode change the autopilot accepted is taken as under way while its
 /// heartbeat does not show it yet, ns: PX4 beats at 1 Hz, so the mode shows within a
 /// second; two lost beats are allowed for. Asked again inside it, the request is
@@ -313,6 +316,8 @@ pub struct Px4Link {
     mode_accepted: Option<(Request, u64)>,
     last_setpoint_sent_ns: Option<u64>,
     last_heartbeat_sent_ns: Option<u64>,
+    /// When a HEARTBEAT was last asked for (telemetry heard, no heartbeat yet).
+    heartbeat_asked_ns: Option<u64>,
     intervals_requested: bool,
     parse_errors: u32,
     state_seq: u64,
@@ -341,6 +346,7 @@ impl Px4Link {
             mode_accepted: None,
             last_setpoint_sent_ns: None,
             last_heartbeat_sent_ns: None,
+            heartbeat_asked_ns: None,
             intervals_requested: false,
             parse_errors: 0,
             state_seq: 0,
@@ -513,6 +519,13 @@ impl Px4Link {
                 if origin.is_finite() {
                     self.telemetry.origin_amsl_from_home = Some(origin);
                 }
+                // The autopilot's own home (PX4 sets it where it armed, and repeats it
+                // every 2 s): a px4-link restarted in the air centres its geofence there
+                // rather than where it first heard the vehicle.
+                let home = enu_from_ned([f64::from(h.x), f64::from(h.y), f64::from(h.z)]);
+                if home.iter().all(|v| v.is_finite()) {
+                    self.home = Some(home);
+                }
             }
             MavMessage::GLOBAL_POSITION_INT(g) => {
                 self.telemetry.global_alt_amsl = Some(f64::from(g.alt) * 1e-3);
@@ -641,6 +654,21 @@ impl Px4Link {
                 system_status: MavState::MAV_STATE_ACTIVE,
                 mavlink_version: 3,
             }));
+        }
+        // The autopilot is heard but its heartbeat (1 Hz) not yet: a restarted px4-link
+        // asks for one at once rather than fly up to a second without the vehicle's
+        // mode and arming (REQUEST_MESSAGE, answered by PX4 and the simulator alike).
+        if !self.connected(now_ns)
+            && self.telemetry.last_seq.is_some()
+            && self
+                .heartbeat_asked_ns
+                .is_none_or(|t| now_ns.saturating_sub(t) >= HEARTBEAT_ASK_NS)
+        {
+            self.heartbeat_asked_ns = Some(now_ns);
+            self.out.push(self.command_long(
+                MavCmd::MAV_CMD_REQUEST_MESSAGE,
+                [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            ));
         }
         if !self.intervals_requested && self.connected(now_ns) {
             self.intervals_requested = true;

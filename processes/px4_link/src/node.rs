@@ -282,6 +282,11 @@ impl LinkNode {
     pub fn autopilot_clock(&self) -> &crate::clock::AutopilotClock {
         self.link.autopilot_clock()
     }
+
+    /// The point the geofence is centred on (ENU).
+    pub fn home(&self) -> Option<nalgebra::Vector3<f64>> {
+        self.link.home()
+    }
 }
 
 /// The link request a [`LinkRequest`] asks for, or `None` when it cannot be read.

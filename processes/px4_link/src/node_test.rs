@@ -553,3 +553,60 @@ fn two_lost_heartbeats_in_a_row_keep_the_link_connected_and_a_third_does_not() {
         "three beats lost"
     );
 }
+
+#[test]
+fn a_restarted_link_that_hears_telemetry_asks_for_a_heartbeat_at_once() {
+    // Restarted in the air, px4-link hears PX4's 50 Hz telemetry at once but its 1 Hz
+    // heartbeat (mode, arming) up to a second later: it asks for one instead of waiting.
+    let ms = 1_000_000;
+    let mut node = LinkNode::new(LinkSettings::default());
+    let asks = |out: &[MavMessage]| {
+        out.iter()
+            .filter(|m| {
+                matches!(m, MavMessage::COMMAND_LONG(c)
+                    if c.command == MavCmd::MAV_CMD_REQUEST_MESSAGE && c.param1 == 0.0)
+            })
+            .count()
+    };
+    assert_eq!(asks(node.poll(0)), 0, "nothing heard: nothing asked");
+    telemetry(&mut node, 10 * ms);
+    assert_eq!(asks(node.poll(10 * ms)), 1, "asked at once");
+    assert_eq!(asks(node.poll(100 * ms)), 0, "not again within 200 ms");
+    assert_eq!(asks(node.poll(210 * ms)), 1, "again after 200 ms");
+    node.on_message(230 * ms, &PX4, &heartbeat());
+    assert!(node.status(230 * ms).connected);
+    for t in (240..2_000).step_by(10) {
+        telemetry(&mut node, t * ms);
+        assert_eq!(
+            asks(node.poll(t * ms)),
+            0,
+            "connected: never asked at {t} ms"
+        );
+    }
+}
+
+#[test]
+fn the_autopilots_home_centres_the_geofence_of_a_link_restarted_in_the_air() {
+    let mut node = LinkNode::new(LinkSettings::default());
+    node.on_message(
+        0,
+        &PX4,
+        &MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
+            x: 10.0,
+            y: 20.0,
+            z: -3.0,
+            ..Default::default()
+        }),
+    );
+    assert_eq!(
+        node.home(),
+        Some(nalgebra::Vector3::new(20.0, 10.0, 3.0)),
+        "first heard"
+    );
+    node.on_message(1, &PX4, &home(500.0, 0.0));
+    assert_eq!(
+        node.home(),
+        Some(nalgebra::Vector3::new(0.0, 0.0, 0.0)),
+        "the autopilot's"
+    );
+}

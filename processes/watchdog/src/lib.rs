@@ -10,7 +10,9 @@ use ipc_types::msg::{
 
 pub mod stage;
 
-pub use stage::{WatchdogStage, WatchdogStageConfig, watched_processes};
+pub use stage::{
+    PhaseBudget, RideThroughConfig, WatchdogStage, WatchdogStageConfig, watched_processes,
+};
 use thiserror::Error;
 
 /// One supervised process.
@@ -23,6 +25,45 @@ pub struct WatchedProcess {
     /// Its loss in the air orders a safe landing (the fsm and px4-link: without them
     /// nothing flies the vehicle).
     pub critical: bool,
+    /// A death waits this long for the process to come back (systemd restarts it) before
+    /// it counts as a loss, ms; 0: a death is a loss at once.
+    pub restart_ms: f64,
+}
+
+/// How long something may be gone in each mission phase before it is a loss, ms: within
+/// it the mission flies on (the pad filter predicts, setpoints keep flowing), past it the
+/// policy applies.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Budget {
+    /// The phases with their own budget.
+    pub by_phase: Vec<(MissionState, f64)>,
+    /// Every other phase.
+    pub otherwise: f64,
+}
+
+impl Budget {
+    /// The same budget in every phase.
+    pub fn flat(ms: f64) -> Self {
+        Self {
+            by_phase: Vec::new(),
+            otherwise: ms,
+        }
+    }
+
+    /// The budget in `phase`, ms.
+    pub fn ms(&self, phase: MissionState) -> f64 {
+        self.by_phase
+            .iter()
+            .find(|(p, _)| *p == phase)
+            .map_or(self.otherwise, |(_, ms)| *ms)
+    }
+
+    fn values(&self) -> impl Iterator<Item = f64> + '_ {
+        self.by_phase
+            .iter()
+            .map(|(_, ms)| *ms)
+            .chain(std::iter::once(self.otherwise))
+    }
 }
 
 /// One data path that must keep flowing while the mission is in one of `phases`.
@@ -32,9 +73,10 @@ pub struct PathRule {
     pub topic: String,
     /// The mission states in which it must flow (empty: always, once it has started).
     pub phases: Vec<MissionState>,
-    /// Silent for longer than this is a fault, ms; infinite for a path that may rightly
-    /// stop (pad observations: the pad out of view), watched for garbage only.
-    pub max_silence_ms: f64,
+    /// Silent for longer than this in the phase it is silent in is a fault, ms; infinite
+    /// for a path that may rightly stop (pad observations: the pad out of view), watched
+    /// for garbage only.
+    pub silence: Budget,
     /// Its silence in the air orders a safe landing.
     pub critical: bool,
 }
@@ -125,6 +167,14 @@ pub enum ConfigError {
         /// The value given.
         value: f64,
     },
+    /// A restart budget outside 0 to 60000 ms.
+    #[error("restart budget of {name}: {value} ms is out of range (allowed: 0 to 60000)")]
+    BadRestart {
+        /// The process.
+        name: String,
+        /// The value given.
+        value: f64,
+    },
     /// A process or topic named twice.
     #[error("{0} is watched twice")]
     Duplicate(String),
@@ -176,6 +226,9 @@ pub struct Outputs {
     /// The order to give: a safe landing or a hold, with its reason. Given once; a hold
     /// may later become a landing.
     pub order: Option<(SafetyAction, String)>,
+    /// Processes back since the last tick after a death: name and milliseconds from the
+    /// death being found to the first heartbeat of the new process.
+    pub rejoins: Vec<(String, f64)>,
 }
 
 #[derive(Debug, Clone)]
@@ -189,6 +242,8 @@ struct ProcessState {
     cpu: Option<(u64, u64)>,
     /// CPU use between the last two measurements, percent of one core.
     cpu_percent: f64,
+    /// Times it came back after a death.
+    restarts: u32,
 }
 
 #[derive(Debug, Clone)]
@@ -210,6 +265,7 @@ pub struct Watchdog {
     airborne: bool,
     pad_fresh: bool,
     pending: Vec<(u64, Fault)>,
+    rejoins: Vec<(String, f64)>,
     order: Option<SafetyAction>,
     order_ns: u64,
     faults: u32,
@@ -224,15 +280,26 @@ impl Watchdog {
             return Err(ConfigError::TooMany(cfg.processes.len()));
         }
         let mut names: Vec<&str> = Vec::new();
+        let named = cfg
+            .processes
+            .iter()
+            .map(|p| &p.name)
+            .chain(cfg.paths.iter().map(|r| &r.topic));
+        for name in named {
+            if names.contains(&name.as_str()) {
+                return Err(ConfigError::Duplicate(name.clone()));
+            }
+            names.push(name);
+        }
         let limits = cfg
             .processes
             .iter()
             .map(|p| ("heartbeat deadline", &p.name, p.deadline_ms))
-            .chain(
-                cfg.paths
-                    .iter()
-                    .map(|r| ("silence limit", &r.topic, r.max_silence_ms)),
-            );
+            .chain(cfg.paths.iter().flat_map(|r| {
+                r.silence
+                    .values()
+                    .map(move |ms| ("silence limit", &r.topic, ms))
+            }));
         for (what, name, value) in limits {
             if value <= 0.0 || value.is_nan() {
                 return Err(ConfigError::BadLimit {
@@ -241,10 +308,16 @@ impl Watchdog {
                     value,
                 });
             }
-            if names.contains(&name.as_str()) {
-                return Err(ConfigError::Duplicate(name.clone()));
-            }
-            names.push(name);
+        }
+        if let Some(p) = cfg
+            .processes
+            .iter()
+            .find(|p| !(0.0..=60_000.0).contains(&p.restart_ms))
+        {
+            return Err(ConfigError::BadRestart {
+                name: p.name.clone(),
+                value: p.restart_ms,
+            });
         }
         Ok(Self {
             processes: vec![
@@ -256,6 +329,7 @@ impl Watchdog {
                     decided: false,
                     cpu: None,
                     cpu_percent: 0.0,
+                    restarts: 0,
                 };
                 cfg.processes.len()
             ],
@@ -274,6 +348,7 @@ impl Watchdog {
             airborne: false,
             pad_fresh: false,
             pending: Vec::new(),
+            rejoins: Vec::new(),
             order: None,
             order_ns: 0,
             faults: 0,
@@ -283,10 +358,16 @@ impl Watchdog {
     }
 
     /// A heartbeat of `process` at `now_ns`. A process that beats again after a hang
-    /// is alive again; a dead one that beats was restarted.
+    /// is alive again; a dead one that beats was restarted (within its restart budget,
+    /// its death was never a loss).
     pub fn beat(&mut self, process: &str, now_ns: u64) {
         if let Some(k) = self.process_index(process) {
             let p = &mut self.processes[k];
+            if p.liveness == Liveness::Dead {
+                p.restarts = p.restarts.saturating_add(1);
+                let after_ms = now_ns.saturating_sub(p.fault_ns.unwrap_or(now_ns)) as f64 * 1e-6;
+                self.rejoins.push((process.to_string(), after_ms));
+            }
             p.last_beat_ns = Some(now_ns);
             p.liveness = Liveness::Alive;
             p.decided = false;
@@ -391,8 +472,9 @@ impl Watchdog {
                 path.last_ns.unwrap_or(0).max(self.phase_since_ns)
             };
             let started = path.last_ns.is_some() || !r.phases.is_empty();
-            let silent =
-                needed && started && now_ns.saturating_sub(since) as f64 * 1e-6 > r.max_silence_ms;
+            let silent = needed
+                && started
+                && now_ns.saturating_sub(since) as f64 * 1e-6 > r.silence.ms(self.phase);
             if silent && !path.silent {
                 self.pending.push((now_ns, Fault::Silent(r.topic.clone())));
             }
@@ -405,12 +487,13 @@ impl Watchdog {
         self.faults = self.faults.saturating_add(faults.len() as u32);
         let mut out = Outputs {
             faults,
+            rejoins: std::mem::take(&mut self.rejoins),
             ..Outputs::default()
         };
         if !self.airborne {
             return out;
         }
-        for (fault, critical) in self.undecided() {
+        for (fault, critical) in self.undecided(now_ns) {
             let action = match (critical, self.cfg.policy.action(self.phase)) {
                 (true, _) => Action::Land,
                 (false, Action::Continue) if !self.pad_fresh => Action::Land,
@@ -457,11 +540,17 @@ impl Watchdog {
     }
 
     /// The standing faults not decided yet, each with whether it is critical; marked
-    /// decided.
-    fn undecided(&mut self) -> Vec<(Fault, bool)> {
+    /// decided. A dead process is decided only once its restart budget has passed.
+    fn undecided(&mut self, now_ns: u64) -> Vec<(Fault, bool)> {
         let mut v = Vec::new();
         for (w, p) in self.cfg.processes.iter().zip(self.processes.iter_mut()) {
             let fault = match p.liveness {
+                Liveness::Dead
+                    if now_ns.saturating_sub(p.fault_ns.unwrap_or(0)) as f64 * 1e-6
+                        < w.restart_ms =>
+                {
+                    continue;
+                }
                 Liveness::Dead => Fault::Dead(w.name.clone()),
                 Liveness::Hung => Fault::Hung(w.name.clone()),
                 Liveness::Starting | Liveness::Alive => continue,
@@ -514,7 +603,7 @@ impl Watchdog {
                 name: Text::new(&w.name),
                 liveness: p.liveness as u32,
                 missed_deadlines: p.missed,
-                reserved: 0,
+                restarts: p.restarts,
                 last_heartbeat_ns: p.last_beat_ns.unwrap_or(0),
                 fault_ns: p.fault_ns.unwrap_or(0),
                 cpu_ns: p.cpu.map_or(0, |(_, c)| c),

@@ -7,6 +7,7 @@ fn process(name: &str, critical: bool) -> WatchedProcess {
         name: name.into(),
         deadline_ms: 500.0,
         critical,
+        restart_ms: 0.0,
     }
 }
 
@@ -21,13 +22,13 @@ fn watchdog() -> Watchdog {
             PathRule {
                 topic: "pad/observation".into(),
                 phases: vec![MissionState::Descend, MissionState::Land],
-                max_silence_ms: 300.0,
+                silence: Budget::flat(300.0),
                 critical: false,
             },
             PathRule {
                 topic: "fsm/setpoint".into(),
                 phases: Vec::new(),
-                max_silence_ms: 200.0,
+                silence: Budget::flat(200.0),
                 critical: true,
             },
         ],
@@ -332,4 +333,103 @@ fn the_view_shows_each_processs_cpu_use_between_its_last_two_measurements() {
     assert_eq!(health(&w, "fsm").cpu_percent, 0.0);
     // A process the watchdog does not watch is ignored.
     w.cpu("nobody", 3_000 * MS, 5 * MS);
+}
+
+/// The test's watchdog with a 600 ms restart budget for every process and telemetry
+/// allowed 1500 ms of silence, 500 in the touchdown.
+fn riding_through() -> Watchdog {
+    let cfg = WatchdogConfig {
+        processes: ["fsm", "px4-link", "planner"]
+            .iter()
+            .map(|n| WatchedProcess {
+                restart_ms: 600.0,
+                ..process(n, *n != "planner")
+            })
+            .collect(),
+        paths: vec![PathRule {
+            topic: "vehicle/state".into(),
+            phases: Vec::new(),
+            silence: Budget {
+                by_phase: vec![(MissionState::Land, 500.0)],
+                otherwise: 1500.0,
+            },
+            critical: true,
+        }],
+        policy: Policy::default(),
+    };
+    Watchdog::new(cfg).unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn a_px4_link_restarted_within_its_budget_is_no_loss() {
+    let mut w = riding_through();
+    w.mission(MissionState::Land, true, true, 0);
+    healthy(&mut w, 0, 1_000);
+    w.died("px4-link", 1_000 * MS);
+    let o = w.tick(1_000 * MS);
+    assert_eq!(o.faults, vec![(1_000 * MS, Fault::Dead("px4-link".into()))]);
+    assert!(o.order.is_none() && o.decisions.is_empty(), "{o:?}");
+    assert!(w.tick(1_290 * MS).order.is_none());
+    w.beat("px4-link", 1_300 * MS);
+    let o = w.tick(1_310 * MS);
+    assert_eq!(o.rejoins, vec![("px4-link".to_string(), 300.0)]);
+    for t in (1_320..3_000).step_by(10) {
+        w.beat("px4-link", t * MS);
+        let o = w.tick(t * MS);
+        assert!(o.order.is_none() && o.decisions.is_empty(), "{t} ms: {o:?}");
+    }
+    let v = w.view();
+    assert_eq!(v.processes[1].restarts, 1);
+    assert_eq!(v.processes[1].liveness, Liveness::Alive as u32);
+    assert!(!w.ordered());
+}
+
+#[test]
+fn a_px4_link_not_back_within_its_budget_lands() {
+    let mut w = riding_through();
+    w.mission(MissionState::Track, true, true, 0);
+    healthy(&mut w, 0, 1_000);
+    w.died("px4-link", 1_000 * MS);
+    assert!(w.tick(1_590 * MS).order.is_none(), "within the budget");
+    let o = w.tick(1_600 * MS);
+    assert_eq!(
+        o.order,
+        Some((SafetyAction::SafeLand, "px4-link died".into()))
+    );
+    assert_eq!(o.decisions[0].why, "px4-link died: land (critical)");
+}
+
+#[test]
+fn telemetry_silence_is_judged_by_the_budget_of_the_phase() {
+    let mut w = riding_through();
+    w.mission(MissionState::Track, true, true, 0);
+    w.message("vehicle/state", 0, true);
+    assert!(
+        w.tick(1_000 * MS).faults.is_empty(),
+        "1 s while tracking: ridden through"
+    );
+    w.message("vehicle/state", 1_000 * MS, true);
+    assert!(
+        w.tick(2_500 * MS).faults.is_empty(),
+        "at the budget: not yet"
+    );
+    let o = w.tick(2_510 * MS);
+    assert_eq!(
+        o.faults,
+        vec![(2_510 * MS, Fault::Silent("vehicle/state".into()))]
+    );
+    assert!(o.order.is_some());
+
+    let mut w = riding_through();
+    w.mission(MissionState::Land, true, true, 0);
+    w.message("vehicle/state", 0, true);
+    let o = w.tick(510 * MS);
+    assert_eq!(
+        o.faults,
+        vec![(510 * MS, Fault::Silent("vehicle/state".into()))]
+    );
+    assert_eq!(
+        o.order,
+        Some((SafetyAction::SafeLand, "vehicle/state silent".into()))
+    );
 }

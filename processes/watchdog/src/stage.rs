@@ -13,7 +13,7 @@ use serde::Deserialize;
 use stack_config::{Invalid, Validate, check_range};
 use stage::{Counter, Input, Message, Outbox, Stage, StageError};
 
-use crate::{Action, PathRule, Policy, Watchdog, WatchdogConfig, WatchedProcess};
+use crate::{Action, Budget, PathRule, Policy, Watchdog, WatchdogConfig, WatchedProcess};
 
 /// The processes whose loss in the air always lands: nothing else flies the vehicle.
 pub const CRITICAL: &[&str] = &["fsm", "px4-link"];
@@ -29,17 +29,129 @@ pub struct WatchdogStageConfig {
     pub node_poll_ms: u64,
     /// How often the view is published (and a standing order repeated), ms.
     pub view_period_ms: u64,
-    /// The autopilot's telemetry (new telemetry in vehicle/state) silent this long in the
-    /// air: land, ms.
-    pub state_silence_ms: f64,
-    /// Setpoints silent this long while the fsm flies offboard: land, ms.
-    pub setpoint_silence_ms: f64,
-    /// Camera frames silent this long: the policy's action, ms.
-    pub camera_silence_ms: f64,
+    /// How long each path and a dead process may be gone before it is a loss.
+    pub ride_through: RideThroughConfig,
     /// The fsm's pad estimate counts as fresh this long after the last observation, ms.
     pub pad_fresh_ms: f64,
     /// What to do about a non-critical loss in the air, per phase.
     pub policy: PolicyConfig,
+}
+
+/// `[watchdog.ride_through]`: a short outage is flown through, a longer one is a loss
+/// (docs/faults.md says why each budget is what it is).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RideThroughConfig {
+    /// A watched process found dead waits this long for its restart (systemd's
+    /// RestartSec and the process's start) before it is a loss, ms; 0: at once.
+    pub restart_ms: f64,
+    /// The autopilot's telemetry (new telemetry in vehicle/state) in the air, ms
+    /// (critical: past it, land).
+    pub telemetry_ms: PhaseBudget,
+    /// Setpoints while the fsm flies offboard, ms (critical: past it, land).
+    pub setpoints_ms: PhaseBudget,
+    /// Camera frames, ms (past it, the policy's action).
+    pub camera_ms: PhaseBudget,
+}
+
+/// A budget per mission phase, ms: `default` for every phase not named.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PhaseBudget {
+    /// Every phase not named.
+    pub default: f64,
+    /// Taking off.
+    pub takeoff: Option<f64>,
+    /// Going to the preset point.
+    pub go_to_preset: Option<f64>,
+    /// Waiting for the pad there.
+    pub wait_for_pad: Option<f64>,
+    /// Tracking the pad.
+    pub track: Option<f64>,
+    /// Following where the pad should be.
+    pub lost: Option<f64>,
+    /// Descending onto the pad.
+    pub descend: Option<f64>,
+    /// The touchdown.
+    pub land: Option<f64>,
+}
+
+impl PhaseBudget {
+    /// `ms` in every phase.
+    pub const fn flat(ms: f64) -> Self {
+        Self {
+            default: ms,
+            takeoff: None,
+            go_to_preset: None,
+            wait_for_pad: None,
+            track: None,
+            lost: None,
+            descend: None,
+            land: None,
+        }
+    }
+
+    fn named(&self) -> [(MissionState, Option<f64>); 7] {
+        use MissionState as M;
+        [
+            (M::Takeoff, self.takeoff),
+            (M::GoToPreset, self.go_to_preset),
+            (M::WaitForPad, self.wait_for_pad),
+            (M::Track, self.track),
+            (M::Lost, self.lost),
+            (M::Descend, self.descend),
+            (M::Land, self.land),
+        ]
+    }
+
+    /// As the library's budget.
+    pub fn budget(&self) -> Budget {
+        Budget {
+            by_phase: self
+                .named()
+                .into_iter()
+                .filter_map(|(p, ms)| ms.map(|ms| (p, ms)))
+                .collect(),
+            otherwise: self.default,
+        }
+    }
+
+    fn validate(&self, key: &str) -> Result<(), Invalid> {
+        check_range(&format!("{key}.default"), self.default, 10.0, 60_000.0)?;
+        for (phase, ms) in self.named() {
+            if let Some(ms) = ms {
+                check_range(&format!("{key}.{}", phase.name()), ms, 10.0, 60_000.0)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Default for RideThroughConfig {
+    /// Why each number: docs/faults.md, "Riding through".
+    fn default() -> Self {
+        Self {
+            restart_ms: 600.0,
+            telemetry_ms: PhaseBudget {
+                land: Some(500.0),
+                ..PhaseBudget::flat(1500.0)
+            },
+            setpoints_ms: PhaseBudget::flat(700.0),
+            camera_ms: PhaseBudget {
+                land: Some(1000.0),
+                ..PhaseBudget::flat(2500.0)
+            },
+        }
+    }
+}
+
+impl Validate for RideThroughConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        check_range("ride_through.restart_ms", self.restart_ms, 0.0, 60_000.0)?;
+        self.telemetry_ms.validate("ride_through.telemetry_ms")?;
+        self.setpoints_ms.validate("ride_through.setpoints_ms")?;
+        self.camera_ms.validate("ride_through.camera_ms")
+    }
 }
 
 /// `[watchdog.policy]`: "land", "hold" or "continue" for the descent and the touchdown,
@@ -72,9 +184,7 @@ impl Default for WatchdogStageConfig {
             tick_ms: 10,
             node_poll_ms: 20,
             view_period_ms: 200,
-            state_silence_ms: 500.0,
-            setpoint_silence_ms: 500.0,
-            camera_silence_ms: 1000.0,
+            ride_through: RideThroughConfig::default(),
             pad_fresh_ms: 500.0,
             policy: PolicyConfig::default(),
         }
@@ -86,15 +196,8 @@ impl Validate for WatchdogStageConfig {
         check_range("tick_ms", self.tick_ms, 1, 1000)?;
         check_range("node_poll_ms", self.node_poll_ms, 1, 1000)?;
         check_range("view_period_ms", self.view_period_ms, 10, 10_000)?;
-        for (k, v) in [
-            ("state_silence_ms", self.state_silence_ms),
-            ("setpoint_silence_ms", self.setpoint_silence_ms),
-            ("camera_silence_ms", self.camera_silence_ms),
-            ("pad_fresh_ms", self.pad_fresh_ms),
-        ] {
-            check_range(k, v, 10.0, 60_000.0)?;
-        }
-        Ok(())
+        check_range("pad_fresh_ms", self.pad_fresh_ms, 10.0, 60_000.0)?;
+        self.ride_through.validate()
     }
 }
 
@@ -111,32 +214,33 @@ impl WatchdogStageConfig {
                     name: name.clone(),
                     deadline_ms: *deadline_ms,
                     critical: CRITICAL.contains(&name.as_str()),
+                    restart_ms: self.ride_through.restart_ms,
                 })
                 .collect(),
             paths: vec![
                 PathRule {
                     topic: topics::VEHICLE_STATE.into(),
                     phases: Vec::new(),
-                    max_silence_ms: self.state_silence_ms,
+                    silence: self.ride_through.telemetry_ms.budget(),
                     critical: true,
                 },
                 PathRule {
                     topic: topics::FSM_SETPOINT.into(),
                     phases: offboard,
-                    max_silence_ms: self.setpoint_silence_ms,
+                    silence: self.ride_through.setpoints_ms.budget(),
                     critical: true,
                 },
                 PathRule {
                     topic: topics::CAMERA_FRAME.into(),
                     phases: Vec::new(),
-                    max_silence_ms: self.camera_silence_ms,
+                    silence: self.ride_through.camera_ms.budget(),
                     critical: false,
                 },
                 // Observations stop whenever the pad is out of view: garbage only.
                 PathRule {
                     topic: topics::PAD_OBSERVATION.into(),
                     phases: Vec::new(),
-                    max_silence_ms: f64::INFINITY,
+                    silence: Budget::flat(f64::INFINITY),
                     critical: false,
                 },
             ],
@@ -304,7 +408,13 @@ impl Stage for WatchdogStage {
                 (topics::VEHICLE_STATE, sane)
             }
             Message::FsmStatus(s) => {
-                self.phase = MissionState::from_raw(s.state).unwrap_or(self.phase);
+                // An fsm in Idle in the air is a restarted one: the mission is still in
+                // the state it was in, which the view keeps for the new fsm to resume.
+                match MissionState::from_raw(s.state) {
+                    Some(MissionState::Idle) if self.airborne => {}
+                    Some(p) => self.phase = p,
+                    None => {}
+                }
                 self.pad_valid = s.pad_valid == 1;
                 (topics::FSM_STATUS, true)
             }
@@ -333,6 +443,9 @@ impl Stage for WatchdogStage {
         for (_, f) in &o.faults {
             self.counts.faults += 1;
             tracing::warn!(fault = %f.describe(), "watchdog: fault");
+        }
+        for (p, ms) in &o.rejoins {
+            tracing::info!(process = p.as_str(), after_ms = ms, "watchdog: rejoined");
         }
         for d in &o.decisions {
             tracing::warn!(action = d.action.name(), "watchdog: {}", d.why);
