@@ -12,7 +12,7 @@ export CARGO_TERM_COLOR ?= never
 help:
 	@echo "make demo   install what is missing, build (release), run the simulated mission"
 	@echo "make test   install what is missing, then run every check and test"
-	@echo "make faults the whole fault matrix (make test flies half of it per run)"
+	@echo "make faults the whole fault matrix (make test flies a quarter of it per run)"
 
 bootstrap:
 	@missing=""; \
@@ -76,7 +76,7 @@ peers:
 	python3 tests/peers/foxglove_reader.py target/peers/processes.mcap
 	@rm -rf target/peers
 
-# The whole fault matrix (44 flights, about 16 minutes); make test flies one half of
+# The whole fault matrix (74 flights, about 27 minutes); make test flies one part of four of
 # it per run (tools/landing/tests/faults.rs).
 faults: build
 	FAULT_MATRIX=full $(CARGO) test --release -p landing --test faults -- --nocapture

@@ -1097,6 +1097,9 @@ pub struct ProcessHealth {
     pub cpu_ns: u64,
     /// Its CPU use between the last two measurements, percent of one core.
     pub cpu_percent: f64,
+    /// When it first beat after its last death (monotonic ns): back in the graph; 0 when
+    /// never restarted.
+    pub rejoined_ns: u64,
 }
 
 /// The watchdog's view of the whole stack.

@@ -77,6 +77,9 @@ pub struct PathRule {
     /// for a path that may rightly stop (pad observations: the pad out of view), watched
     /// for garbage only.
     pub silence: Budget,
+    /// Carrying only garbage for longer than this is a loss, ms (garbage is reported at
+    /// once; a moment of it, dropped by its readers, is flown through).
+    pub garbage: Budget,
     /// Its silence in the air orders a safe landing.
     pub critical: bool,
 }
@@ -244,13 +247,16 @@ struct ProcessState {
     cpu_percent: f64,
     /// Times it came back after a death.
     restarts: u32,
+    /// When it first beat after its last death.
+    rejoined_ns: u64,
 }
 
 #[derive(Debug, Clone)]
 struct PathState {
     last_ns: Option<u64>,
     silent: bool,
-    garbage: bool,
+    /// Since when it has carried only garbage.
+    garbage_since: Option<u64>,
     decided: bool,
 }
 
@@ -296,9 +302,15 @@ impl Watchdog {
             .iter()
             .map(|p| ("heartbeat deadline", &p.name, p.deadline_ms))
             .chain(cfg.paths.iter().flat_map(|r| {
-                r.silence
+                let silence = r
+                    .silence
                     .values()
-                    .map(move |ms| ("silence limit", &r.topic, ms))
+                    .map(move |ms| ("silence limit", &r.topic, ms));
+                let garbage = r
+                    .garbage
+                    .values()
+                    .map(move |ms| ("garbage limit", &r.topic, ms));
+                silence.chain(garbage)
             }));
         for (what, name, value) in limits {
             if value <= 0.0 || value.is_nan() {
@@ -330,6 +342,7 @@ impl Watchdog {
                     cpu: None,
                     cpu_percent: 0.0,
                     restarts: 0,
+                    rejoined_ns: 0,
                 };
                 cfg.processes.len()
             ],
@@ -337,7 +350,7 @@ impl Watchdog {
                 PathState {
                     last_ns: None,
                     silent: false,
-                    garbage: false,
+                    garbage_since: None,
                     decided: false,
                 };
                 cfg.paths.len()
@@ -365,6 +378,7 @@ impl Watchdog {
             let p = &mut self.processes[k];
             if p.liveness == Liveness::Dead {
                 p.restarts = p.restarts.saturating_add(1);
+                p.rejoined_ns = now_ns;
                 let after_ms = now_ns.saturating_sub(p.fault_ns.unwrap_or(now_ns)) as f64 * 1e-6;
                 self.rejoins.push((process.to_string(), after_ms));
             }
@@ -412,17 +426,17 @@ impl Watchdog {
         };
         let path = &mut self.paths[k];
         if !sane {
-            if !path.garbage {
-                path.garbage = true;
+            if path.garbage_since.is_none() {
+                path.garbage_since = Some(now_ns);
                 self.pending
                     .push((now_ns, Fault::Garbage(topic.to_string())));
             }
             return;
         }
-        if path.garbage || path.silent {
+        if path.garbage_since.is_some() || path.silent {
             path.decided = false;
         }
-        path.garbage = false;
+        path.garbage_since = None;
         path.last_ns = Some(now_ns);
         path.silent = false;
     }
@@ -560,8 +574,12 @@ impl Watchdog {
                 v.push((fault, w.critical));
             }
         }
+        let phase = self.phase;
         for (r, s) in self.cfg.paths.iter().zip(self.paths.iter_mut()) {
-            let fault = if s.garbage {
+            let garbage_lost = s
+                .garbage_since
+                .is_some_and(|t| now_ns.saturating_sub(t) as f64 * 1e-6 > r.garbage.ms(phase));
+            let fault = if garbage_lost {
                 Fault::Garbage(r.topic.clone())
             } else if s.silent {
                 Fault::Silent(r.topic.clone())
@@ -608,6 +626,7 @@ impl Watchdog {
                 fault_ns: p.fault_ns.unwrap_or(0),
                 cpu_ns: p.cpu.map_or(0, |(_, c)| c),
                 cpu_percent: p.cpu_percent,
+                rejoined_ns: p.rejoined_ns,
             };
         }
         v

@@ -23,12 +23,14 @@ fn watchdog() -> Watchdog {
                 topic: "pad/observation".into(),
                 phases: vec![MissionState::Descend, MissionState::Land],
                 silence: Budget::flat(300.0),
+                garbage: Budget::flat(100.0),
                 critical: false,
             },
             PathRule {
                 topic: "fsm/setpoint".into(),
                 phases: Vec::new(),
                 silence: Budget::flat(200.0),
+                garbage: Budget::flat(100.0),
                 critical: true,
             },
         ],
@@ -210,9 +212,32 @@ fn setpoints_that_stop_or_turn_to_garbage_in_the_air_order_a_landing() {
         o.faults,
         vec![(1_000 * MS, Fault::Garbage("fsm/setpoint".into()))]
     );
+    assert!(
+        o.order.is_none(),
+        "reported at once, a loss after its budget"
+    );
+    for t in (1_020..=1_100).step_by(20) {
+        w.message("fsm/setpoint", t * MS, false);
+        assert!(w.tick(t * MS).order.is_none(), "{t} ms: within 100 ms");
+    }
+    w.message("fsm/setpoint", 1_120 * MS, false);
+    let o = w.tick(1_120 * MS);
     assert_eq!(
         o.order,
         Some((SafetyAction::SafeLand, "garbage on fsm/setpoint".into()))
+    );
+
+    // A moment of garbage, then good setpoints again: flown through.
+    let mut w = watchdog();
+    w.mission(MissionState::Track, true, true, 0);
+    healthy(&mut w, 0, 1_000);
+    w.message("fsm/setpoint", 1_000 * MS, false);
+    w.message("fsm/setpoint", 1_060 * MS, false);
+    assert!(w.tick(1_060 * MS).order.is_none());
+    let out = healthy(&mut w, 1_080, 2_000);
+    assert!(
+        out.iter()
+            .all(|o| o.order.is_none() && o.decisions.is_empty())
     );
 
     let mut w = watchdog();
@@ -353,11 +378,21 @@ fn riding_through() -> Watchdog {
                 by_phase: vec![(MissionState::Land, 500.0)],
                 otherwise: 1500.0,
             },
+            garbage: Budget::flat(1500.0),
             critical: true,
         }],
         policy: Policy::default(),
     };
     Watchdog::new(cfg).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Every process but `except` beats at `t_ms`.
+fn beat_but(w: &mut Watchdog, t_ms: u64, except: &str) {
+    for p in ["fsm", "px4-link", "planner"] {
+        if p != except {
+            w.beat(p, t_ms * MS);
+        }
+    }
 }
 
 #[test]
@@ -369,12 +404,15 @@ fn a_px4_link_restarted_within_its_budget_is_no_loss() {
     let o = w.tick(1_000 * MS);
     assert_eq!(o.faults, vec![(1_000 * MS, Fault::Dead("px4-link".into()))]);
     assert!(o.order.is_none() && o.decisions.is_empty(), "{o:?}");
-    assert!(w.tick(1_290 * MS).order.is_none());
+    for t in (1_010..1_300).step_by(10) {
+        beat_but(&mut w, t, "px4-link");
+        assert!(w.tick(t * MS).order.is_none());
+    }
     w.beat("px4-link", 1_300 * MS);
-    let o = w.tick(1_310 * MS);
+    let o = w.tick(1_300 * MS);
     assert_eq!(o.rejoins, vec![("px4-link".to_string(), 300.0)]);
-    for t in (1_320..3_000).step_by(10) {
-        w.beat("px4-link", t * MS);
+    for t in (1_310..3_000).step_by(10) {
+        beat_but(&mut w, t, "");
         let o = w.tick(t * MS);
         assert!(o.order.is_none() && o.decisions.is_empty(), "{t} ms: {o:?}");
     }
@@ -390,7 +428,10 @@ fn a_px4_link_not_back_within_its_budget_lands() {
     w.mission(MissionState::Track, true, true, 0);
     healthy(&mut w, 0, 1_000);
     w.died("px4-link", 1_000 * MS);
-    assert!(w.tick(1_590 * MS).order.is_none(), "within the budget");
+    for t in (1_000..1_600).step_by(10) {
+        beat_but(&mut w, t, "px4-link");
+        assert!(w.tick(t * MS).order.is_none(), "{t} ms: within the budget");
+    }
     let o = w.tick(1_600 * MS);
     assert_eq!(
         o.order,

@@ -52,6 +52,9 @@ pub struct RideThroughConfig {
     pub setpoints_ms: PhaseBudget,
     /// Camera frames, ms (past it, the policy's action).
     pub camera_ms: PhaseBudget,
+    /// Pad observations carrying only garbage, ms (their silence is no fault: the pad
+    /// may be out of view; past it, the policy's action).
+    pub observations_ms: PhaseBudget,
 }
 
 /// A budget per mission phase, ms: `default` for every phase not named.
@@ -141,6 +144,7 @@ impl Default for RideThroughConfig {
                 land: Some(1000.0),
                 ..PhaseBudget::flat(2500.0)
             },
+            observations_ms: PhaseBudget::flat(1000.0),
         }
     }
 }
@@ -150,7 +154,9 @@ impl Validate for RideThroughConfig {
         check_range("ride_through.restart_ms", self.restart_ms, 0.0, 60_000.0)?;
         self.telemetry_ms.validate("ride_through.telemetry_ms")?;
         self.setpoints_ms.validate("ride_through.setpoints_ms")?;
-        self.camera_ms.validate("ride_through.camera_ms")
+        self.camera_ms.validate("ride_through.camera_ms")?;
+        self.observations_ms
+            .validate("ride_through.observations_ms")
     }
 }
 
@@ -222,18 +228,21 @@ impl WatchdogStageConfig {
                     topic: topics::VEHICLE_STATE.into(),
                     phases: Vec::new(),
                     silence: self.ride_through.telemetry_ms.budget(),
+                    garbage: self.ride_through.telemetry_ms.budget(),
                     critical: true,
                 },
                 PathRule {
                     topic: topics::FSM_SETPOINT.into(),
                     phases: offboard,
                     silence: self.ride_through.setpoints_ms.budget(),
+                    garbage: self.ride_through.setpoints_ms.budget(),
                     critical: true,
                 },
                 PathRule {
                     topic: topics::CAMERA_FRAME.into(),
                     phases: Vec::new(),
                     silence: self.ride_through.camera_ms.budget(),
+                    garbage: self.ride_through.camera_ms.budget(),
                     critical: false,
                 },
                 // Observations stop whenever the pad is out of view: garbage only.
@@ -241,6 +250,7 @@ impl WatchdogStageConfig {
                     topic: topics::PAD_OBSERVATION.into(),
                     phases: Vec::new(),
                     silence: Budget::flat(f64::INFINITY),
+                    garbage: self.ride_through.observations_ms.budget(),
                     critical: false,
                 },
             ],

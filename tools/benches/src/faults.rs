@@ -1,13 +1,16 @@
 //! `landing bench faults`: the fault matrix. Every process the watchdog watches is killed
-//! (SIGKILL) and stopped (SIGSTOP: a hang), the camera frames and pad observations are
-//! delayed, half dropped and corrupted (in the publishers' ports), and the world fails
-//! (the camera unplugged, the telemetry lost, noise on the MAVLink port), while the fsm
-//! tracks and while it descends, one `landing run --processes --inject` flight each; each row says how the flight
-//! ended, how long the watchdog took to find the fault and to order, and what it decided.
-//! The headline: fault -> safe-land order, p50 / p95 / max, for dead and for hung
-//! processes, over the rows whose fault the watchdog landed for. A row it decided to
-//! `continue` (over the pad) may still see an order later, for a later fault (the camera
-//! path falling silent once the pad estimate is stale): shown in its row, not in the
+//! (SIGKILL), stopped (SIGSTOP: a hang) and restarted (SIGKILL, then started again at
+//! once, as systemd's `Restart=on-failure` does); the camera frames and pad observations
+//! are delayed, half dropped and corrupted (for good, and for half a second: in the
+//! publishers' ports); and the world fails (the camera unplugged and the telemetry lost
+//! for 0.5, 1 and 2 s, the pad hidden, noise on the MAVLink port), while the fsm tracks
+//! and while it descends (a restart also in the touchdown), one `landing run --processes
+//! --inject` flight each. Each row says how the flight ended, how long the watchdog took
+//! to find the fault, to order, and (a restart) until the new process was back in the
+//! graph, and what it decided. The headline: fault -> safe-land order, p50 / p95 / max,
+//! for dead and for hung processes, over the rows whose fault the watchdog landed for,
+//! and death -> rejoin for the restarts. A row it decided to `continue` (over the pad)
+//! may still see an order later, for a later fault: shown in its row, not in the
 //! headline.
 
 use std::path::PathBuf;
@@ -32,28 +35,31 @@ pub struct FaultsArgs {
     /// The processes to fault (default: every process the watchdog watches).
     #[arg(long, value_delimiter = ',')]
     processes: Vec<String>,
-    /// The faults to each process, each `kill` or `stop` (`--faults ''`: none).
-    #[arg(long, value_delimiter = ',', default_value = "kill,stop")]
+    /// The faults to each process, each `kill`, `stop` or `restart` (`--faults ''`: none).
+    #[arg(long, value_delimiter = ',', default_value = "kill,stop,restart")]
     faults: Vec<String>,
     /// Faults in data paths and of the world, each FAULT:TARGET as `--inject` writes
     /// them: a process's outputs (camera-ingest's camera frames, aruco-pnp's pad
-    /// observations), the camera unplugged for 2 s, the pad hidden for 2 s (the camera's
-    /// images blank), the autopilot's telemetry lost for 1 s, 5000 datagrams of noise at
-    /// px4-link's port.
+    /// observations), the camera unplugged and the autopilot's telemetry lost for 0.5, 1
+    /// and 2 s, the pad hidden for 2 s (the camera's images blank), 5000 datagrams of
+    /// noise at px4-link's port.
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "delay:100:camera-ingest,drop:0.5:camera-ingest,corrupt:camera-ingest,delay:100:aruco-pnp,drop:0.5:aruco-pnp,corrupt:aruco-pnp,cut:2:sim/camera,blank:2:sim/camera,cut:1:mavlink/from-px4,garbage:5000:px4-link"
+        default_value = "delay:100:camera-ingest,drop:0.5:camera-ingest,corrupt:camera-ingest,corrupt:0.5:camera-ingest,delay:100:aruco-pnp,drop:0.5:aruco-pnp,corrupt:aruco-pnp,corrupt:0.5:aruco-pnp,cut:0.5:sim/camera,cut:1:sim/camera,cut:2:sim/camera,blank:2:sim/camera,cut:0.5:mavlink/from-px4,cut:1:mavlink/from-px4,cut:2:mavlink/from-px4,garbage:5000:px4-link"
     )]
     data_faults: Vec<String>,
     /// When, each a mission phase (`takeoff`, `track`, `descend`, `land`).
     #[arg(long, value_delimiter = ',', default_value = "track,descend")]
     phases: Vec<String>,
-    /// Fly each fault in one phase only, phase number (fault number + ROTATION) mod the
-    /// number of phases: runs with ROTATION, ROTATION+1, ... cover the matrix between
-    /// them in a fraction of the time (CI's fault test flies one such half per run).
-    #[arg(long, value_name = "ROTATION")]
-    one_phase_each: Option<u64>,
+    /// When a `restart` is flown: a restarted px4-link or fsm must finish the touchdown.
+    #[arg(long, value_delimiter = ',', default_value = "track,descend,land")]
+    restart_phases: Vec<String>,
+    /// Fly only part K of N of the matrix (every Nth flight from the Kth, K from 0): runs
+    /// with K = 0 .. N-1 cover it between them in a fraction of the time (CI's fault test
+    /// flies one part per run).
+    #[arg(long, value_name = "K/N", value_parser = parse_part)]
+    part: Option<(u64, u64)>,
     /// Print one JSON object instead of a Markdown table.
     #[arg(long)]
     json: bool,
@@ -77,6 +83,21 @@ struct Row {
     detected_after_ms: Option<f64>,
     ordered_after_ms: Option<f64>,
     action: Option<String>,
+    rejoined_after_ms: Option<f64>,
+}
+
+/// `K/N` with N from 1 to 100 and K below N.
+fn parse_part(v: &str) -> Result<(u64, u64), String> {
+    let bad = || format!("`{v}` is not K/N (N 1 to 100, K 0 to N-1, e.g. 0/4)");
+    let (k, n) = v.split_once('/').ok_or_else(bad)?;
+    let (k, n) = (
+        k.parse::<u64>().map_err(|_| bad())?,
+        n.parse::<u64>().map_err(|_| bad())?,
+    );
+    if n == 0 || n > 100 || k >= n {
+        return Err(bad());
+    }
+    Ok((k, n))
 }
 
 /// Runs the matrix.
@@ -95,8 +116,8 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
         args.processes.clone()
     };
     for f in args.faults.iter().filter(|f| !f.is_empty()) {
-        if !["kill", "stop"].contains(&f.as_str()) {
-            bail!("--faults: `{f}` is not allowed (allowed: kill, stop)");
+        if !["kill", "stop", "restart"].contains(&f.as_str()) {
+            bail!("--faults: `{f}` is not allowed (allowed: kill, stop, restart)");
         }
     }
     let exe = std::env::current_exe().context("finding the landing binary")?;
@@ -118,18 +139,17 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
     }
     let flights: Vec<(&String, &String, &String)> = pairs
         .iter()
-        .enumerate()
-        .flat_map(|(i, (fault, process))| {
-            let n = args.phases.len() as u64;
-            args.phases
-                .iter()
-                .enumerate()
-                .filter(move |(k, _)| {
-                    args.one_phase_each
-                        .is_none_or(|r| (i as u64).wrapping_add(r) % n == *k as u64)
-                })
-                .map(move |(_, phase)| (fault, process, phase))
+        .flat_map(|(fault, process)| {
+            let phases = if fault == "restart" {
+                &args.restart_phases
+            } else {
+                &args.phases
+            };
+            phases.iter().map(move |phase| (fault, process, phase))
         })
+        .enumerate()
+        .filter(|(i, _)| args.part.is_none_or(|(k, n)| *i as u64 % n == k))
+        .map(|(_, f)| f)
         .collect();
     let total = flights.len();
     let mut rows = Vec::with_capacity(total);
@@ -161,6 +181,7 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
             detected_after_ms: f["detected_after_ms"].as_f64(),
             ordered_after_ms: f["ordered_after_ms"].as_f64(),
             action: f["action"].as_str().map(str::to_string),
+            rejoined_after_ms: f["rejoined_after_ms"].as_f64(),
         });
     }
     let continued = |r: &Row| r.action.as_deref().is_some_and(|a| a.ends_with("continue"));
@@ -188,6 +209,9 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
             "detected_ms": summary("stop", |r| r.detected_after_ms, false),
             "ordered_ms": summary("stop", |r| r.ordered_after_ms, true),
         },
+        "restarted": {
+            "rejoined_ms": summary("restart", |r| r.rejoined_after_ms, false),
+        },
         "continued": rows.iter().filter(|r| continued(r)).count(),
     });
     if args.json {
@@ -203,19 +227,20 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
         return Ok(());
     }
     println!(
-        "| fault | outcome | touchdown error (m) | detected (ms) | ordered (ms) | watchdog's decision |"
+        "| fault | outcome | touchdown error (m) | detected (ms) | ordered (ms) | rejoined (ms) | watchdog's decision |"
     );
-    println!("| --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- |");
     let ms = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.0}"));
     for r in &rows {
         println!(
-            "| {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} |",
             r.inject,
             r.outcome,
             r.touchdown_error_m
                 .map_or("-".to_string(), |x| format!("{x:.2}")),
             ms(r.detected_after_ms),
             ms(r.ordered_after_ms),
+            ms(r.rejoined_after_ms),
             r.action.as_deref().unwrap_or("-"),
         );
     }
@@ -235,5 +260,13 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
             o["n"],
         );
     }
+    let r = &headline["restarted"]["rejoined_ms"];
+    println!(
+        "restarted: death to rejoin p50 {:.0} ms, p95 {:.0} ms, max {:.0} ms (n={})",
+        r["p50"].as_f64().unwrap_or(0.0),
+        r["p95"].as_f64().unwrap_or(0.0),
+        r["max"].as_f64().unwrap_or(0.0),
+        r["n"],
+    );
     Ok(())
 }

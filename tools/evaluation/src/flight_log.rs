@@ -385,6 +385,9 @@ pub struct FaultRecord {
     /// How long until the watchdog's safe-land (or hold) order went out, ms; `null` when
     /// none followed this fault.
     pub ordered_after_ms: Option<f64>,
+    /// A `restart`: how long from the kill until the new process's first heartbeat
+    /// reached the watchdog (back in the graph), ms; else `null`.
+    pub rejoined_after_ms: Option<f64>,
     /// Datagrams sent at px4-link's port (`garbage`, `flood`), else `null`.
     pub datagrams_sent: Option<u64>,
     /// Monotonic time of the fault, ns (not in the summary).

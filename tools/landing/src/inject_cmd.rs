@@ -92,10 +92,7 @@ pub fn run(args: &InjectArgs, prefix: Option<&str>) -> Result<()> {
             if let Some(sig) = i.fault.signal() {
                 return signal(&i.process, prefix.as_str(), sig);
             }
-            let for_s = match i.fault {
-                Fault::Cut(s) | Fault::Blank(s) => s,
-                _ => 0.0,
-            };
+            let for_s = i.fault.duration_s();
             match i.fault.order() {
                 Some(o) => order(&i.process, o, i.topic.as_deref(), for_s),
                 None => bail!(

@@ -28,8 +28,9 @@ pub enum Fault {
     Delay(f64),
     /// Each of its outputs is dropped with this probability.
     Drop(f64),
-    /// Its outputs' payloads are overwritten: NaN and out-of-range values.
-    Corrupt,
+    /// Its outputs' payloads are overwritten: NaN and out-of-range values; for this many
+    /// seconds (`corrupt:0.5:P`), else to the end of the run (`corrupt:P`).
+    Corrupt(Option<f64>),
     /// A world fault: one topic stops for this many seconds, then comes back (the
     /// simulator's camera unplugged and plugged in again, the autopilot's telemetry
     /// lost). The injection names the topic; its publisher does it.
@@ -78,7 +79,8 @@ impl Fault {
             Self::Restart => "restart".into(),
             Self::Delay(ms) => format!("delay:{ms}"),
             Self::Drop(f) => format!("drop:{f}"),
-            Self::Corrupt => "corrupt".into(),
+            Self::Corrupt(None) => "corrupt".into(),
+            Self::Corrupt(Some(s)) => format!("corrupt:{s}"),
             Self::Cut(s) => format!("cut:{s}"),
             Self::Blank(s) => format!("blank:{s}"),
             Self::Garbage(n) => format!("garbage:{n}"),
@@ -95,12 +97,20 @@ impl Fault {
         }
     }
 
+    /// How long a port fault lasts, s (0: to the end of the run, or until cleared).
+    pub fn duration_s(self) -> f64 {
+        match self {
+            Self::Cut(s) | Self::Blank(s) | Self::Corrupt(Some(s)) => s,
+            _ => 0.0,
+        }
+    }
+
     /// The order to its output ports, for a fault in its data paths.
     pub fn order(self) -> Option<(PortFault, f64)> {
         match self {
             Self::Delay(ms) => Some((PortFault::Delay, ms)),
             Self::Drop(f) => Some((PortFault::Drop, f)),
-            Self::Corrupt => Some((PortFault::Corrupt, 0.0)),
+            Self::Corrupt(_) => Some((PortFault::Corrupt, 0.0)),
             Self::Cut(_) => Some((PortFault::Drop, 1.0)),
             Self::Blank(_) => Some((PortFault::Blank, 0.0)),
             _ => None,
@@ -134,7 +144,7 @@ pub struct Injection {
 /// Why an `--inject` value was refused.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 #[error(
-    "--inject {value}: {why} (FAULT:PROCESS@WHEN, FAULT kill, stop or restart, delay:MS (0-10000), drop:FRACTION (0-1) or corrupt, or a world fault cut:SECONDS:TOPIC (0-600), blank:SECONDS:TOPIC (0-600, images) garbage:DATAGRAMS:px4-link (1-1000000) or flood:random|mutated|spoofed:PER_SECOND:px4-link (1-100000, until the end), WHEN takeoff, track, descend, land or seconds, e.g. kill:fsm@track, stop:planner@12.5, drop:0.5:aruco-pnp@descend, cut:2:sim/camera@track)"
+    "--inject {value}: {why} (FAULT:PROCESS@WHEN, FAULT kill, stop or restart, delay:MS (0-10000), drop:FRACTION (0-1), corrupt or corrupt:SECONDS (0-600), or a world fault cut:SECONDS:TOPIC (0-600), blank:SECONDS:TOPIC (0-600, images) garbage:DATAGRAMS:px4-link (1-1000000) or flood:random|mutated|spoofed:PER_SECOND:px4-link (1-100000, until the end), WHEN takeoff, track, descend, land or seconds, e.g. kill:fsm@track, stop:planner@12.5, drop:0.5:aruco-pnp@descend, cut:2:sim/camera@track)"
 )]
 pub struct InjectionError {
     value: String,
@@ -163,7 +173,8 @@ impl FromStr for Injection {
             ["kill", p] => (Fault::Kill, p),
             ["stop", p] => (Fault::Stop, p),
             ["restart", p] => (Fault::Restart, p),
-            ["corrupt", p] => (Fault::Corrupt, p),
+            ["corrupt", p] => (Fault::Corrupt(None), p),
+            ["corrupt", secs, p] => (Fault::Corrupt(Some(number(secs, 600.0)?)), p),
             ["delay", ms, p] => (Fault::Delay(number(ms, 10_000.0)?), p),
             ["drop", f, p] => (Fault::Drop(number(f, 1.0)?), p),
             ["cut", secs, t] if t.contains('/') => {

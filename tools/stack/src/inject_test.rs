@@ -64,7 +64,14 @@ fn port_faults_parse_with_their_value() {
     let i: Injection = "corrupt:aruco-pnp@3"
         .parse()
         .unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!((i.fault, i.when), (Fault::Corrupt, When::At(3.0)));
+    assert_eq!((i.fault, i.when), (Fault::Corrupt(None), When::At(3.0)));
+    assert_eq!(i.fault.duration_s(), 0.0, "to the end of the run");
+    let i: Injection = "corrupt:0.5:camera-ingest@track"
+        .parse()
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(i.fault, Fault::Corrupt(Some(0.5)));
+    assert_eq!(i.fault.duration_s(), 0.5);
+    assert_eq!(i.to_string(), "corrupt:0.5:camera-ingest@track");
 }
 
 #[test]

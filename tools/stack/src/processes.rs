@@ -394,10 +394,7 @@ pub fn run(
                         fault: fault as u32,
                         value,
                         topic: Text::new(inj.topic.as_deref().unwrap_or("")),
-                        for_s: match inj.fault {
-                            Fault::Cut(s) | Fault::Blank(s) => s,
-                            _ => 0.0,
-                        },
+                        for_s: inj.fault.duration_s(),
                         ..FaultOrder::default()
                     };
                     if let Err(e) = fault_orders.send(Header::captured_at(record.at_ns), &order) {
@@ -507,6 +504,7 @@ fn fault_record(fault: &str, process: &str, at_s: f64) -> FaultRecord {
         detected_after_ms: None,
         action: None,
         ordered_after_ms: None,
+        rejoined_after_ms: None,
         datagrams_sent: None,
         outcome: String::new(),
         at_ns: monotonic_ns(),
@@ -534,6 +532,12 @@ fn note_detection(f: &mut FaultRecord, view: &WatchdogView) {
         } else {
             after_ms(view.last_fault_ns)
         };
+    }
+    if f.fault == "restart" && f.rejoined_after_ms.is_none() {
+        f.rejoined_after_ms = view.processes[..n]
+            .iter()
+            .find(|p| p.name.as_str() == f.process && p.restarts > 0)
+            .and_then(|p| after_ms(p.rejoined_ns));
     }
     if f.detected_after_ms.is_some() {
         let line = view.action.as_str();
