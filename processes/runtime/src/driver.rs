@@ -281,6 +281,13 @@ macro_rules! ports {
                 }
             }
 
+            fn restarts(&self) -> u64 {
+                match self {
+                    $(Self::$s(s) => s.restarts(),)*
+                    $(Self::$c(s) => s.restarts(),)*
+                }
+            }
+
             fn has_samples(&self) -> bool {
                 match self {
                     $(Self::$s(s) => s.has_samples(),)*
@@ -494,6 +501,15 @@ impl Node<'_> {
                 .map(|i| format!("{}:{}", i.topic, i.port.gaps()))
                 .collect();
             line.push_str(&format!(" lost_on={}", by_topic.join(",")));
+        }
+        // A publisher that started over is a restart upstream, not lost data.
+        let restarted: Vec<String> = inputs
+            .iter()
+            .filter(|i| i.port.restarts() > 0)
+            .map(|i| format!("{}:{}", i.topic, i.port.restarts()))
+            .collect();
+        if !restarted.is_empty() {
+            line.push_str(&format!(" restarted_upstream={}", restarted.join(",")));
         }
         if self.fault_orders.is_some() {
             let f = &self.faults;

@@ -594,6 +594,7 @@ impl Ipc {
             listener,
             service: service.to_string(),
             last_seq: Cell::new(0),
+            restarts: Cell::new(0),
             gaps: Cell::new(0),
         })
     }
@@ -675,6 +676,7 @@ impl Ipc {
             listener,
             service: service.to_string(),
             last_seq: Cell::new(0),
+            restarts: Cell::new(0),
             gaps: Cell::new(0),
         })
     }
@@ -888,6 +890,7 @@ pub struct Subscriber<P: ?Sized + Debug + IceoryxSend + 'static, H: MessageHeade
     service: String,
     last_seq: Cell<u64>,
     gaps: Cell<u64>,
+    restarts: Cell<u64>,
 }
 
 /// Receives variable-length payloads (frames, maps) with header `H`.
@@ -906,7 +909,12 @@ where
             reason: reason(e),
         })?;
         if let Some(s) = &s {
-            track_seq(&self.last_seq, &self.gaps, s.user_header().msg().seq);
+            track_seq(
+                &self.last_seq,
+                &self.gaps,
+                &self.restarts,
+                s.user_header().msg().seq,
+            );
         }
         Ok(s)
     }
@@ -931,16 +939,24 @@ where
         self.port.has_samples().unwrap_or(true)
     }
 
-    /// Samples lost to overflow or a publisher restart, counted from sequence gaps.
+    /// Samples lost to overflow, counted from sequence gaps.
     pub fn gaps(&self) -> u64 {
         self.gaps.get()
     }
+
+    /// Times the publisher started over (its sequence went back: a restarted process
+    /// numbers from 1 again): a restart, not lost data.
+    pub fn restarts(&self) -> u64 {
+        self.restarts.get()
+    }
 }
 
-fn track_seq(last: &Cell<u64>, gaps: &Cell<u64>, seq: u64) {
+fn track_seq(last: &Cell<u64>, gaps: &Cell<u64>, restarts: &Cell<u64>, seq: u64) {
     let l = last.get();
     if l != 0 && seq > l + 1 {
         gaps.set(gaps.get() + seq - l - 1);
+    } else if l != 0 && seq <= l {
+        restarts.set(restarts.get() + 1);
     }
     last.set(seq);
 }

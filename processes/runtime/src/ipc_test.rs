@@ -30,12 +30,12 @@ fn the_periodic_waiter_learns_the_period_despite_bursts_and_drops() {
 }
 
 #[test]
-fn sequence_gaps_are_counted() {
-    let (last, gaps) = (Cell::new(0), Cell::new(0));
-    for s in [1, 2, 5, 6, 9] {
-        track_seq(&last, &gaps, s);
+fn sequence_gaps_are_counted_and_a_sequence_that_starts_over_is_a_restart() {
+    let (last, gaps, restarts) = (Cell::new(0), Cell::new(0), Cell::new(0));
+    for s in [1, 2, 5, 6, 9, 1, 2, 3] {
+        track_seq(&last, &gaps, &restarts, s);
     }
-    assert_eq!(gaps.get(), 4);
+    assert_eq!((gaps.get(), restarts.get()), (4, 1));
 }
 
 #[test]
@@ -201,4 +201,32 @@ fn a_deep_subscriber_keeps_sixteen_messages_where_a_default_one_keeps_four() {
         panic!("a buffer deeper than the service allows must be refused")
     };
     assert!(e.to_string().contains("t/depth"), "{e}");
+}
+
+#[test]
+fn a_restarted_publisher_is_counted_as_a_restart_not_as_lost_messages() {
+    let prefix = IpcPrefix::unique("restart");
+    let a = Ipc::open("a", &prefix).expect("node");
+    let sub = a
+        .subscriber_with_depth::<u64>("t/restart", stage::MAX_MESSAGE_DEPTH as usize)
+        .expect("subscriber");
+    let drain = |s: &Subscriber<u64>| {
+        let mut got = Vec::new();
+        while let Some(m) = s.receive().expect("receive") {
+            got.push(*m.payload());
+        }
+        (got, s.gaps(), s.restarts())
+    };
+    let mut first = a.publisher::<u64>("t/restart").expect("publisher");
+    for v in 1..=5 {
+        first.send(Header::default(), &v).expect("send");
+    }
+    assert_eq!(drain(&sub), ((1..=5).collect(), 0, 0));
+    drop(first);
+    // The process died and came back: a new publisher numbers from 1 again.
+    let mut again = a.publisher::<u64>("t/restart").expect("publisher again");
+    for v in 6..=8 {
+        again.send(Header::default(), &v).expect("send");
+    }
+    assert_eq!(drain(&sub), ((6..=8).collect(), 0, 1));
 }
