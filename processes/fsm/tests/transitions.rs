@@ -1134,3 +1134,75 @@ fn a_preset_above_what_the_camera_can_read_is_searched_from_its_ceiling() {
     );
     assert_eq!(w.state(), MissionState::WaitForPad);
 }
+
+/// A restarted fsm in `w` (a fresh one, as its process after systemd's restart), fed the
+/// watchdog's view (5 Hz) as the watchdog would: the state it last saw, `was`, while the
+/// new fsm is in Idle in the air, then the new fsm's. Runs until `until` or `seconds`.
+fn restart_and_fly(w: &mut World, was: MissionState, until: MissionState, seconds: f64) {
+    w.fsm = Fsm::new(config());
+    let end = w.t + (seconds * 1e9) as u64;
+    let mut next_view = w.t;
+    while w.t < end && w.state() != until {
+        if w.t >= next_view {
+            let seen = match w.state() {
+                MissionState::Idle => was,
+                s => s,
+            };
+            w.fsm.on_watchdog_view(w.t, seen as u32);
+            next_view = w.t + 200_000_000;
+        }
+        w.step();
+    }
+    assert_eq!(w.state(), until, "{:?}", w.reasons());
+}
+
+#[test]
+fn an_fsm_restarted_while_tracking_resumes_and_lands_without_a_second_take_off() {
+    let mut w = World::new(config());
+    w.expect(MissionState::Track, 30.0);
+    let (arms, takeoffs) = (
+        w.count(LinkRequestKind::Arm),
+        w.count(LinkRequestKind::Offboard),
+    );
+    restart_and_fly(&mut w, MissionState::Track, MissionState::Landed, 60.0);
+    let first = &w.fsm.transitions()[0];
+    assert_eq!(
+        (first.from, first.to, first.reason.as_str()),
+        (
+            MissionState::Idle,
+            MissionState::Track,
+            "restarted in flight (was track)"
+        )
+    );
+    assert!(
+        w.fsm
+            .transitions()
+            .iter()
+            .all(|t| t.to != MissionState::Takeoff && t.to != MissionState::SafeLand),
+        "{:?}",
+        w.reasons()
+    );
+    assert_eq!(w.count(LinkRequestKind::Arm), arms, "never armed again");
+    assert_eq!(w.count(LinkRequestKind::Offboard), takeoffs, "never asked for OFFBOARD again");
+    assert_eq!(w.nan_setpoints, 0);
+}
+
+#[test]
+fn an_fsm_restarted_in_the_descent_resumes_the_descent() {
+    let mut w = World::new(config());
+    w.expect(MissionState::Descend, 60.0);
+    restart_and_fly(&mut w, MissionState::Descend, MissionState::Landed, 60.0);
+    let first = &w.fsm.transitions()[0];
+    assert_eq!(
+        (first.to, first.reason.as_str()),
+        (MissionState::Descend, "restarted in flight (was descend)")
+    );
+}
+
+#[test]
+fn an_fsm_started_on_the_ground_takes_off_as_always() {
+    // Armed on the ground is no flight to resume.
+    let mut w = World::new(config());
+    w.expect(MissionState::Takeoff, 5.0);
+    assert_eq!(w.fsm.reason(), "started, link up");
+}

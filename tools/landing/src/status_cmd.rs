@@ -97,19 +97,25 @@ pub fn text(v: &WatchdogView, prefix: &str, now_ns: u64) -> String {
     );
     let _ = writeln!(
         s,
-        "  {:<14} {:<9} {:>14} {:>7}  found hung/dead",
-        "process", "state", "last beat", "missed"
+        "  {:<14} {:<9} {:>14} {:>7} {:>8}  found hung/dead",
+        "process", "state", "last beat", "missed", "restarts"
     );
-    for p in &v.processes[..(v.count as usize).min(v.processes.len())] {
+    let watched = &v.processes[..(v.count as usize).min(v.processes.len())];
+    for p in watched {
         let _ = writeln!(
             s,
-            "  {:<14} {:<9} {:>14} {:>7}  {}",
+            "  {:<14} {:<9} {:>14} {:>7} {:>8}  {}",
             p.name.as_str(),
             Liveness::from_raw(p.liveness).name(),
             ago(now_ns, p.last_heartbeat_ns),
             p.missed_deadlines,
+            p.restarts,
             ago(now_ns, p.fault_ns),
         );
+    }
+    // A process systemd gave up on stays dead: the stack runs without it.
+    for name in degraded(v) {
+        let _ = writeln!(s, "  DEGRADED: {name} is dead and not back");
     }
     let or_dash = |t: &str| {
         if t.is_empty() {
@@ -139,6 +145,8 @@ pub fn json(v: &WatchdogView) -> serde_json::Value {
                 "missed_deadlines": p.missed_deadlines,
                 "last_heartbeat_ns": p.last_heartbeat_ns,
                 "fault_ns": p.fault_ns,
+                "restarts": p.restarts,
+                "rejoined_ns": p.rejoined_ns,
             })
         })
         .collect();
@@ -150,6 +158,16 @@ pub fn json(v: &WatchdogView) -> serde_json::Value {
         "last_fault": v.last_fault.as_str(),
         "last_fault_ns": v.last_fault_ns,
         "decision": v.action.as_str(),
+        "degraded": degraded(v),
         "processes": processes,
     })
+}
+
+/// The watched processes that are dead (and not back).
+fn degraded(v: &WatchdogView) -> Vec<&str> {
+    v.processes[..(v.count as usize).min(v.processes.len())]
+        .iter()
+        .filter(|p| Liveness::from_raw(p.liveness) == Liveness::Dead)
+        .map(|p| p.name.as_str())
+        .collect()
 }
