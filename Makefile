@@ -7,12 +7,13 @@ APT_PACKAGES := libopencv-dev libopencv-contrib-dev clang libclang-dev pkg-confi
 CARGO ?= cargo
 export CARGO_TERM_COLOR ?= never
 
-.PHONY: demo test bootstrap build lint bench help peers fuzz faults
+.PHONY: demo test bootstrap build lint bench help peers fuzz faults systemd
 
 help:
 	@echo "make demo   install what is missing, build (release), run the simulated mission"
 	@echo "make test   install what is missing, then run every check and test"
-	@echo "make faults the whole fault matrix (make test flies a quarter of it per run)"
+	@echo "make faults the whole fault matrix (make test flies a sixth of it per run)"
+	@echo "make systemd the stack under a live systemd in a container (root)"
 
 bootstrap:
 	@missing=""; \
@@ -76,10 +77,17 @@ peers:
 	python3 tests/peers/foxglove_reader.py target/peers/processes.mcap
 	@rm -rf target/peers
 
-# The whole fault matrix (74 flights, about 27 minutes); make test flies one part of four of
+# The whole fault matrix (74 flights, about 33 minutes); make test flies one part of six of
 # it per run (tools/landing/tests/faults.rs).
 faults: build
 	FAULT_MATRIX=full $(CARGO) test --release -p landing --test faults -- --nocapture
+
+# The stack under a live systemd: systemd as PID 1 of a systemd-nspawn container over an
+# overlay of this machine, the units from deploy/install.sh, a stage killed ten times in
+# ten seconds, a hung one; needs root (tests/systemd/live.sh, docs/jetson.md).
+systemd: build
+	@command -v systemd-nspawn >/dev/null || { sudo=""; [ "$$(id -u)" -eq 0 ] || sudo=sudo; $$sudo apt-get install -y -qq --no-install-recommends systemd-container >/dev/null; }
+	tests/systemd/live.sh
 
 bench: build
 	./target/release/landing bench ipc

@@ -626,7 +626,8 @@ impl Fsm {
         if self.resume(now_ns, out) {
             return;
         }
-        if !self.started {
+        // Armed already: a mission under way (a restart on the pad), not one to start.
+        if !self.started || self.vehicle().is_some_and(|v| v.armed != 0) {
             return;
         }
         if self.link_fresh(now_ns) {
@@ -641,9 +642,7 @@ impl Fsm {
     fn resume(&mut self, now_ns: u64, out: &mut Outputs) -> bool {
         let flying = self.link_fresh(now_ns)
             && self.vehicle().is_some_and(|v| {
-                v.armed != 0
-                    && LandedState::from_raw(v.landed_state) == LandedState::InAir
-                    && FlightMode::from_raw(v.flight_mode) == FlightMode::Offboard
+                v.armed != 0 && FlightMode::from_raw(v.flight_mode) == FlightMode::Offboard
             });
         if !self.transitions.is_empty() || !flying {
             self.resume_since = None;
@@ -668,9 +667,24 @@ impl Fsm {
         }
         let was = self.watchdog_phase.unwrap_or(MissionState::Idle);
         let why = format!("restarted in flight (was {})", was.name());
+        let in_air = LandedState::from_raw(v.landed_state) == LandedState::InAir;
         use MissionState as M;
         match (was, pad) {
             (M::SafeLand | M::Abort | M::Landed, _) => self.go(now_ns, M::SafeLand, why),
+            // On the pad already, motors still on: finish the touchdown (switch them off).
+            (M::Descend | M::Land, _) if !in_air => {
+                self.z_cmd = p.z;
+                self.dropping = true;
+                self.drop_moving = false;
+                self.touch_since = None;
+                self.touched = false;
+                self.go(now_ns, M::Land, why);
+            }
+            // Armed on the ground with no descent to finish: nothing to resume.
+            (_, _) if !in_air => {
+                self.streaming = false;
+                return false;
+            }
             (M::Descend | M::Land, Some(est)) => {
                 self.h_cmd = p.z - est.position.z;
                 self.track_height = self.h_cmd.max(self.cfg.commit_height_m + 0.3);

@@ -1183,7 +1183,11 @@ fn an_fsm_restarted_while_tracking_resumes_and_lands_without_a_second_take_off()
         w.reasons()
     );
     assert_eq!(w.count(LinkRequestKind::Arm), arms, "never armed again");
-    assert_eq!(w.count(LinkRequestKind::Offboard), takeoffs, "never asked for OFFBOARD again");
+    assert_eq!(
+        w.count(LinkRequestKind::Offboard),
+        takeoffs,
+        "never asked for OFFBOARD again"
+    );
     assert_eq!(w.nan_setpoints, 0);
 }
 

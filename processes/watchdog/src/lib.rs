@@ -579,9 +579,10 @@ impl Watchdog {
             let garbage_lost = s
                 .garbage_since
                 .is_some_and(|t| now_ns.saturating_sub(t) as f64 * 1e-6 > r.garbage.ms(phase));
+            // While garbage flows, its own budget decides (its silence is the garbage).
             let fault = if garbage_lost {
                 Fault::Garbage(r.topic.clone())
-            } else if s.silent {
+            } else if s.silent && s.garbage_since.is_none() {
                 Fault::Silent(r.topic.clone())
             } else {
                 continue;

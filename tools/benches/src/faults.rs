@@ -84,6 +84,8 @@ struct Row {
     ordered_after_ms: Option<f64>,
     action: Option<String>,
     rejoined_after_ms: Option<f64>,
+    /// The referee's line on how the flight ended.
+    referee: String,
 }
 
 /// `K/N` with N from 1 to 100 and K below N.
@@ -182,6 +184,7 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
             ordered_after_ms: f["ordered_after_ms"].as_f64(),
             action: f["action"].as_str().map(str::to_string),
             rejoined_after_ms: f["rejoined_after_ms"].as_f64(),
+            referee: s["referee"].as_str().unwrap_or("").to_string(),
         });
     }
     let continued = |r: &Row| r.action.as_deref().is_some_and(|a| a.ends_with("continue"));

@@ -152,7 +152,10 @@ fn cpu_sets(root: &Path) -> Vec<(String, Vec<u32>)> {
         for l in conf.lines() {
             if let Some(v) = l.strip_prefix("CPUAffinity=") {
                 let cpus = v.split_whitespace().map(|c| c.parse().unwrap()).collect();
-                sets.push((dir.file_name().unwrap().to_string_lossy().into_owned(), cpus));
+                sets.push((
+                    dir.file_name().unwrap().to_string_lossy().into_owned(),
+                    cpus,
+                ));
             }
         }
     }

@@ -1,0 +1,150 @@
+#!/bin/sh
+# `make systemd`: the stack under a live systemd. systemd as PID 1 of a systemd-nspawn
+# container whose root is an overlay of this machine's (nothing of the host is written),
+# its own network namespace, the units installed by deploy/install.sh (CPU sets for this
+# machine's CPUs), the simulator started beside them as a unit of the test. Checks, each
+# one line, exit 1 on the first failure:
+#   - every landing@ unit reaches active (READY=1) and stays so;
+#   - a stage killed ten times in ten seconds is restarted every time (NRestarts, a new
+#     main PID each time), and landing-clean never runs out of starts;
+#   - a hung stage (SIGSTOP) is killed by WatchdogSec and restarted;
+#   - the units start on this machine's CPUs (a 2-core machine here).
+# Needs root, mount (overlayfs) and systemd-nspawn (apt: systemd-container). About a
+# minute. docs/jetson.md.
+set -eu
+
+REPO=$(cd "$(dirname "$0")/../.." && pwd)
+BIN=${BIN:-$REPO/target/release}
+STAGES="camera-ingest aruco-pnp depth-map planner fsm px4-link watchdog"
+
+fail() {
+    echo "systemd live: FAIL: $*" >&2
+    exit 1
+}
+[ "$(id -u)" = 0 ] || { echo "tests/systemd/live.sh: needs root (overlay mount, systemd-nspawn)" >&2; exit 2; }
+command -v systemd-nspawn >/dev/null || { echo "tests/systemd/live.sh: needs systemd-nspawn (apt: systemd-container)" >&2; exit 2; }
+for b in sim landing fsm; do
+    [ -x "$BIN/$b" ] || { echo "tests/systemd/live.sh: $BIN/$b missing (cargo build --release --workspace)" >&2; exit 2; }
+done
+
+WORK=$(mktemp -d /tmp/landing-systemd.XXXXXX)
+ROOT=$WORK/root
+mkdir -p "$WORK/upper" "$WORK/work" "$ROOT"
+mount -t overlay overlay -o "lowerdir=/,upperdir=$WORK/upper,workdir=$WORK/work" "$ROOT"
+NSPAWN=
+cleanup() {
+    if [ -n "$NSPAWN" ]; then
+        kill "$NSPAWN" 2>/dev/null || true
+        wait "$NSPAWN" 2>/dev/null || true
+    fi
+    umount "$ROOT" 2>/dev/null || umount -l "$ROOT" 2>/dev/null || true
+    if [ -n "${KEEP:-}" ]; then echo "kept $WORK"; else rm -rf "$WORK"; fi
+}
+trap cleanup EXIT INT TERM
+
+# A machine of its own: its id, the stack installed, nothing else of the host started.
+systemd-id128 new >"$ROOT/etc/machine-id"
+"$REPO/deploy/install.sh" --root "$ROOT" --bin-dir "$BIN" >"$WORK/install.log"
+install -m 0755 "$BIN/sim" "$ROOT/usr/local/bin/sim"
+cat >"$ROOT/etc/systemd/system/landing-test-sim.service" <<'EOF'
+# The simulator beside the stack (this test only): the world the stack flies in.
+[Unit]
+Description=landing test: the simulator
+After=landing.target
+[Service]
+User=landing
+Group=landing
+Environment=LANDING_IPC_PREFIX=landing_
+ExecStart=/usr/local/bin/sim --config /etc/landing/config/landing.toml --deploy-dir /etc/landing --scenario /etc/landing/scenarios/indoor-static.toml --duration-s 600 --ipc-prefix landing_
+RemoveIPC=no
+EOF
+cat >"$ROOT/etc/systemd/system/landing-test.target" <<'EOF'
+[Unit]
+Description=landing test: the stack and the simulator on a basic system
+Requires=basic.target
+After=basic.target
+Wants=landing.target landing-test-sim.service
+AllowIsolate=yes
+EOF
+
+systemd-nspawn -q -D "$ROOT" --register=no --keep-unit --link-journal=no --private-network \
+    -b systemd.unit=landing-test.target >"$WORK/console.log" 2>&1 &
+NSPAWN=$!
+
+# The container's PID 1 (systemd), as the host sees it.
+PID1=
+for _ in $(seq 1 100); do
+    for c in $(pgrep -P "$NSPAWN" 2>/dev/null || true); do
+        if [ "$(cat "/proc/$c/comm" 2>/dev/null)" = systemd ]; then PID1=$c; fi
+    done
+    [ -n "$PID1" ] && break
+    kill -0 "$NSPAWN" 2>/dev/null || { cat "$WORK/console.log" >&2; fail "systemd-nspawn ended"; }
+    sleep 0.1
+done
+[ -n "$PID1" ] || { cat "$WORK/console.log" >&2; fail "no systemd in the container"; }
+inside() { nsenter -t "$PID1" -a "$@"; }
+prop() { inside systemctl show -P "$2" "landing@$1.service"; }
+
+# 1. Every unit active, with READY=1 (Type=notify: active only once it said so).
+for _ in $(seq 1 300); do
+    up=0
+    for s in $STAGES; do
+        [ "$(prop "$s" ActiveState)" = active ] && up=$((up + 1))
+    done
+    [ "$up" = 7 ] && break
+    sleep 0.2
+done
+for s in $STAGES; do
+    state=$(prop "$s" ActiveState)
+    [ "$state" = active ] || {
+        inside systemctl status "landing@$s.service" --no-pager -n 20 >&2 || true
+        fail "landing@$s is $state, not active"
+    }
+done
+echo "systemd live: all 7 units active on $(nproc) CPUs ($(sed -n 's/^CPU sets//p' "$WORK/install.log"))"
+
+# 2. Killed ten times in ten seconds: restarted every time.
+before=$(prop planner NRestarts)
+pids=""
+for k in $(seq 1 10); do
+    pid=""
+    for _ in $(seq 1 50); do
+        pid=$(prop planner MainPID)
+        [ "$pid" != 0 ] && [ "$(prop planner ActiveState)" = active ] && break
+        sleep 0.05
+    done
+    [ "$pid" != 0 ] || fail "planner not back before kill $k"
+    case " $pids " in *" $pid "*) fail "planner's main PID $pid did not change before kill $k" ;; esac
+    pids="$pids $pid"
+    inside kill -KILL "$pid"
+    sleep 0.55
+done
+for _ in $(seq 1 50); do
+    [ "$(prop planner ActiveState)" = active ] && break
+    sleep 0.1
+done
+after=$(prop planner NRestarts)
+[ "$(prop planner ActiveState)" = active ] || fail "planner not active after ten kills ($(prop planner Result))"
+[ $((after - before)) = 10 ] || fail "planner restarted $((after - before)) times after ten kills"
+[ "$(inside systemctl show -P ActiveState landing-clean.service)" != failed ] || fail "landing-clean failed"
+echo "systemd live: planner killed 10 times in 10 s, restarted 10 times, active"
+
+# 3. Hung: WatchdogSec kills it and it comes back.
+before=$(prop depth-map NRestarts)
+pid=$(prop depth-map MainPID)
+inside kill -STOP "$pid"
+t0=$(date +%s%N)
+for _ in $(seq 1 100); do
+    new=$(prop depth-map MainPID)
+    [ "$new" != "$pid" ] && [ "$new" != 0 ] && [ "$(prop depth-map ActiveState)" = active ] && break
+    sleep 0.1
+done
+t1=$(date +%s%N)
+[ "$(prop depth-map NRestarts)" -gt "$before" ] || fail "a hung depth-map was not restarted"
+[ "$(prop depth-map ActiveState)" = active ] || fail "depth-map not active after its hang"
+echo "systemd live: hung depth-map killed by WatchdogSec and back in $(((t1 - t0) / 1000000)) ms"
+
+# 4. Nothing failed meanwhile.
+failed=$(inside systemctl list-units --failed --plain --no-legend 'landing*' | wc -l)
+[ "$failed" = 0 ] || { inside systemctl list-units --failed --no-pager >&2; fail "$failed landing units failed"; }
+echo "systemd live: ok"
