@@ -136,7 +136,7 @@ impl Default for RideThroughConfig {
         Self {
             restart_ms: 600.0,
             telemetry_ms: PhaseBudget {
-                land: Some(500.0),
+                land: Some(800.0),
                 ..PhaseBudget::flat(1500.0)
             },
             setpoints_ms: PhaseBudget::flat(700.0),
