@@ -1130,6 +1130,13 @@ pub struct WatchdogView {
     pub processes: [ProcessHealth; MAX_WATCHED],
 }
 
+impl WatchdogView {
+    /// The valid entries of `processes` (the first `count`, at most all of them).
+    pub fn watched(&self) -> &[ProcessHealth] {
+        &self.processes[..(self.count as usize).min(self.processes.len())]
+    }
+}
+
 /// What a [`FaultOrder`] does to a process's outputs.
 #[repr(u32)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -30,41 +30,45 @@ pub struct WatchedProcess {
     pub restart_ms: f64,
 }
 
-/// How long something may be gone in each mission phase before it is a loss, ms: within
-/// it the mission flies on (the pad filter predicts, setpoints keep flowing), past it the
-/// policy applies.
+/// A value per mission phase: the phases named, and one for every other phase. The
+/// policy ([`Policy`]) and the ride-through budgets ([`Budget`]) are both this.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Budget {
-    /// The phases with their own budget.
-    pub by_phase: Vec<(MissionState, f64)>,
+pub struct ByPhase<T> {
+    /// The phases with their own value.
+    pub by_phase: Vec<(MissionState, T)>,
     /// Every other phase.
-    pub otherwise: f64,
+    pub otherwise: T,
 }
 
-impl Budget {
-    /// The same budget in every phase.
-    pub fn flat(ms: f64) -> Self {
+impl<T: Copy> ByPhase<T> {
+    /// The same value in every phase.
+    pub fn flat(value: T) -> Self {
         Self {
             by_phase: Vec::new(),
-            otherwise: ms,
+            otherwise: value,
         }
     }
 
-    /// The budget in `phase`, ms.
-    pub fn ms(&self, phase: MissionState) -> f64 {
+    /// The value in `phase`.
+    pub fn get(&self, phase: MissionState) -> T {
         self.by_phase
             .iter()
             .find(|(p, _)| *p == phase)
-            .map_or(self.otherwise, |(_, ms)| *ms)
+            .map_or(self.otherwise, |(_, v)| *v)
     }
 
-    fn values(&self) -> impl Iterator<Item = f64> + '_ {
+    fn values(&self) -> impl Iterator<Item = T> + '_ {
         self.by_phase
             .iter()
-            .map(|(_, ms)| *ms)
+            .map(|(_, v)| *v)
             .chain(std::iter::once(self.otherwise))
     }
 }
+
+/// How long something may be gone in each mission phase before it is a loss, ms: within
+/// it the mission flies on (the pad filter predicts, setpoints keep flowing), past it the
+/// policy applies.
+pub type Budget = ByPhase<f64>;
 
 /// One data path that must keep flowing while the mission is in one of `phases`.
 #[derive(Debug, Clone, PartialEq)]
@@ -111,13 +115,7 @@ impl Action {
 /// What to do per mission phase when something not critical is lost in the air. A
 /// critical loss (the fsm, px4-link, the autopilot's telemetry, the setpoints) always
 /// lands; on the ground nothing is ordered (systemd restarts what died).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Policy {
-    /// The phases with their own action.
-    pub by_phase: Vec<(MissionState, Action)>,
-    /// Every other phase.
-    pub otherwise: Action,
-}
+pub type Policy = ByPhase<Action>;
 
 impl Default for Policy {
     /// Close over the pad the fsm goes on landing on its estimate (stopping to land in
@@ -130,16 +128,6 @@ impl Default for Policy {
             ],
             otherwise: Action::Land,
         }
-    }
-}
-
-impl Policy {
-    /// The action for a non-critical loss in `phase`.
-    pub fn action(&self, phase: MissionState) -> Action {
-        self.by_phase
-            .iter()
-            .find(|(p, _)| *p == phase)
-            .map_or(self.otherwise, |(_, a)| *a)
     }
 }
 
@@ -488,7 +476,7 @@ impl Watchdog {
             let started = path.last_ns.is_some() || !r.phases.is_empty();
             let silent = needed
                 && started
-                && now_ns.saturating_sub(since) as f64 * 1e-6 > r.silence.ms(self.phase);
+                && now_ns.saturating_sub(since) as f64 * 1e-6 > r.silence.get(self.phase);
             if silent && !path.silent {
                 self.pending.push((now_ns, Fault::Silent(r.topic.clone())));
             }
@@ -508,7 +496,7 @@ impl Watchdog {
             return out;
         }
         for (fault, critical) in self.undecided(now_ns) {
-            let action = match (critical, self.cfg.policy.action(self.phase)) {
+            let action = match (critical, self.cfg.policy.get(self.phase)) {
                 (true, _) => Action::Land,
                 (false, Action::Continue) if !self.pad_fresh => Action::Land,
                 (false, a) => a,
@@ -519,7 +507,7 @@ impl Watchdog {
                 (false, a)
                     if a != Action::Continue
                         && !self.pad_fresh
-                        && self.cfg.policy.action(self.phase) == Action::Continue =>
+                        && self.cfg.policy.get(self.phase) == Action::Continue =>
                 {
                     format!(
                         "{} in {}: land, no pad",
@@ -578,7 +566,7 @@ impl Watchdog {
         for (r, s) in self.cfg.paths.iter().zip(self.paths.iter_mut()) {
             let garbage_lost = s
                 .garbage_since
-                .is_some_and(|t| now_ns.saturating_sub(t) as f64 * 1e-6 > r.garbage.ms(phase));
+                .is_some_and(|t| now_ns.saturating_sub(t) as f64 * 1e-6 > r.garbage.get(phase));
             // While garbage flows, its own budget decides (its silence is the garbage).
             let fault = if garbage_lost {
                 Fault::Garbage(r.topic.clone())

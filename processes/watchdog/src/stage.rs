@@ -177,8 +177,8 @@ impl Default for PolicyConfig {
     fn default() -> Self {
         let p = Policy::default();
         Self {
-            descend: p.action(MissionState::Descend),
-            land: p.action(MissionState::Land),
+            descend: p.get(MissionState::Descend),
+            land: p.get(MissionState::Land),
             otherwise: p.otherwise,
         }
     }

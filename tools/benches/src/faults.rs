@@ -248,28 +248,27 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
         );
     }
     println!();
+    // "p50 .. ms, p95 .. ms, max .. ms (n=..)" of one summary.
+    let stats = |v: &Value| {
+        let ms = |k: &str| v[k].as_f64().unwrap_or(0.0);
+        format!(
+            "p50 {:.0} ms, p95 {:.0} ms, max {:.0} ms (n={})",
+            ms("p50"),
+            ms("p95"),
+            ms("max"),
+            v["n"]
+        )
+    };
     for (name, key) in [("dead (kill)", "dead"), ("hung (stop)", "hung")] {
-        let o = &headline[key]["ordered_ms"];
-        let d = &headline[key]["detected_ms"];
         println!(
-            "{name}: found p50 {:.0} ms, p95 {:.0} ms, max {:.0} ms (n={}); landing order p50 {:.0} ms, p95 {:.0} ms, max {:.0} ms (n={}, the rows not continued)",
-            d["p50"].as_f64().unwrap_or(0.0),
-            d["p95"].as_f64().unwrap_or(0.0),
-            d["max"].as_f64().unwrap_or(0.0),
-            d["n"],
-            o["p50"].as_f64().unwrap_or(0.0),
-            o["p95"].as_f64().unwrap_or(0.0),
-            o["max"].as_f64().unwrap_or(0.0),
-            o["n"],
+            "{name}: found {}; landing order {}, the rows not continued",
+            stats(&headline[key]["detected_ms"]),
+            stats(&headline[key]["ordered_ms"]),
         );
     }
-    let r = &headline["restarted"]["rejoined_ms"];
     println!(
-        "restarted: death to rejoin p50 {:.0} ms, p95 {:.0} ms, max {:.0} ms (n={})",
-        r["p50"].as_f64().unwrap_or(0.0),
-        r["p95"].as_f64().unwrap_or(0.0),
-        r["max"].as_f64().unwrap_or(0.0),
-        r["n"],
+        "restarted: death to rejoin {}",
+        stats(&headline["restarted"]["rejoined_ms"])
     );
     Ok(())
 }

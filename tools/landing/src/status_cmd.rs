@@ -100,8 +100,7 @@ pub fn text(v: &WatchdogView, prefix: &str, now_ns: u64) -> String {
         "  {:<14} {:<9} {:>14} {:>7} {:>8}  found hung/dead",
         "process", "state", "last beat", "missed", "restarts"
     );
-    let watched = &v.processes[..(v.count as usize).min(v.processes.len())];
-    for p in watched {
+    for p in v.watched() {
         let _ = writeln!(
             s,
             "  {:<14} {:<9} {:>14} {:>7} {:>8}  {}",
@@ -136,7 +135,8 @@ pub fn text(v: &WatchdogView, prefix: &str, now_ns: u64) -> String {
 
 /// The view as JSON.
 pub fn json(v: &WatchdogView) -> serde_json::Value {
-    let processes: Vec<_> = v.processes[..(v.count as usize).min(v.processes.len())]
+    let processes: Vec<_> = v
+        .watched()
         .iter()
         .map(|p| {
             serde_json::json!({
@@ -165,7 +165,7 @@ pub fn json(v: &WatchdogView) -> serde_json::Value {
 
 /// The watched processes that are dead (and not back).
 fn degraded(v: &WatchdogView) -> Vec<&str> {
-    v.processes[..(v.count as usize).min(v.processes.len())]
+    v.watched()
         .iter()
         .filter(|p| Liveness::from_raw(p.liveness) == Liveness::Dead)
         .map(|p| p.name.as_str())

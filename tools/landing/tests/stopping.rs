@@ -191,7 +191,17 @@ fn a_planner_restarted_while_tracking_is_found_dead_and_rejoins_without_a_landin
         &p,
     );
     let (_, s, log) = summary(landing);
-    assert_eq!(s["outcome"], "landed", "{s}\n{log}");
+    // On the pad: `landed`, or the referee's down-after-fault line when it saw the disarm
+    // before the fsm's `landed` (as the fault matrix judges it, tests/faults.rs). Asserting
+    // `landed` alone failed once in three runs of this binary (its summary not kept); the
+    // matrix saw that line on the pad in 4 of 18 restarts.
+    let on_pad = s["touchdown_error_m"].as_f64().is_some_and(|e| e <= 0.10);
+    let down_after_fault = s["outcome"] == "safe_landed"
+        && s["referee"] == "down and disarmed after a fault to a process";
+    assert!(
+        on_pad && (s["outcome"] == "landed" || down_after_fault),
+        "{s}\n{log}"
+    );
     let f = &s["faults"][0];
     assert_eq!(f["fault"], "restart", "{s}");
     assert!(f["detected_after_ms"].as_f64().is_some(), "found dead: {s}");

@@ -516,7 +516,6 @@ fn fault_record(fault: &str, process: &str, at_s: f64) -> FaultRecord {
 /// decided, and when it ordered (the first time each, after the fault).
 fn note_detection(f: &mut FaultRecord, view: &WatchdogView) {
     let after_ms = |t: u64| (t >= f.at_ns).then(|| (t - f.at_ns) as f64 * 1e-6);
-    let n = (view.count as usize).min(view.processes.len());
     let whole_process = ["kill", "stop", "restart", "exited"].contains(&f.fault.as_str());
     if f.fault.starts_with("garbage") || f.fault.starts_with("flood") {
         // Noise on the link is px4-link's to drop (its stop line counts it), not a fault
@@ -525,7 +524,7 @@ fn note_detection(f: &mut FaultRecord, view: &WatchdogView) {
     }
     if f.detected_after_ms.is_none() {
         f.detected_after_ms = if whole_process {
-            view.processes[..n]
+            view.watched()
                 .iter()
                 .find(|p| p.name.as_str() == f.process)
                 .and_then(|p| after_ms(p.fault_ns))
@@ -534,7 +533,8 @@ fn note_detection(f: &mut FaultRecord, view: &WatchdogView) {
         };
     }
     if f.fault == "restart" && f.rejoined_after_ms.is_none() {
-        f.rejoined_after_ms = view.processes[..n]
+        f.rejoined_after_ms = view
+            .watched()
             .iter()
             .find(|p| p.name.as_str() == f.process && p.restarts > 0)
             .and_then(|p| after_ms(p.rejoined_ns));
