@@ -50,7 +50,7 @@ test: lint
 # Every parser of untrusted input (MAVLink, config, scenario, graph, pad layout,
 # calibration, MCAP, camera and depth frames) fuzzed for FUZZ_SECONDS each on stable
 # Rust: executions per target are printed; a panic, hang or unbounded allocation fails.
-FUZZ_SECONDS ?= 8
+FUZZ_SECONDS ?= 5
 fuzz:
 	$(CARGO) build --release -p fuzz
 	./target/release/landing-fuzz --seconds $(FUZZ_SECONDS)

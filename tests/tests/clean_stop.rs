@@ -1,5 +1,5 @@
 //! Every stack process stops cleanly: started the way `landing run --processes` starts
-//! it, with data flowing through it, stopped with SIGTERM at a random moment, 30 times
+//! it, with data flowing through it, stopped with SIGTERM at a random moment, 15 times
 //! per binary, while two busy loops load both cores. Each stop must end with exit code 0
 //! and the process's final counters in its log; no crash, no hang, no error.
 //!
@@ -21,7 +21,7 @@ use landing_tests::stop::{BusyLoops, Moments, catches_sigterm, count_in, last_li
 use runtime::{Ipc, IpcPrefix};
 
 /// Stops per binary.
-const TRIALS: usize = 30;
+const TRIALS: usize = 15;
 /// A stop comes at a moment drawn uniformly from this long after data has flowed.
 const WINDOW: Duration = Duration::from_secs(1);
 /// The scenario the stack flies: the paper's obstacle demo (every stage busy).

@@ -186,12 +186,12 @@ fn no_message_lost(logs: &str) {
 }
 
 #[test]
-fn two_minutes_of_flight_with_every_stage_its_own_process_lose_no_message() {
+fn a_minute_of_flight_with_every_stage_its_own_process_loses_no_message() {
     let _stack = common::one_stack();
-    // A world where the pad's vehicle waits 60 s, 49 m away, then drives by: the vehicle
-    // takes off, waits at the preset point for two minutes of steady state (camera and
-    // depth frames, states, maps, setpoints, status, the watchdog), then tracks the pad
-    // and lands on it.
+    // A world where the pad's vehicle waits 30 s, 19 m further away, then drives by: the
+    // vehicle takes off, waits at the preset point for a minute of steady state (camera
+    // and depth frames, states, maps, setpoints, status, the watchdog), then tracks the
+    // pad and lands on it. (Two minutes until CI's time budget asked for one.)
     let paper = std::fs::read_to_string(
         std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../deploy/scenarios/paper-sim.toml"),
@@ -200,8 +200,8 @@ fn two_minutes_of_flight_with_every_stage_its_own_process_lose_no_message() {
     let world = paper
         .replace("name = \"paper-sim\"", "name = \"soak\"")
         .replace("duration_s = 120.0", "duration_s = 200.0")
-        .replace("start_delay_s = 5.0", "start_delay_s = 60.0")
-        .replace("start_m = [-6.0, -2.0]", "start_m = [-55.0, -2.0]");
+        .replace("start_delay_s = 5.0", "start_delay_s = 30.0")
+        .replace("start_m = [-6.0, -2.0]", "start_m = [-25.0, -2.0]");
     assert_ne!(world, paper);
     let file = temp("soak.toml", &world);
     let logs = std::env::temp_dir().join(format!("landing-soak-logs-{}", std::process::id()));
@@ -216,7 +216,7 @@ fn two_minutes_of_flight_with_every_stage_its_own_process_lose_no_message() {
         logs,
     ]);
     let flown = s["flight_time_s"].as_f64().unwrap();
-    assert!(flown >= 120.0, "a {flown} s flight");
+    assert!(flown >= 60.0, "a {flown} s flight");
     no_message_lost(logs);
 }
 
