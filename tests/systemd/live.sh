@@ -10,7 +10,9 @@
 #   - every stage killed three times is back (READY=1) each time; the time from each
 #     death to the new process's READY=1 is printed (p50, p95);
 #   - a hung stage (SIGSTOP) is killed by WatchdogSec and restarted;
-#   - the units start on this machine's CPUs (a 2-core machine here).
+#   - the units start on this machine's CPUs (a 2-core machine here);
+#   - a unit that cannot start is given up (start-limit-hit), the system reads degraded
+#     and `landing status` says DEGRADED.
 # Needs root, mount (overlayfs) and systemd-nspawn (apt: systemd-container). About a
 # minute. docs/jetson.md.
 set -eu
@@ -186,4 +188,43 @@ echo "systemd live: hung depth-map killed by WatchdogSec and back in $(((t1 - t0
 # 4. Nothing failed meanwhile.
 failed=$(inside systemctl list-units --failed --plain --no-legend 'landing*' | wc -l)
 [ "$failed" = 0 ] || { inside systemctl list-units --failed --no-pager >&2; fail "$failed landing units failed"; }
+# 5. A unit that cannot start is given up and says so: the planner's binary replaced by
+# one that exits 1 at once, the planner killed; systemd restarts it until its start limit,
+# the unit fails, the system reads degraded and `landing status` names it.
+rm -f "$ROOT/usr/local/bin/planner" # the running one keeps its file until it exits
+printf '#!/bin/sh\nexit 1\n' >"$ROOT/usr/local/bin/planner"
+chmod 0755 "$ROOT/usr/local/bin/planner"
+starts_before=$(prop planner NRestarts)
+inside kill -KILL "$(prop planner MainPID)"
+# Failed between two restarts for a moment; given up once it stays failed (systemd 252
+# keeps the last run's Result, exit-code, and logs the start limit).
+given_up=""
+for _ in $(seq 1 60); do
+    n=$(prop planner NRestarts)
+    sleep 0.5
+    if [ "$(prop planner ActiveState)" = failed ] && [ "$(prop planner NRestarts)" = "$n" ]; then
+        given_up=1
+        break
+    fi
+done
+[ -n "$given_up" ] || fail "a planner that cannot start is $(prop planner ActiveState) after 30 s, not given up"
+result=$(prop planner Result)
+inside journalctl -u landing@planner.service --no-pager 2>/dev/null | grep -q "Start request repeated too quickly" || {
+    inside systemctl status landing@planner.service --no-pager -n 30 >&2 || true
+    fail "the planner failed ($result) without reaching its start limit"
+}
+system=$(inside systemctl is-system-running 2>/dev/null || true)
+[ "$system" = degraded ] || fail "the system reads $system, not degraded"
+status=""
+for _ in $(seq 1 20); do
+    status=$(inside runuser -u landing -- env LANDING_IPC_PREFIX=landing_ /usr/local/bin/landing status 2>&1 || true)
+    case "$status" in *"DEGRADED: planner is dead and not back"*) break ;; esac
+    sleep 0.2
+done
+case "$status" in
+    *"DEGRADED: planner is dead and not back"*) ;;
+    *) echo "$status" >&2; fail "landing status does not say the planner is gone" ;;
+esac
+echo "systemd live: a planner that cannot start given up after $(($(prop planner NRestarts) - starts_before)) restarts (start limit, $result), the system degraded, landing status: DEGRADED: planner is dead and not back"
+
 echo "systemd live: ok"
