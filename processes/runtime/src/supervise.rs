@@ -46,6 +46,44 @@ pub fn process_cpu_ns(pid: u32) -> Option<u64> {
     Some((utime + stime).saturating_mul(1_000_000_000) / ticks)
 }
 
+/// Whether process `pid` is on its way out: a zombie, exiting, or with a SIGKILL pending
+/// (`/proc/<pid>/stat` and `status`). A killed process keeps its iceoryx2 node alive until
+/// the kernel has run its exit, which on a loaded machine can take longer than its
+/// heartbeat deadline: without this the watchdog called a killed fsm hung (176 ms after the
+/// kill, on CI), and a hang is decided at once where a death waits for its restart. False
+/// when it cannot tell (no such process, not Linux): the node list decides then.
+pub fn process_is_dying(pid: u32) -> bool {
+    /// `PF_EXITING` in the flags of `/proc/<pid>/stat` (include/linux/sched.h).
+    const PF_EXITING: u64 = 0x4;
+    /// SIGKILL's bit in the pending-signal masks of `/proc/<pid>/status`.
+    const SIGKILL_BIT: u64 = 1 << (libc::SIGKILL - 1);
+    let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else {
+        return false;
+    };
+    // After the command name: the state (field 3), then the flags are field 9.
+    let Some(rest) = stat.rfind(')').and_then(|i| stat.get(i + 1..)) else {
+        return false;
+    };
+    let mut fields = rest.split_whitespace();
+    let state = fields.next().unwrap_or("");
+    let flags: u64 = fields.nth(5).and_then(|f| f.parse().ok()).unwrap_or(0);
+    if matches!(state, "Z" | "X" | "x") || flags & PF_EXITING != 0 {
+        return true;
+    }
+    let Ok(status) = std::fs::read_to_string(format!("/proc/{pid}/status")) else {
+        return false;
+    };
+    status.lines().any(|l| {
+        let mask = |key: &str| {
+            l.strip_prefix(key)
+                .and_then(|v| u64::from_str_radix(v.trim(), 16).ok())
+        };
+        mask("ShdPnd:")
+            .or_else(|| mask("SigPnd:"))
+            .is_some_and(|m| m & SIGKILL_BIT != 0)
+    })
+}
+
 /// Why the supervision source could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum SupervisionError {
@@ -134,7 +172,10 @@ impl Supervision {
         };
         let mut died = Vec::new();
         for (k, w) in self.watched.iter_mut().enumerate() {
-            let node = nodes.iter().find(|n| n.alive && n.name == w.name);
+            // A node whose process is being killed is dead already.
+            let node = nodes
+                .iter()
+                .find(|n| n.alive && n.name == w.name && !n.pid.is_some_and(process_is_dying));
             w.pid = node.and_then(|n| n.pid);
             let alive = node.map(|n| n.id);
             match (w.listed, alive) {

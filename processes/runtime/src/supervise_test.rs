@@ -20,3 +20,32 @@ fn a_processs_cpu_time_is_read_from_proc_and_grows_as_it_works() {
     assert!(after > before, "{before} -> {after} ns after 20 s of work");
     assert_eq!(process_cpu_ns(u32::MAX), None, "no such process");
 }
+
+#[test]
+fn a_process_that_exited_unreaped_is_dying_and_a_running_one_is_not() {
+    assert!(
+        !process_is_dying(std::process::id()),
+        "this test is running"
+    );
+    let mut sleeper = std::process::Command::new("sleep")
+        .arg("30")
+        .spawn()
+        .unwrap();
+    assert!(!process_is_dying(sleeper.id()), "a sleeping process");
+    let mut done = std::process::Command::new("true").spawn().unwrap();
+    // Not reaped: a zombie until `wait`, its node (had it one) still listed alive.
+    let start = std::time::Instant::now();
+    while !process_is_dying(done.id()) {
+        assert!(
+            start.elapsed().as_secs() < 20,
+            "`true` never became a zombie"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let gone = done.id();
+    done.wait().unwrap();
+    assert!(!process_is_dying(gone), "reaped: the node list decides");
+    sleeper.kill().unwrap();
+    sleeper.wait().unwrap();
+    assert!(!process_is_dying(u32::MAX), "no such process");
+}
