@@ -46,12 +46,14 @@ pub fn process_cpu_ns(pid: u32) -> Option<u64> {
     Some((utime + stime).saturating_mul(1_000_000_000) / ticks)
 }
 
-/// Whether process `pid` is on its way out: a zombie, exiting, or with a SIGKILL pending
-/// (`/proc/<pid>/stat` and `status`). A killed process keeps its iceoryx2 node alive until
-/// the kernel has run its exit, which on a loaded machine can take longer than its
-/// heartbeat deadline: without this the watchdog called a killed fsm hung (176 ms after the
-/// kill, on CI), and a hang is decided at once where a death waits for its restart. False
-/// when it cannot tell (no such process, not Linux): the node list decides then.
+/// Whether process `pid` is on its way out by a fault: a SIGKILL pending, or exiting (or
+/// a zombie) with a status other than a clean exit 0 (`/proc/<pid>/stat` and `status`). A
+/// killed process keeps its iceoryx2 node alive until it is reaped, which on a loaded
+/// machine can come later than its heartbeat deadline: without this the watchdog called
+/// a killed fsm hung (176 ms after the kill, in `make test`), and a hang is decided at once
+/// where a death waits for its restart. A process stopping cleanly (SIGTERM, exit 0) is not
+/// dying: its node goes as before. False when it cannot tell (no such process, not Linux):
+/// the node list decides then.
 pub fn process_is_dying(pid: u32) -> bool {
     /// `PF_EXITING` in the flags of `/proc/<pid>/stat` (include/linux/sched.h).
     const PF_EXITING: u64 = 0x4;
@@ -60,14 +62,16 @@ pub fn process_is_dying(pid: u32) -> bool {
     let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else {
         return false;
     };
-    // After the command name: the state (field 3), then the flags are field 9.
+    // After the command name: the state is field 3, the flags field 9 and the exit
+    // status (as waitpid reports it, Linux 3.5+) field 52.
     let Some(rest) = stat.rfind(')').and_then(|i| stat.get(i + 1..)) else {
         return false;
     };
-    let mut fields = rest.split_whitespace();
-    let state = fields.next().unwrap_or("");
-    let flags: u64 = fields.nth(5).and_then(|f| f.parse().ok()).unwrap_or(0);
-    if matches!(state, "Z" | "X" | "x") || flags & PF_EXITING != 0 {
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let state = fields.first().copied().unwrap_or("");
+    let field = |n: usize| fields.get(n - 3).and_then(|f| f.parse::<u64>().ok());
+    let exiting = matches!(state, "Z" | "X" | "x") || field(9).is_some_and(|f| f & PF_EXITING != 0);
+    if exiting && field(52).is_some_and(|code| code != 0) {
         return true;
     }
     let Ok(status) = std::fs::read_to_string(format!("/proc/{pid}/status")) else {

@@ -22,7 +22,7 @@ fn a_processs_cpu_time_is_read_from_proc_and_grows_as_it_works() {
 }
 
 #[test]
-fn a_process_that_exited_unreaped_is_dying_and_a_running_one_is_not() {
+fn a_process_that_failed_unreaped_is_dying_and_one_that_exited_cleanly_is_not() {
     assert!(
         !process_is_dying(std::process::id()),
         "this test is running"
@@ -32,20 +32,34 @@ fn a_process_that_exited_unreaped_is_dying_and_a_running_one_is_not() {
         .spawn()
         .unwrap();
     assert!(!process_is_dying(sleeper.id()), "a sleeping process");
-    let mut done = std::process::Command::new("true").spawn().unwrap();
-    // Not reaped: a zombie until `wait`, its node (had it one) still listed alive.
-    let start = std::time::Instant::now();
-    while !process_is_dying(done.id()) {
-        assert!(
-            start.elapsed().as_secs() < 20,
-            "`true` never became a zombie"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    let gone = done.id();
-    done.wait().unwrap();
+    // Not reaped: zombies until `wait`, their nodes (had they any) still listed alive.
+    let zombie = |program: &str| {
+        let child = std::process::Command::new(program).spawn().unwrap();
+        let stat = format!("/proc/{}/stat", child.id());
+        let start = std::time::Instant::now();
+        while !std::fs::read_to_string(&stat).unwrap().contains(") Z ") {
+            assert!(
+                start.elapsed().as_secs() < 20,
+                "`{program}` never became a zombie"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        child
+    };
+    let mut failed = zombie("false");
+    assert!(process_is_dying(failed.id()), "exited 1, not reaped");
+    let mut clean = zombie("true");
+    assert!(
+        !process_is_dying(clean.id()),
+        "exited 0: a clean stop, not a death"
+    );
+    let gone = failed.id();
+    failed.wait().unwrap();
+    clean.wait().unwrap();
     assert!(!process_is_dying(gone), "reaped: the node list decides");
+    // SIGKILL: dying from the signal on, a zombie with a signal status after.
     sleeper.kill().unwrap();
+    assert!(process_is_dying(sleeper.id()), "killed, not reaped");
     sleeper.wait().unwrap();
     assert!(!process_is_dying(u32::MAX), "no such process");
 }
