@@ -12,7 +12,7 @@ export CARGO_TERM_COLOR ?= never
 help:
 	@echo "make demo   install what is missing, build (release), run the simulated mission"
 	@echo "make test   install what is missing, then run every check and test"
-	@echo "make faults the whole fault matrix (make test flies a sixth of it per run)"
+	@echo "make faults the whole fault matrix (make test flies an eighth of it per run)"
 	@echo "make systemd the stack under a live systemd in a container (root)"
 
 bootstrap:
@@ -77,7 +77,7 @@ peers:
 	python3 tests/peers/foxglove_reader.py target/peers/processes.mcap
 	@rm -rf target/peers
 
-# The whole fault matrix (74 flights, about 33 minutes); make test flies one part of six of
+# The whole fault matrix (74 flights, about 33 minutes); make test flies one part of eight of
 # it per run (tools/landing/tests/faults.rs).
 faults: build
 	FAULT_MATRIX=full $(CARGO) test --release -p landing --test faults -- --nocapture
