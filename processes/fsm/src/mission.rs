@@ -1058,13 +1058,14 @@ impl Fsm {
         // The drop stopped at the pad's height: the gear is on it. Motors off now (a forced
         // disarm): PX4's land detector needs a second of low thrust to agree, and until then
         // its controller tilts the vehicle about feet that grip a moving pad.
-        let vz_rel = Vector3::from(v.velocity).z - est.velocity.z;
+        let vz = v.velocity[2];
+        let vz_rel = vz - est.velocity.z;
         self.drop_moving |= self.dropping && vz_rel < -0.5 * self.cfg.drop_rate_m_s;
         let still = vz_rel > -TOUCH_STILL_M_S;
         // Far above the estimate, stopped in the world as well: an estimate sinking under
         // the drop makes a moving vehicle look still relative to it.
         let near = height < TOUCH_HEIGHT_M;
-        let far = height < TOUCH_HEIGHT_FAR_M && Vector3::from(v.velocity).z > -TOUCH_STILL_M_S;
+        let far = height < TOUCH_HEIGHT_FAR_M && vz > -TOUCH_STILL_M_S;
         if self.drop_moving && !on_ground && still && (near || far) {
             let since = *self.touch_since.get_or_insert(now_ns);
             let held = now_ns.saturating_sub(since) as f64 * 1e-9;

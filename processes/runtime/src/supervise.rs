@@ -33,17 +33,35 @@ pub const CPU_PERIOD_NS: u64 = 1_000_000_000;
 /// The CPU time (user and system, every thread) process `pid` has used, ns, from
 /// `/proc/<pid>/stat`; `None` when it cannot be read (gone, not Linux).
 pub fn process_cpu_ns(pid: u32) -> Option<u64> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-    // The command name (field 2) is in parentheses and may hold spaces: count from the
-    // last ')'. utime and stime are fields 14 and 15, the 12th and 13th after it.
-    let rest = stat.get(stat.rfind(')')? + 1..)?;
-    let mut fields = rest.split_whitespace().skip(11);
-    let utime: u64 = fields.next()?.parse().ok()?;
-    let stime: u64 = fields.next()?.parse().ok()?;
+    let stat = ProcStat::read(pid)?;
+    let utime = stat.number(14)?;
+    let stime = stat.number(15)?;
     // SAFETY: sysconf reads a constant of the system; no memory is touched.
     let ticks = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
     let ticks = u64::try_from(ticks).ok().filter(|t| *t > 0)?;
     Some((utime + stime).saturating_mul(1_000_000_000) / ticks)
+}
+
+/// `/proc/<pid>/stat`, read once: its fields by their number in proc(5).
+struct ProcStat(String);
+
+impl ProcStat {
+    fn read(pid: u32) -> Option<Self> {
+        std::fs::read_to_string(format!("/proc/{pid}/stat"))
+            .ok()
+            .map(Self)
+    }
+
+    /// Field `n` (3 or more). The command name (field 2) is in parentheses and may hold
+    /// spaces: fields are counted from the last ')'.
+    fn field(&self, n: usize) -> Option<&str> {
+        let rest = self.0.get(self.0.rfind(')')? + 1..)?;
+        rest.split_whitespace().nth(n.checked_sub(3)?)
+    }
+
+    fn number(&self, n: usize) -> Option<u64> {
+        self.field(n)?.parse().ok()
+    }
 }
 
 /// Whether process `pid` is on its way out by a fault: a SIGKILL pending, or exiting (or
@@ -59,19 +77,14 @@ pub fn process_is_dying(pid: u32) -> bool {
     const PF_EXITING: u64 = 0x4;
     /// SIGKILL's bit in the pending-signal masks of `/proc/<pid>/status`.
     const SIGKILL_BIT: u64 = 1 << (libc::SIGKILL - 1);
-    let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else {
+    let Some(stat) = ProcStat::read(pid) else {
         return false;
     };
-    // After the command name: the state is field 3, the flags field 9 and the exit
-    // status (as waitpid reports it, Linux 3.5+) field 52.
-    let Some(rest) = stat.rfind(')').and_then(|i| stat.get(i + 1..)) else {
-        return false;
-    };
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let state = fields.first().copied().unwrap_or("");
-    let field = |n: usize| fields.get(n - 3).and_then(|f| f.parse::<u64>().ok());
-    let exiting = matches!(state, "Z" | "X" | "x") || field(9).is_some_and(|f| f & PF_EXITING != 0);
-    if exiting && field(52).is_some_and(|code| code != 0) {
+    // The state is field 3, the flags field 9 and the exit status (as waitpid reports it,
+    // Linux 3.5+) field 52.
+    let exiting = matches!(stat.field(3), Some("Z" | "X" | "x"))
+        || stat.number(9).is_some_and(|f| f & PF_EXITING != 0);
+    if exiting && stat.number(52).is_some_and(|code| code != 0) {
         return true;
     }
     let Ok(status) = std::fs::read_to_string(format!("/proc/{pid}/status")) else {

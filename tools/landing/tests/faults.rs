@@ -26,9 +26,6 @@ use serde_json::Value;
 const FLIGHTS: usize = 6 * (2 * 2 + 3) + 16 * 2;
 const PARTS: usize = 8;
 
-/// Touchdown error within which a fault that costs nothing lands, m.
-const ON_THE_PAD_M: f64 = 0.10;
-
 /// The shipped `[watchdog.ride_through]` budget `key` for tracking and descending, ms.
 fn ride_through_ms(key: &str) -> f64 {
     let cfg: toml::Table = toml::from_str(&common::shipped_config()).unwrap();
@@ -60,14 +57,7 @@ fn judge(r: &Value) -> Option<String> {
     }
     let on_the_pad = || {
         let e = r["touchdown_error_m"].as_f64().unwrap_or(f64::INFINITY);
-        // The referee ends a faulted run as soon as the vehicle is down and disarmed,
-        // which on the pad can come a moment before the fsm's own `landed` reaches it
-        // (the disarm shows in the 20 Hz truth first): `safe_landed` with this line is a
-        // touchdown its limits passed. The referee is not the stack's to change; the
-        // touchdown error decides here.
-        let down_after_fault = outcome == "safe_landed"
-            && r["referee"].as_str() == Some("down and disarmed after a fault to a process");
-        if !(outcome == "landed" || down_after_fault) || e > ON_THE_PAD_M {
+        if !common::landed_on_the_pad(r) {
             Some(format!(
                 "{inject}: within its budget, yet {outcome} {e:.2} m off (`{action}`)"
             ))

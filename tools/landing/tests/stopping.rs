@@ -5,29 +5,14 @@
 
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
-use std::sync::{PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
+mod common;
+
 /// The stage processes of deploy/graph.toml.
 const STAGES: usize = 8;
-
-/// The machine's two cores. The harness runs two tests at a time, and a stack flying
-/// beside another lands centimetres worse (CI: a restarted planner's flight touched down
-/// 10.2 cm off, more than the 10 cm it is judged by; here 8 such flights alone landed
-/// 1.8-4.7 cm off, 10 beside a busy loop 0.9-11.2 cm). The flight judged by its touchdown
-/// has the machine to itself (a write lock waits for the others and holds the next ones
-/// off); the flights judged only by how they end share it.
-static MACHINE: RwLock<()> = RwLock::new(());
-
-fn beside_others() -> RwLockReadGuard<'static, ()> {
-    MACHINE.read().unwrap_or_else(PoisonError::into_inner)
-}
-
-fn alone() -> RwLockWriteGuard<'static, ()> {
-    MACHINE.write().unwrap_or_else(PoisonError::into_inner)
-}
 
 fn prefix(tag: &str) -> String {
     format!("lt_{tag}{}_", std::process::id())
@@ -131,7 +116,7 @@ fn summary(child: Child) -> (Option<i32>, Value, String) {
 
 #[test]
 fn killing_landing_outright_leaves_no_stage_and_no_shared_memory_behind() {
-    let _machine = beside_others();
+    let _machine = common::beside_others();
     let p = prefix("kill");
     let mut landing = start(&["--processes", "--json"], &p);
     wait_for_stages(&p, landing.id());
@@ -142,7 +127,7 @@ fn killing_landing_outright_leaves_no_stage_and_no_shared_memory_behind() {
 
 #[test]
 fn ctrl_c_ends_a_processes_run_as_interrupted_with_its_summary() {
-    let _machine = beside_others();
+    let _machine = common::beside_others();
     let p = prefix("int");
     let landing = start(&["--processes", "--json"], &p);
     wait_for_stages(&p, landing.id());
@@ -155,7 +140,7 @@ fn ctrl_c_ends_a_processes_run_as_interrupted_with_its_summary() {
 
 #[test]
 fn the_simulator_dying_ends_the_run_with_a_summary_naming_it() {
-    let _machine = beside_others();
+    let _machine = common::beside_others();
     let p = prefix("die");
     let landing = start(&["--processes", "--json"], &p);
     wait_for_stages(&p, landing.id());
@@ -178,7 +163,7 @@ fn the_simulator_dying_ends_the_run_with_a_summary_naming_it() {
 
 #[test]
 fn an_fsm_killed_while_tracking_is_found_by_the_watchdog_which_orders_a_landing() {
-    let _machine = beside_others();
+    let _machine = common::beside_others();
     // The watchdog finds the fsm's node dead and orders px4-link to land (AUTO.LAND);
     // had px4-link died too, PX4's offboard-loss failsafe (COM_OBL_RC_ACT = 4 in the
     // airframe, deploy/README.md) would land after COM_OF_LOSS_T. The vehicle must end on
@@ -202,7 +187,7 @@ fn an_fsm_killed_while_tracking_is_found_by_the_watchdog_which_orders_a_landing(
 
 #[test]
 fn a_planner_restarted_while_tracking_is_found_dead_and_rejoins_without_a_landing() {
-    let _machine = alone();
+    let _machine = common::one_stack();
     // SIGKILL and the same command again at once, as systemd's Restart=on-failure: the
     // node list never shows the name missing, only under another node id. The death is
     // found; the new planner is back within the watchdog's restart budget, so nothing is
@@ -217,13 +202,7 @@ fn a_planner_restarted_while_tracking_is_found_dead_and_rejoins_without_a_landin
     // before the fsm's `landed` (as the fault matrix judges it, tests/faults.rs). Asserting
     // `landed` alone failed once in three runs of this binary (its summary not kept); the
     // matrix saw that line on the pad in 4 of 18 restarts.
-    let on_pad = s["touchdown_error_m"].as_f64().is_some_and(|e| e <= 0.10);
-    let down_after_fault = s["outcome"] == "safe_landed"
-        && s["referee"] == "down and disarmed after a fault to a process";
-    assert!(
-        on_pad && (s["outcome"] == "landed" || down_after_fault),
-        "{s}\n{log}"
-    );
+    assert!(common::landed_on_the_pad(&s), "{s}\n{log}");
     let f = &s["faults"][0];
     assert_eq!(f["fault"], "restart", "{s}");
     assert!(f["detected_after_ms"].as_f64().is_some(), "found dead: {s}");
@@ -278,7 +257,7 @@ fn blanking_a_topic_that_carries_no_images_is_refused_before_the_flight() {
 
 #[test]
 fn ctrl_c_ends_a_lockstep_run_as_interrupted_with_its_summary() {
-    let _machine = beside_others();
+    let _machine = common::beside_others();
     // Stopped at its first progress line (the flight takes a few seconds here).
     let mut landing = start(&["--scenario", "obstacle-demo", "--json"], &prefix("lock"));
     let mut err = BufReader::new(landing.stderr.take().unwrap());
@@ -296,7 +275,7 @@ fn ctrl_c_ends_a_lockstep_run_as_interrupted_with_its_summary() {
 
 #[test]
 fn landing_clean_removes_what_a_stack_killed_outright_left_behind() {
-    let _machine = beside_others();
+    let _machine = common::beside_others();
     // Every process SIGKILLed at once (a power cut, `systemctl kill -s KILL`): nobody is
     // left to clean up, so `landing clean` (landing-clean.service, before the stack
     // starts again) must.
@@ -330,7 +309,7 @@ fn landing_clean_removes_what_a_stack_killed_outright_left_behind() {
 
 #[test]
 fn landing_status_shows_a_process_hung_in_flight_and_the_watchdogs_order() {
-    let _machine = beside_others();
+    let _machine = common::beside_others();
     let p = prefix("status");
     let landing = start(
         &["--processes", "--json", "--inject", "stop:planner@track"],
@@ -389,7 +368,7 @@ fn landing_status_without_a_running_stack_is_one_line_and_exit_2() {
 
 #[test]
 fn landing_inject_corrupts_a_running_stacks_pad_observations_and_stops_its_planner() {
-    let _machine = beside_others();
+    let _machine = common::beside_others();
     let p = prefix("inject");
     let logs = std::env::temp_dir().join(format!("lt-inject-{}", std::process::id()));
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_landing"));

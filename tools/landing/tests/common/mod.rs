@@ -2,18 +2,46 @@
 #![allow(dead_code)] // each test file uses a part
 
 use std::process::{Command, Output};
-use std::sync::{Mutex, MutexGuard, PoisonError};
+use std::sync::{PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
 
-/// One stack of OS processes flying in real time at once within a test file. Each takes
+use serde_json::Value;
+
+/// The machine's two cores, shared by the real-time stacks of a test file. Each takes
 /// about a core; the harness runs two tests at a time on CI's two cores, and two stacks
 /// beside each other starved both (measured: aruco-pnp lost 22-25 states held off the
-/// CPU, and paper-sim touched down at 1.03 m/s). A vehicle's computer runs one stack; a
-/// lockstep flight beside it stays as the load.
-static ONE_STACK: Mutex<()> = Mutex::new(());
+/// CPU, and paper-sim touched down at 1.03 m/s; a restarted planner's flight 10.2 cm off,
+/// where 8 alone landed 1.8-4.7 cm off). A vehicle's computer runs one stack: a flight
+/// judged by how it lands has the machine to itself ([`one_stack`], a write lock that
+/// waits for the others and holds the next ones off); flights judged only by how they end
+/// share it ([`beside_others`]). A lockstep flight beside them stays as the load.
+static MACHINE: RwLock<()> = RwLock::new(());
 
-/// Holds the machine for one real-time stack until dropped.
-pub fn one_stack() -> MutexGuard<'static, ()> {
-    ONE_STACK.lock().unwrap_or_else(PoisonError::into_inner)
+/// Holds the machine for one real-time stack, alone, until dropped.
+pub fn one_stack() -> RwLockWriteGuard<'static, ()> {
+    MACHINE.write().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Holds a share of the machine for a stack judged only by how its run ends.
+pub fn beside_others() -> RwLockReadGuard<'static, ()> {
+    MACHINE.read().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Touchdown error within which a fault that costs nothing lands, m.
+pub const ON_THE_PAD_M: f64 = 0.10;
+
+/// Whether a run summary (or a `landing bench faults` row) came down on the pad: `landed`
+/// within [`ON_THE_PAD_M`], or `safe_landed` by the referee's down-after-fault line within
+/// it. The referee ends a faulted run as soon as the vehicle is down and disarmed, which on
+/// the pad can come a moment before the fsm's own `landed` reaches it (the disarm shows in
+/// the 20 Hz truth first): a touchdown its limits passed. The referee is not the stack's to
+/// change; the touchdown error decides here.
+pub fn landed_on_the_pad(s: &Value) -> bool {
+    let down_after_fault = s["outcome"] == "safe_landed"
+        && s["referee"] == "down and disarmed after a fault to a process";
+    let on_pad = s["touchdown_error_m"]
+        .as_f64()
+        .is_some_and(|e| e <= ON_THE_PAD_M);
+    on_pad && (s["outcome"] == "landed" || down_after_fault)
 }
 
 /// Runs the `landing` binary with `args` and waits for it.
