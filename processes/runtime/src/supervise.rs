@@ -1,8 +1,10 @@
 //! The supervision source: the liveness of the stack's processes as the runtime sees it,
 //! delivered to the watchdog stage as `watchdog/liveness` messages. A heartbeat event of a
 //! process is a beat; a node of the stack that is listed dead, or that was alive and is
-//! no longer listed, is a death (whoever cleaned it up first). After a death the source
-//! removes the dead node's resources, so that a process systemd restarts reconnects.
+//! no longer listed, is a death (whoever cleaned it up first). At its next wait, after the
+//! death is delivered, the source removes the dead node's resources, so that the ports
+//! of the others let go of it. The beats are read last in each wait, after a look at the
+//! nodes or a cleanup however long: the deadlines are judged right after it.
 //! Every [`CPU_PERIOD_NS`] it also reads each listed process's CPU time from
 //! `/proc/<pid>/stat` (the node list names the pid), for the watchdog's view.
 
@@ -121,8 +123,14 @@ pub struct Supervision {
     next_cpu_ns: u64,
     seq: u64,
     beats: u64,
+    /// Beats read from a process reported dead and not listed since (sent before it
+    /// died).
+    stale_beats: u64,
     deaths: u64,
     cleaned: u64,
+    /// Dead nodes were listed: their resources are removed at the start of the next
+    /// wait, after the deaths are delivered (so the cleanup does not delay them).
+    cleanup_due: bool,
     /// Last: fields drop in order, and the node must outlive the heartbeat listeners
     /// made from it. Dropped before them, its `Drop` still saw itself alive and left the
     /// prefix's node-counter segment behind when the stack stopped.
@@ -157,8 +165,10 @@ impl Supervision {
             next_cpu_ns: 0,
             seq: 0,
             beats: 0,
+            stale_beats: 0,
             deaths: 0,
             cleaned: 0,
+            cleanup_due: false,
         })
     }
 
@@ -215,9 +225,7 @@ impl Supervision {
                 _ => {}
             }
         }
-        if nodes.iter().any(|n| !n.alive) {
-            self.cleaned += self.ipc.cleanup_dead_nodes();
-        }
+        self.cleanup_due = nodes.iter().any(|n| !n.alive);
         died
     }
 }
@@ -233,20 +241,27 @@ impl External for Supervision {
         clock: &dyn Fn() -> u64,
         deliver: &mut dyn FnMut(Input<'_>, u64) -> Result<(), StageError>,
     ) -> Result<Flow, StageError> {
+        let mut timeout_ns = timeout_ns;
+        if self.cleanup_due {
+            // Found dead at the last look and reported then; cleaned up now, before the
+            // beats of this wait are read (a cleanup took 180 ms on a loaded machine).
+            self.cleanup_due = false;
+            self.cleaned += self.ipc.cleanup_dead_nodes();
+            timeout_ns = 0;
+        }
         let now = clock();
         let until_poll = self.next_poll_ns.saturating_sub(now);
         let listeners: Vec<&Listener<Svc>> = self.watched.iter().map(|w| &w.heartbeat).collect();
         let ready = wait_any_readable(&listeners, timeout_ns.min(until_poll));
         let at = clock();
         let mut events = Vec::new();
-        for (k, beat) in ready.into_iter().enumerate() {
-            if beat {
-                let _ = self.watched[k].heartbeat.try_wait(|_| {});
-                self.beats += 1;
-                events.push((k, ProcessEventKind::Beat, at, 0));
-            }
-        }
-        if at >= self.next_poll_ns {
+        // A beat from a process reported dead is a restarted one only if its node is
+        // listed again: look now rather than at the next poll.
+        let beat_from_the_dead = ready
+            .iter()
+            .zip(&self.watched)
+            .any(|(r, w)| *r && w.reported);
+        if at >= self.next_poll_ns || beat_from_the_dead {
             self.next_poll_ns = at + self.poll_ns;
             // Stamped after the look: listing the nodes takes milliseconds, and a death
             // it finds may be younger than the wake-up.
@@ -255,6 +270,23 @@ impl External for Supervision {
             for k in died {
                 self.deaths += 1;
                 events.push((k, ProcessEventKind::Died, seen, 0));
+            }
+        }
+        // The beats are read after the look, however long it took: the watchdog's
+        // deadlines are judged after this wait, and a beat that came meanwhile must count. A beat of a
+        // process found dead and not listed since was sent before it died: read late, it
+        // would count as a restart, which then hangs (in `make test`, a killed fsm was
+        // called hung).
+        for k in 0..self.watched.len() {
+            let w = &self.watched[k];
+            if w.heartbeat.try_wait(|_| {}).unwrap_or(0) == 0 {
+                continue;
+            }
+            if w.reported {
+                self.stale_beats += 1;
+            } else {
+                self.beats += 1;
+                events.push((k, ProcessEventKind::Beat, clock(), 0));
             }
         }
         if at >= self.next_cpu_ns {
@@ -285,6 +317,7 @@ impl External for Supervision {
     fn counters(&self) -> Vec<Counter> {
         vec![
             ("heartbeat_events", self.beats),
+            ("stale_beats", self.stale_beats),
             ("nodes_gone", self.deaths),
             ("dead_nodes_cleaned", self.cleaned),
         ]

@@ -63,3 +63,130 @@ fn a_process_that_failed_unreaped_is_dying_and_one_that_exited_cleanly_is_not() 
     sleeper.wait().unwrap();
     assert!(!process_is_dying(u32::MAX), "no such process");
 }
+
+/// Set in a child run of this test binary: the stack prefix under which it plays the
+/// watched process.
+const CHILD_PREFIX: &str = "SUPERVISE_TEST_VICTIM_PREFIX";
+
+/// The watched process, run as a child: opens its node, beats once for every line on its
+/// stdin and says `beat` when it has.
+#[test]
+fn a_watched_process_beats_for_every_line_it_is_given() {
+    use std::io::{BufRead, Write};
+    let Ok(prefix) = std::env::var(CHILD_PREFIX) else {
+        return;
+    };
+    let prefix = IpcPrefix::new(&prefix).unwrap();
+    let ipc = Ipc::open("victim", &prefix).unwrap();
+    let mut heart = ipc.heartbeat(Duration::from_millis(250)).unwrap();
+    for line in std::io::stdin().lock().lines() {
+        line.unwrap();
+        heart.beat().unwrap();
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "beat").unwrap();
+        out.flush().unwrap();
+    }
+}
+
+struct Victim {
+    child: std::process::Child,
+    out: std::io::BufReader<std::process::ChildStdout>,
+}
+
+impl Victim {
+    fn start(prefix: &str) -> Self {
+        let mut child = std::process::Command::new(std::env::current_exe().unwrap())
+            .args([
+                "--exact",
+                "supervise::tests::a_watched_process_beats_for_every_line_it_is_given",
+                "--nocapture",
+                "--test-threads=1",
+                "-q",
+            ])
+            .env(CHILD_PREFIX, prefix)
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let out = std::io::BufReader::new(child.stdout.take().unwrap());
+        Self { child, out }
+    }
+
+    /// One beat, sent when this returns.
+    fn beat(&mut self) {
+        use std::io::{BufRead, Write};
+        let stdin = self.child.stdin.as_mut().unwrap();
+        writeln!(stdin).unwrap();
+        stdin.flush().unwrap();
+        let mut line = String::new();
+        loop {
+            line.clear();
+            assert_ne!(
+                self.out.read_line(&mut line).unwrap(),
+                0,
+                "the victim ended"
+            );
+            if line.trim() == "beat" {
+                return;
+            }
+        }
+    }
+}
+
+/// The events the supervision source delivers in `waits` waits of 30 ms, on the clock
+/// started at `start`; the first wait lists the nodes (their poll is due).
+fn events(s: &mut Supervision, waits: usize, start: std::time::Instant) -> Vec<ProcessEventKind> {
+    std::thread::sleep(Duration::from_millis(25));
+    let clock = move || start.elapsed().as_nanos() as u64;
+    let mut seen = Vec::new();
+    for _ in 0..waits {
+        s.wait(30_000_000, &clock, &mut |input, _| {
+            if let Message::ProcessEvent(e) = input.msg {
+                seen.extend(ProcessEventKind::from_raw(e.kind));
+            }
+            Ok(())
+        })
+        .unwrap();
+    }
+    seen.retain(|k| *k != ProcessEventKind::Cpu);
+    seen
+}
+
+#[test]
+fn a_beat_sent_before_a_death_and_read_after_it_is_not_a_restart_but_a_new_process_is() {
+    use ProcessEventKind::{Beat, Died};
+    let name = format!("sv{}_", std::process::id());
+    let prefix = IpcPrefix::new(&name).unwrap();
+    let mut s = Supervision::open(
+        "dog",
+        &prefix,
+        &[("victim".to_string(), Duration::from_millis(250))],
+        Duration::from_millis(20),
+    )
+    .unwrap();
+    let start = std::time::Instant::now();
+    let mut victim = Victim::start(&name);
+    victim.beat();
+    assert_eq!(
+        events(&mut s, 3, start),
+        vec![Beat],
+        "listed alive, one beat"
+    );
+    // A beat waits unread in the listener; then the process is killed and reaped.
+    victim.beat();
+    victim.child.kill().unwrap();
+    victim.child.wait().unwrap();
+    assert_eq!(
+        events(&mut s, 3, start),
+        vec![Died],
+        "the beat the dead process sent is not delivered after its death"
+    );
+    assert_eq!(s.stale_beats, 1);
+    // Restarted: its first beat counts at once.
+    let mut again = Victim::start(&name);
+    again.beat();
+    assert_eq!(events(&mut s, 1, start), vec![Beat]);
+    again.child.kill().unwrap();
+    again.child.wait().unwrap();
+    assert_eq!(events(&mut s, 3, start), vec![Died]);
+}
