@@ -3,11 +3,12 @@
 
 SHELL := /bin/bash
 # OpenCV with contrib (aruco) and libclang for the opencv and iceoryx2 bindings.
-APT_PACKAGES := libopencv-dev libopencv-contrib-dev clang libclang-dev pkg-config systemd
+# libusb and libudev for pyrealsense2 (the tests write RealSense recordings with it).
+APT_PACKAGES := libopencv-dev libopencv-contrib-dev clang libclang-dev pkg-config systemd libusb-1.0-0 libudev1
 CARGO ?= cargo
 export CARGO_TERM_COLOR ?= never
 
-.PHONY: demo test bootstrap build lint bench help peers fuzz faults systemd
+.PHONY: demo test bootstrap build lint bench help peers fuzz faults systemd pydeps
 
 help:
 	@echo "make demo   install what is missing, build (release), run the simulated mission"
@@ -42,7 +43,12 @@ lint: bootstrap
 	  $(CARGO) clippy --release --workspace --all-targets -- -D warnings; \
 	else echo "clippy not installed: lint skipped"; fi
 
-test: lint
+# Python packages the tests run: pyrealsense2 writes RealSense .bag recordings with
+# librealsense's own recorder (older than 2.58, which writes ROS 2 .db3 files only).
+pydeps:
+	@python3 -c 'import numpy, pyrealsense2' 2>/dev/null || python3 -m pip install --quiet --disable-pip-version-check numpy 'pyrealsense2<2.58'
+
+test: lint pydeps
 	$(CARGO) test --release --workspace
 	$(MAKE) --no-print-directory peers
 	$(MAKE) --no-print-directory fuzz

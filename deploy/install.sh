@@ -46,7 +46,7 @@ R=${ROOT%/}
 
 # What runs on the vehicle (the simulator does not), the flight recorder, and `landing`
 # for `landing clean`.
-BINARIES="camera-ingest aruco-pnp depth-map planner fsm px4-link watchdog recorder landing"
+BINARIES="camera-ingest depth-ingest aruco-pnp depth-map planner fsm px4-link watchdog recorder landing"
 UNITS_DIR="$R/etc/systemd/system"
 USER_NAME=landing
 

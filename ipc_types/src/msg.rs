@@ -42,6 +42,8 @@ pub enum Stage {
     Px4Link = 7,
     /// watchdog.
     Watchdog = 8,
+    /// depth-ingest.
+    DepthIngest = 9,
     /// Benchmarks and tests.
     Bench = 15,
 }
@@ -58,6 +60,7 @@ impl Stage {
             6 => Self::Fsm,
             7 => Self::Px4Link,
             8 => Self::Watchdog,
+            9 => Self::DepthIngest,
             15 => Self::Bench,
             _ => return None,
         })
@@ -74,6 +77,7 @@ impl Stage {
             Self::Fsm => "fsm",
             Self::Px4Link => "px4-link",
             Self::Watchdog => "watchdog",
+            Self::DepthIngest => "depth-ingest",
             Self::Bench => "bench",
         }
     }

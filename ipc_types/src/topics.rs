@@ -99,6 +99,9 @@ pub const HIL_TO_PX4: &str = "hil/to-px4";
 /// camera-ingest itself (OpenCV, on its capture thread): not iceoryx2. camera-ingest
 /// reads this instead of `sim/camera` when its source is not the simulator.
 pub const CAMERA_DEVICE: &str = "camera/device";
+/// Depth frames from a recording or a depth camera, read by depth-ingest itself (on its
+/// capture thread): not iceoryx2.
+pub const DEPTH_DEVICE: &str = "depth/device";
 /// Camera frames as the pipeline sees them.
 pub const CAMERA_FRAME: &str = "camera/frame";
 /// Depth frames from a real depth camera driver (depth-map `--input depth-frame`).
@@ -195,6 +198,12 @@ pub const TABLE: &[TopicInfo] = &[
         name: CAMERA_DEVICE,
         service: None,
         payload: Payload::CameraFrame,
+        evaluator_only: false,
+    },
+    TopicInfo {
+        name: DEPTH_DEVICE,
+        service: None,
+        payload: Payload::DepthFrame,
         evaluator_only: false,
     },
     row(CAMERA_FRAME, services::CAMERA_FRAME, Payload::CameraFrame),

@@ -6,7 +6,7 @@ use opencv::prelude::*;
 use opencv::videoio::{VideoWriter, VideoWriterTrait};
 
 use super::*;
-use crate::pacing::Pacer;
+use runtime::capture::Pacer;
 
 /// A fresh directory for one test, removed when dropped.
 struct TempDir(PathBuf);

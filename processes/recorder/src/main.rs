@@ -34,7 +34,7 @@ fn run(args: &Args) -> Result<()> {
     let config = args.stage.config.as_deref();
     let (mut stage, spec, out) = RecorderStage::from_config(cfg, &args.recorder, config, &graph)?;
     let deadline = Duration::from_millis(500);
-    let served = runtime::serve_spec(&args.stage, &ipc, &spec, deadline, &mut stage);
+    let served = runtime::serve_spec(&args.stage, &ipc, &spec, deadline, &mut stage, None);
     // The file is finished whatever ended the run.
     let n = stage.finish().with_context(|| format!("finishing {out}"))?;
     served?;

@@ -6,6 +6,7 @@
 //! the thin `main.rs` of each process, the lockstep runner and tools bind those libraries
 //! to it.
 
+pub mod capture;
 pub mod clock;
 pub mod driver;
 pub mod ipc;

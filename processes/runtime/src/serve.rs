@@ -129,14 +129,16 @@ pub fn serve(
 
 /// Runs `stage` as a process on the iceoryx2 driver with a node of its own, `spec`, for a
 /// process that reads the graph rather than being one of its nodes (the recorder: every
-/// topic): its prefix from `args`, its heartbeat every `[ipc] heartbeat_period_ms` with
-/// `deadline`. Returns when SIGTERM or SIGINT stops it.
+/// topic; depth-ingest, a sensor driver the simulated graph does without, with its capture
+/// thread as `external`): its prefix from `args`, its heartbeat every `[ipc]
+/// heartbeat_period_ms` with `deadline`. Returns when SIGTERM or SIGINT stops it.
 pub fn serve_spec(
     args: &StageArgs,
     ipc_cfg: &IpcConfig,
     spec: &NodeSpec,
     deadline: Duration,
     stage: &mut dyn Stage,
+    external: Option<&mut dyn External>,
 ) -> Result<(), ServeError> {
     let prefix = IpcPrefix::resolve(args.ipc_prefix.as_deref(), &ipc_cfg.prefix)?;
     let ipc = Ipc::open(stage.name(), &prefix)?;
@@ -144,6 +146,6 @@ pub fn serve_spec(
         period: Duration::from_millis(ipc_cfg.heartbeat_period_ms),
         deadline,
     };
-    driver::run(&ipc, spec, stage, None, beat)?;
+    driver::run(&ipc, spec, stage, external, beat)?;
     Ok(())
 }

@@ -24,16 +24,19 @@ pub const JOIN_TIMEOUT: Duration = Duration::from_secs(2);
 pub enum ThreadRole {
     /// camera-ingest's thread that reads, paces and reopens an OpenCV camera or file.
     CameraCapture = 80,
+    /// depth-ingest's thread that reads and paces a depth recording.
+    DepthCapture = 81,
 }
 
 impl ThreadRole {
     /// Every role, for documentation and tests.
-    pub const ALL: [ThreadRole; 1] = [ThreadRole::CameraCapture];
+    pub const ALL: [ThreadRole; 2] = [ThreadRole::CameraCapture, ThreadRole::DepthCapture];
 
     /// The thread's name (as `ps -L` and a debugger show it).
     pub fn name(self) -> &'static str {
         match self {
             Self::CameraCapture => "capture",
+            Self::DepthCapture => "depth-capture",
         }
     }
 

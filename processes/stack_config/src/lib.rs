@@ -220,6 +220,7 @@ pub const SECTIONS: &[&str] = &[
     "px4_link",
     "planner",
     "camera_ingest",
+    "depth_ingest",
     "depth_map",
     "fsm",
     "watchdog",

@@ -29,6 +29,10 @@ pub struct StackConfig {
     /// camera-ingest: where frames come from, the calibration, undistortion.
     #[serde(default)]
     pub camera_ingest: Option<CameraIngestConfig>,
+    /// depth-ingest: where a real depth camera's frames come from, and what a source that
+    /// does not record them has (intrinsics, depth units, rate).
+    #[serde(default)]
+    pub depth_ingest: Option<depth_ingest::DepthIngestConfig>,
     /// depth-map: the depth camera's mount, ray casting, the window, the log-odds model.
     #[serde(default)]
     pub depth_map: depth_map::DepthMapConfig,
@@ -59,6 +63,9 @@ impl Validate for StackConfig {
         self.recorder.validate().map_err(|e| e.under("recorder"))?;
         if let Some(c) = &self.camera_ingest {
             c.validate().map_err(|e| e.under("camera_ingest"))?;
+        }
+        if let Some(c) = &self.depth_ingest {
+            c.validate().map_err(|e| e.under("depth_ingest"))?;
         }
         Ok(())
     }
