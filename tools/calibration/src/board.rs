@@ -88,7 +88,9 @@ impl std::str::FromStr for CharucoSpec {
         let n = DICTIONARIES
             .iter()
             .find(|(name, _)| name == dictionary)
-            .ok_or_else(|| fail("a dictionary DICT_4X4_50 .. DICT_7X7_50 or DICT_ARUCO_ORIGINAL"))?;
+            .ok_or_else(|| {
+                fail("a dictionary DICT_4X4_50 .. DICT_7X7_50 or DICT_ARUCO_ORIGINAL")
+            })?;
         let needed = (sx * sy) / 2;
         let size = dictionary_size(n.0);
         if needed > size {
@@ -102,10 +104,10 @@ impl std::str::FromStr for CharucoSpec {
 }
 
 fn dictionary_size(name: &str) -> i32 {
-    match name.rsplit('_').next().and_then(|n| n.parse().ok()) {
-        Some(n) => n,
-        None => 1024,
-    }
+    name.rsplit('_')
+        .next()
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(1024)
 }
 
 impl std::fmt::Display for CharucoSpec {
@@ -147,7 +149,10 @@ impl CharucoSpec {
     /// print at `square_m` per square, or to render views from.
     pub fn image(&self, px_per_square: i32) -> Result<Mat, BoardError> {
         let mut board = self.board()?;
-        let size = Size::new(self.squares.0 * px_per_square, self.squares.1 * px_per_square);
+        let size = Size::new(
+            self.squares.0 * px_per_square,
+            self.squares.1 * px_per_square,
+        );
         let mut out = Mat::default();
         board
             .draw(size, &mut out, 0, 1)

@@ -44,7 +44,9 @@ pub enum CalibrateError {
     #[error(transparent)]
     Board(#[from] BoardError),
     /// Not enough usable views.
-    #[error("{used} usable views of the board (at least {MIN_VIEWS}; {rejected} rejected): take more, from more angles and distances, filling the image")]
+    #[error(
+        "{used} usable views of the board (at least {MIN_VIEWS}; {rejected} rejected): take more, from more angles and distances, filling the image"
+    )]
     TooFewViews {
         /// Views with enough corners.
         used: usize,

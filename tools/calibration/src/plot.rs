@@ -48,7 +48,12 @@ pub fn write(path: &Path, c: &Calibrated) -> opencv::Result<()> {
     let (fw, fh) = (iw + 80, ih + bars_h + notes + 80);
     let mut img = Mat::new_rows_cols_with_default(fh, fw, CV_8UC3, Scalar::all(255.0))?;
     let origin = Point::new(40, 50);
-    text(&mut img, "ChArUco corners used (one colour per view); grey: cells without a corner", Point::new(40, 30), 0.55)?;
+    text(
+        &mut img,
+        "ChArUco corners used (one colour per view); grey: cells without a corner",
+        Point::new(40, 30),
+        0.55,
+    )?;
     // Coverage cells.
     let mut seen = [[false; 8]; 6];
     for (x, y) in c.corners.iter().flatten() {
@@ -72,7 +77,14 @@ pub fn write(path: &Path, c: &Calibrated) -> opencv::Result<()> {
             imgproc::rectangle(&mut img, cell, Scalar::all(180.0), 1, imgproc::LINE_8, 0)?;
         }
     }
-    imgproc::rectangle(&mut img, Rect::new(origin.x, origin.y, iw, ih), Scalar::all(0.0), 1, imgproc::LINE_8, 0)?;
+    imgproc::rectangle(
+        &mut img,
+        Rect::new(origin.x, origin.y, iw, ih),
+        Scalar::all(0.0),
+        1,
+        imgproc::LINE_8,
+        0,
+    )?;
     for (i, view) in c.corners.iter().enumerate() {
         for (x, y) in view {
             let p = Point::new(
@@ -90,12 +102,26 @@ pub fn write(path: &Path, c: &Calibrated) -> opencv::Result<()> {
         .map(|(_, e)| *e)
         .filter(|e| e.is_finite())
         .fold(0.1f64, f64::max);
-    text(&mut img, &format!("RMS reprojection error per view, px (max {max:.3})"), Point::new(40, top - 10), 0.55)?;
+    text(
+        &mut img,
+        &format!("RMS reprojection error per view, px (max {max:.3})"),
+        Point::new(40, top - 10),
+        0.55,
+    )?;
     let n = c.per_view_px.len().max(1) as i32;
     let bw = (iw / n).max(2);
     for (i, (_, e)) in c.per_view_px.iter().enumerate() {
-        let bh = if e.is_finite() { (e / max * f64::from(bars_h - 40)) as i32 } else { 0 };
-        let r = Rect::new(origin.x + i as i32 * bw, top + bars_h - 40 - bh, (bw - 2).max(1), bh.max(1));
+        let bh = if e.is_finite() {
+            (e / max * f64::from(bars_h - 40)) as i32
+        } else {
+            0
+        };
+        let r = Rect::new(
+            origin.x + i as i32 * bw,
+            top + bars_h - 40 - bh,
+            (bw - 2).max(1),
+            bh.max(1),
+        );
         imgproc::rectangle(&mut img, r, colour(i), -1, imgproc::LINE_8, 0)?;
     }
     let k = &c.calibration;
@@ -114,11 +140,21 @@ pub fn write(path: &Path, c: &Calibrated) -> opencv::Result<()> {
     text(&mut img, &summary, Point::new(40, y), 0.5)?;
     for r in c.rejected.iter().take(8) {
         y += 22;
-        text(&mut img, &format!("rejected {}: {}", r.name, r.why), Point::new(40, y), 0.45)?;
+        text(
+            &mut img,
+            &format!("rejected {}: {}", r.name, r.why),
+            Point::new(40, y),
+            0.45,
+        )?;
     }
     if c.rejected.len() > 8 {
         y += 22;
-        text(&mut img, &format!("... and {} more", c.rejected.len() - 8), Point::new(40, y), 0.45)?;
+        text(
+            &mut img,
+            &format!("... and {} more", c.rejected.len() - 8),
+            Point::new(40, y),
+            0.45,
+        )?;
     }
     imgcodecs::imwrite(&*path.to_string_lossy(), &img, &Vector::new()).map(|_| ())
 }

@@ -2,11 +2,11 @@
 //! distortion), supersampled: what a calibration must recover, and a check of a setup
 //! (board size, distances) before taking real pictures.
 
+use nalgebra::Point2;
 use nalgebra::{Rotation3, Vector3};
 use opencv::core::{CV_8UC1, Mat, Scalar};
 use opencv::prelude::*;
 use optics::CameraCalibration;
-use nalgebra::Point2;
 
 /// Renders boards through one camera; the rays of its pixels are found once.
 pub struct Renderer {
@@ -95,11 +95,59 @@ impl Renderer {
             let (r, c) = (i / sw, i % sw);
             sums[(r / s) * w + c / s] += value;
         }
-        let mut out = Mat::new_rows_cols_with_default(h as i32, w as i32, CV_8UC1, Scalar::all(0.0))?;
+        let mut out =
+            Mat::new_rows_cols_with_default(h as i32, w as i32, CV_8UC1, Scalar::all(0.0))?;
         let n = (s * s) as f64;
         for (px, sum) in out.data_bytes_mut()?.iter_mut().zip(sums) {
             *px = (sum / n).round().clamp(0.0, 255.0) as u8;
         }
         Ok(out)
     }
+}
+
+/// A small deterministic generator, so that a set of views is the same every run.
+struct Lcg(u64);
+
+impl Lcg {
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        lo + (hi - lo) * ((self.0 >> 11) as f64 / (1u64 << 53) as f64)
+    }
+}
+
+/// `n` poses (`camera_from_board` rotation and translation) of a board `board_m` wide and
+/// high, drawn as a careful calibration is taken: the board faces the camera (its y up
+/// the image), turns up to about 35 deg each way, stands `distance_m` away (a range), and
+/// its centre goes everywhere in a field of view `tan_half_fov` wide (x) and 3/4 of that
+/// high; the same for the same `seed`.
+pub fn spread_poses(
+    n: usize,
+    seed: u64,
+    board_m: (f64, f64),
+    distance_m: (f64, f64),
+    tan_half_fov: f64,
+) -> Vec<(Rotation3<f64>, Vector3<f64>)> {
+    let facing = Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
+    let centre = Vector3::new(board_m.0 / 2.0, board_m.1 / 2.0, 0.0);
+    let mut rng = Lcg(seed);
+    (0..n)
+        .map(|_| {
+            let tilt = Rotation3::from_euler_angles(
+                rng.uniform(-0.6, 0.6),
+                rng.uniform(-0.6, 0.6),
+                rng.uniform(-0.5, 0.5),
+            );
+            let rotation = tilt * facing;
+            let d = rng.uniform(distance_m.0, distance_m.1);
+            let at = Vector3::new(
+                rng.uniform(-1.0, 1.0) * tan_half_fov * d,
+                rng.uniform(-0.75, 0.75) * tan_half_fov * d,
+                d,
+            );
+            (rotation, at - rotation * centre)
+        })
+        .collect()
 }

@@ -6,7 +6,7 @@
 
 use std::path::PathBuf;
 
-use calibration::synthetic::Renderer;
+use calibration::synthetic::{Renderer, spread_poses};
 use calibration::{CharucoSpec, calibrate, detect};
 use nalgebra::{Rotation3, Vector3};
 use opencv::core::{CV_8UC1, Mat, Scalar};
@@ -16,44 +16,24 @@ fn workspace() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-/// A small deterministic generator: the poses are the same every run.
-struct Lcg(u64);
-
-impl Lcg {
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        self.0 = self.0.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
-        lo + (hi - lo) * ((self.0 >> 11) as f64 / (1u64 << 53) as f64)
-    }
-}
-
 #[test]
 fn twenty_four_rendered_views_recover_the_down_camera_within_one_percent_and_two_pixels() {
-    let truth =
-        CameraCalibration::load(workspace().join("deploy/config/camera_down_640x480.yaml")).unwrap();
+    let truth = CameraCalibration::load(workspace().join("deploy/config/camera_down_640x480.yaml"))
+        .unwrap();
     let spec: CharucoSpec = "charuco:6x4:0.04:0.03:DICT_4X4_50".parse().unwrap();
     let board = spec.board().unwrap();
     let texture = spec.image(120).unwrap();
     let size_m = (6.0 * 0.04, 4.0 * 0.04);
     let renderer = Renderer::new(&truth, 3);
-    // The board faces the camera (its y up the image) and turns up to 35 deg each way,
-    // its centre 0.16 to 0.28 m away, spread over the image out to its corners.
     let facing = Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
     let centre = Vector3::new(size_m.0 / 2.0, size_m.1 / 2.0, 0.0);
-    let mut rng = Lcg(7);
     let mut detections = Vec::new();
     let mut rejected = Vec::new();
-    for i in 0..24 {
-        let tilt = Rotation3::from_euler_angles(
-            rng.uniform(-0.6, 0.6),
-            rng.uniform(-0.6, 0.6),
-            rng.uniform(-0.5, 0.5),
-        );
-        let rotation = tilt * facing;
-        let d = rng.uniform(0.16, 0.28);
-        let at = Vector3::new(rng.uniform(-1.0, 1.0) * d, rng.uniform(-0.75, 0.75) * d, d);
-        let translation = at - rotation * centre;
+    // The centre 0.16 to 0.28 m away, out to the image's corners.
+    let poses = spread_poses(24, 7, size_m, (0.16, 0.28), 1.0);
+    for (i, (rotation, translation)) in poses.iter().enumerate() {
         let view = renderer
-            .render(&texture, size_m, &rotation, &translation)
+            .render(&texture, size_m, rotation, translation)
             .unwrap();
         match detect(&format!("view{i:02}"), &view, &spec, &board) {
             Ok(det) => detections.push(det),
@@ -64,7 +44,12 @@ fn twenty_four_rendered_views_recover_the_down_camera_within_one_percent_and_two
     let blank = Mat::new_rows_cols_with_default(480, 640, CV_8UC1, Scalar::all(200.0)).unwrap();
     rejected.push(detect("blank", &blank, &spec, &board).unwrap_err());
     let far = renderer
-        .render(&texture, size_m, &facing, &(Vector3::new(0.0, 0.0, 2.5) - facing * centre))
+        .render(
+            &texture,
+            size_m,
+            &facing,
+            &(Vector3::new(0.0, 0.0, 2.5) - facing * centre),
+        )
         .unwrap();
     rejected.push(detect("far", &far, &spec, &board).unwrap_err());
 
@@ -74,7 +59,10 @@ fn twenty_four_rendered_views_recover_the_down_camera_within_one_percent_and_two
         "{} views used, {} rejected {:?}; rms {:.3} px; coverage {:.0} %; fx {:.3} fy {:.3} cx {:.3} cy {:.3} dist {:?}",
         c.per_view_px.len(),
         c.rejected.len(),
-        c.rejected.iter().map(|r| format!("{}: {}", r.name, r.why)).collect::<Vec<_>>(),
+        c.rejected
+            .iter()
+            .map(|r| format!("{}: {}", r.name, r.why))
+            .collect::<Vec<_>>(),
         c.rms_px,
         c.coverage * 100.0,
         k.fx,
@@ -84,19 +72,35 @@ fn twenty_four_rendered_views_recover_the_down_camera_within_one_percent_and_two
         k.distortion
     );
     assert!(c.per_view_px.len() >= 20, "20 or more views used");
-    assert!((k.fx / truth.fx - 1.0).abs() < 0.01, "fx {} vs {}", k.fx, truth.fx);
-    assert!((k.fy / truth.fy - 1.0).abs() < 0.01, "fy {} vs {}", k.fy, truth.fy);
+    assert!(
+        (k.fx / truth.fx - 1.0).abs() < 0.01,
+        "fx {} vs {}",
+        k.fx,
+        truth.fx
+    );
+    assert!(
+        (k.fy / truth.fy - 1.0).abs() < 0.01,
+        "fy {} vs {}",
+        k.fy,
+        truth.fy
+    );
     assert!((k.cx - truth.cx).abs() < 2.0, "cx {} vs {}", k.cx, truth.cx);
     assert!((k.cy - truth.cy).abs() < 2.0, "cy {} vs {}", k.cy, truth.cy);
     assert!(c.rms_px < 0.5, "rms {}", c.rms_px);
     let names: Vec<&str> = c.rejected.iter().map(|r| r.name.as_str()).collect();
-    assert!(names.contains(&"blank") && names.contains(&"far"), "{names:?}");
+    assert!(
+        names.contains(&"blank") && names.contains(&"far"),
+        "{names:?}"
+    );
     // The fitted lens maps the image's corner where the true one does (the distortion
     // as a whole, not coefficient by coefficient, which trade off).
     for corner in [(0.0, 0.0), (639.0, 479.0), (320.0, 0.0)] {
         let p = nalgebra::Point2::new(corner.0, corner.1);
         let (a, b) = (truth.undistort_pixel(&p), k.undistort_pixel(&p));
         let err_px = (a - b).norm() * truth.fx;
-        assert!(err_px < 3.0, "the ray of pixel {corner:?} is {err_px:.2} px off");
+        assert!(
+            err_px < 3.0,
+            "the ray of pixel {corner:?} is {err_px:.2} px off"
+        );
     }
 }

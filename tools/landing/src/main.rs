@@ -1,5 +1,6 @@
 //! `landing`: the one user-facing command of the landing stack.
 
+mod calibrate_cmd;
 mod config_cmd;
 mod eval;
 mod graph_cmd;
@@ -53,6 +54,9 @@ enum Command {
     /// Measure parts of the stack on this machine.
     #[command(subcommand)]
     Bench(BenchCommand),
+    /// Calibrate a camera from views of a ChArUco board, or print the board.
+    #[command(subcommand)]
+    Calibrate(calibrate_cmd::CalibrateCommand),
     /// Work with configuration files.
     #[command(subcommand)]
     Config(ConfigCommand),
@@ -259,6 +263,10 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::Latency(args)) => bench_latency::run(&args),
         Command::Plan(args) => match plan_cmd::run(&args) {
             Ok(false) => return ExitCode::from(plan_cmd::NO_PLAN),
+            other => other.map(|_| ()),
+        },
+        Command::Calibrate(cmd) => match calibrate_cmd::run(&cmd) {
+            Ok(false) => return ExitCode::from(1),
             other => other.map(|_| ()),
         },
         Command::Config(ConfigCommand::Check { file }) => config_cmd::check(&file),
