@@ -7,12 +7,16 @@
 //!   as the calibration YAML the stack reads ([`optics::CameraCalibration`]).
 //! - [`synthetic`]: views of a board rendered through a known camera (intrinsics and
 //!   distortion), to check the fit, and a setup, against the truth.
+//! - [`mount`]: the down camera's rotation and offset on the body from a flight over a
+//!   static pad.
 //! - [`plot`]: the coverage and the per-view errors as a PNG.
 
 pub mod board;
 pub mod camera;
+pub mod mount;
 pub mod plot;
 pub mod synthetic;
 
 pub use board::{BoardError, CharucoSpec};
 pub use camera::{CalibrateError, Calibrated, Detection, Rejected, calibrate, detect};
+pub use mount::{MountError, MountFit, Sample, fit_mount};

@@ -22,6 +22,12 @@ pub enum CalibrateCommand {
     /// reprojection error, the coverage of the image and the rejected views, and draws
     /// them (--plot). Exit code 1 when the fit is poor (RMS over 1 px).
     Camera(CameraArgs),
+    /// The down camera's mount (its tilt from straight down and its offset on the body)
+    /// from a recording of a flight over a static pad (`landing run --record`, or the
+    /// vehicle's recorder): hover over the pad and move a metre or more sideways and up
+    /// and down, turning a little, with the pad in view. Uses the pad observations (PnP)
+    /// and the autopilot's state only; prints the mount and the [aruco_pnp] keys.
+    Mount(MountArgs),
     /// Write a ChArUco board as a PNG, to print (check the printed square with a ruler:
     /// --board must say the true size).
     Board(BoardArgs),
@@ -54,6 +60,28 @@ pub struct CameraArgs {
     plot: Option<PathBuf>,
 }
 
+/// Arguments of `landing calibrate mount`.
+#[derive(Debug, Args)]
+pub struct MountArgs {
+    /// The recording (.mcap) with /pad/observation and /vehicle/state.
+    #[arg(long)]
+    recording: PathBuf,
+    /// The stack file whose [aruco_pnp] camera_position_in_body_m is the drawing's mount
+    /// (the start of the fit) [default: defaults].
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Added to each frame's capture time before the vehicle state is looked up, ms
+    /// [default: found, within 100 ms, as the offset at which the pad holds stillest].
+    #[arg(long, allow_negative_numbers = true)]
+    time_offset_ms: Option<f64>,
+    /// Use the pad only while the vehicle is this slow, m/s.
+    #[arg(long, default_value_t = 2.0)]
+    max_speed_m_s: f64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
 /// Arguments of `landing calibrate board`.
 #[derive(Debug, Args)]
 pub struct BoardArgs {
@@ -73,6 +101,7 @@ pub fn run(cmd: &CalibrateCommand) -> Result<bool> {
     match cmd {
         CalibrateCommand::Camera(a) => camera(a),
         CalibrateCommand::Board(a) => board(a).map(|_| true),
+        CalibrateCommand::Mount(a) => mount(a).map(|_| true),
     }
 }
 
@@ -268,5 +297,140 @@ fn take_views(
         }
         views.add(&format!("frame{k:03}"), &frame, spec, board);
     }
+    Ok(())
+}
+
+/// The largest offset between frame and state stamps the fit looks for, ms.
+const MAX_TIME_OFFSET_MS: f64 = 100.0;
+
+/// Observations with a reprojection error above this are not used, px.
+const MAX_REPROJECTION_PX: f64 = 2.0;
+
+fn mount(a: &MountArgs) -> Result<()> {
+    use ipc_types::msg::{PadObservation, Pose, VehicleState};
+    use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+    let (_, aruco): (_, aruco_pnp::ArucoConfig) =
+        stack_config::load_process_or_default(a.config.as_deref(), "aruco_pnp")?;
+    let nominal = optics::down_camera_from_body(aruco.camera_position_in_body_m).inverse();
+    let mut states = Vec::new();
+    let mut observations = Vec::new();
+    recorder::decode::read_recording(&a.recording, |m| {
+        match m.topic {
+            "/vehicle/state" => states.push(m.decode::<VehicleState>()?),
+            "/pad/observation" => observations.push(m.decode::<PadObservation>()?),
+            _ => {}
+        }
+        Ok(())
+    })
+    .with_context(|| format!("--recording {}", a.recording.display()))?;
+    states.sort_by_key(|s| s.msg.capture_ns);
+    let mut history = state_history::StateHistory::new(states.len() + 2, 0);
+    for s in &states {
+        if let Some(p) = state_history::timed_pose_of(s) {
+            history.push(p);
+        }
+    }
+    let iso = |p: &Pose| {
+        let [x, y, z, w] = p.rotation_xyzw;
+        Isometry3::from_parts(
+            Translation3::new(p.translation[0], p.translation[1], p.translation[2]),
+            UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
+        )
+    };
+    let samples_at = |offset_ms: f64| -> Vec<calibration::Sample> {
+        observations
+            .iter()
+            .filter(|o| {
+                o.marker_count > 0
+                    && o.camera_from_pad.is_finite()
+                    && o.reprojection_error_px < MAX_REPROJECTION_PX
+            })
+            .filter(|o| {
+                // Moving fast, a few ms of stamp or estimator lag are centimetres.
+                let k = states.partition_point(|s| s.msg.capture_ns < o.msg.capture_ns);
+                let v = states
+                    .get(k.min(states.len().saturating_sub(1)))
+                    .map(|s| s.velocity);
+                v.is_some_and(|v| {
+                    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() <= a.max_speed_m_s
+                })
+            })
+            .filter_map(|o| {
+                let at = o
+                    .msg
+                    .capture_ns
+                    .saturating_add_signed((offset_ms * 1e6) as i64);
+                Some(calibration::Sample {
+                    world_from_body: history.at(at).ok()?,
+                    camera_from_pad: iso(&o.camera_from_pad),
+                })
+            })
+            .collect()
+    };
+    // The frames' stamps against the state's (a driver stamping at readout, an
+    // estimator's lag): the offset at which the pad holds stillest, unless given.
+    let offset_ms = match a.time_offset_ms {
+        Some(ms) => ms,
+        None => {
+            let rms = |ms: f64| {
+                calibration::fit_mount(&samples_at(ms), &nominal)
+                    .map_or(f64::INFINITY, |f| f.rms_position_m)
+            };
+            let mut best = (0.0, rms(0.0));
+            for step in [10.0, 2.0, 0.5] {
+                let centre = best.0;
+                for k in -5..=5 {
+                    let ms = centre + f64::from(k) * step;
+                    if ms.abs() <= MAX_TIME_OFFSET_MS {
+                        let r = rms(ms);
+                        if r < best.1 {
+                            best = (ms, r);
+                        }
+                    }
+                }
+            }
+            best.0
+        }
+    };
+    let samples = samples_at(offset_ms);
+    let fit = calibration::fit_mount(&samples, &nominal)?;
+    // The tilt from the drawing's straight-down mount, as a rotation in the body frame.
+    let tilt = fit.body_from_camera.rotation * nominal.rotation.inverse();
+    let (roll, pitch, yaw) = tilt.euler_angles();
+    let t = fit.body_from_camera.translation.vector;
+    let q = fit.body_from_camera.rotation;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "samples": fit.samples,
+                "time_offset_ms": offset_ms,
+                "motion_m": fit.motion_m,
+                "rms_position_m": fit.rms_position_m,
+                "rms_rotation_deg": fit.rms_rotation_deg,
+                "tilt_from_straight_down_deg": [roll.to_degrees(), pitch.to_degrees(), yaw.to_degrees()],
+                "camera_position_in_body_m": [t.x, t.y, t.z],
+                "body_from_camera_xyzw": [q.i, q.j, q.k, q.w],
+            })
+        );
+        return Ok(());
+    }
+    println!(
+        "{} samples of the pad over {:.2} m of flight; the pad holds still to {:.3} m and {:.2} deg RMS",
+        fit.samples, fit.motion_m, fit.rms_position_m, fit.rms_rotation_deg
+    );
+    println!(
+        "the frames' stamps are {offset_ms:.1} ms behind the autopilot's state (added to them before the state is looked up)"
+    );
+    println!(
+        "the camera is tilted from straight down by roll {:.2} deg, pitch {:.2} deg, yaw {:.2} deg (about body x, y, z)",
+        roll.to_degrees(),
+        pitch.to_degrees(),
+        yaw.to_degrees()
+    );
+    println!(
+        "[aruco_pnp] camera_position_in_body_m = [{:.3}, {:.3}, {:.3}]  (was {:?})",
+        t.x, t.y, t.z, aruco.camera_position_in_body_m
+    );
     Ok(())
 }
