@@ -2,6 +2,7 @@
 
 mod calibrate_cmd;
 mod config_cmd;
+mod doctor_cmd;
 mod eval;
 mod graph_cmd;
 mod inject_cmd;
@@ -60,6 +61,12 @@ enum Command {
     /// Work with configuration files.
     #[command(subcommand)]
     Config(ConfigCommand),
+    /// Check a vehicle before flight, one line per check: the stack file, the camera and
+    /// depth source it names, the autopilot answering on the link, the PX4 parameters
+    /// the stack relies on (read over MAVLink), the autopilot's clock (TIMESYNC), the
+    /// iceoryx2 prefix, free disk for recordings. Exit code 1 when a check fails; run it
+    /// with the stack stopped (it opens px4-link's port).
+    Doctor(doctor_cmd::DoctorArgs),
     /// The MAVLink link to the autopilot.
     #[command(subcommand)]
     Link(LinkCommand),
@@ -270,6 +277,10 @@ fn main() -> ExitCode {
             other => other.map(|_| ()),
         },
         Command::Config(ConfigCommand::Check { file }) => config_cmd::check(&file),
+        Command::Doctor(args) => match doctor_cmd::run_doctor(&args, cli.ipc_prefix.as_deref()) {
+            Ok(false) => return ExitCode::from(1),
+            other => other.map(|_| ()),
+        },
         Command::Link(LinkCommand::SetupSigning(args)) => link_cmd::setup_signing(&args),
         Command::Pad(PadCommand::Detect(args)) => match pad_detect::run(&args) {
             Ok(false) => return ExitCode::from(pad_detect::NOT_FOUND),

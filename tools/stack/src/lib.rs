@@ -9,6 +9,7 @@
 //! command, the benchmarks, the campaigns and the tests all run missions through here.
 
 pub mod config;
+pub mod doctor;
 pub mod flood;
 pub mod inject;
 pub mod lockstep;

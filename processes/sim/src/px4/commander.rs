@@ -16,8 +16,8 @@ use mavlink::dialects::common::{
     ATTITUDE_QUATERNION_DATA, COMMAND_ACK_DATA, COMMAND_LONG_DATA, EXTENDED_SYS_STATE_DATA,
     GLOBAL_POSITION_INT_DATA, HEARTBEAT_DATA, HOME_POSITION_DATA, LOCAL_POSITION_NED_DATA,
     MavAutopilot, MavCmd, MavEstimatorType, MavFrame, MavLandedState, MavMessage, MavModeFlag,
-    MavResult, MavState, MavType, MavVtolState, ODOMETRY_DATA, PositionTargetTypemask,
-    SET_MODE_DATA, SET_POSITION_TARGET_LOCAL_NED_DATA,
+    MavParamType, MavResult, MavState, MavType, MavVtolState, ODOMETRY_DATA, PARAM_VALUE_DATA,
+    PositionTargetTypemask, SET_MODE_DATA, SET_POSITION_TARGET_LOCAL_NED_DATA, TIMESYNC_DATA,
 };
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::Deserialize;
@@ -144,6 +144,49 @@ impl Px4Params {
     fn loss_ns(&self) -> u64 {
         secs_to_ns(self.com_of_loss_t)
     }
+
+    /// The parameters as PX4 lists them over MAVLink (PARAM_VALUE): name, value, type.
+    /// EKF2_EV_CTRL and EKF2_HGT_REF say what the simulated estimator always does
+    /// (fuse the external vision's position, velocity and yaw, height from vision), so
+    /// that a preflight check reads what a real PX4 must be set to.
+    pub fn table(&self) -> Vec<(&'static str, f64, MavParamType)> {
+        use MavParamType::{MAV_PARAM_TYPE_INT32 as INT, MAV_PARAM_TYPE_REAL32 as REAL};
+        vec![
+            ("COM_DISARM_LAND", self.com_disarm_land, REAL),
+            ("COM_DISARM_PRFLT", self.com_disarm_prflt, REAL),
+            ("COM_OBL_RC_ACT", f64::from(self.com_obl_rc_act), INT),
+            ("COM_OF_LOSS_T", self.com_of_loss_t, REAL),
+            ("COM_SPOOLUP_TIME", self.com_spoolup_time, REAL),
+            ("EKF2_EV_CTRL", 15.0, INT),
+            ("EKF2_HGT_REF", 3.0, INT),
+            ("MIS_TAKEOFF_ALT", self.mis_takeoff_alt, REAL),
+            ("MPC_LAND_SPEED", self.mpc_land_speed, REAL),
+            ("MPC_TKO_SPEED", self.mpc_tko_speed, REAL),
+            ("NAV_MC_ALT_RAD", self.nav_mc_alt_rad, REAL),
+        ]
+    }
+}
+
+/// A PARAM_VALUE as PX4 sends it: INT32 values bytewise in the float field
+/// (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE).
+fn param_value(
+    index: usize,
+    count: usize,
+    name: &str,
+    value: f64,
+    typ: MavParamType,
+) -> MavMessage {
+    let param_value = match typ {
+        MavParamType::MAV_PARAM_TYPE_INT32 => f32::from_ne_bytes((value as i32).to_ne_bytes()),
+        _ => value as f32,
+    };
+    MavMessage::PARAM_VALUE(PARAM_VALUE_DATA {
+        param_value,
+        param_count: u16::try_from(count).unwrap_or(u16::MAX),
+        param_index: u16::try_from(index).unwrap_or(u16::MAX),
+        param_id: name.into(),
+        param_type: typ,
+    })
 }
 
 /// What PX4 does when the offboard setpoints stop (COM_OBL_RC_ACT).
@@ -728,6 +771,40 @@ impl Commander {
                     sender.system_id,
                     sender.component_id,
                 ));
+            }
+            MavMessage::PARAM_REQUEST_READ(r)
+                if addressed_to_us(r.target_system, r.target_component) =>
+            {
+                let table = self.params.table();
+                let wanted = r.param_id.to_str().unwrap_or_default();
+                let found = match usize::try_from(r.param_index) {
+                    Ok(k) => table.get(k).map(|e| (k, e)),
+                    Err(_) => table.iter().enumerate().find(|(_, e)| e.0 == wanted),
+                };
+                // PX4 answers an unknown name with nothing (a PARAM_ERROR in newer
+                // versions): the asker times out.
+                if let Some((k, (name, value, typ))) = found {
+                    self.outgoing
+                        .push(param_value(k, table.len(), name, *value, *typ));
+                }
+            }
+            MavMessage::PARAM_REQUEST_LIST(r)
+                if addressed_to_us(r.target_system, r.target_component) =>
+            {
+                let table = self.params.table();
+                for (k, (name, value, typ)) in table.iter().enumerate() {
+                    self.outgoing
+                        .push(param_value(k, table.len(), name, *value, *typ));
+                }
+            }
+            // A TIMESYNC request (tc1 0): answered with the autopilot's boot clock, ns.
+            MavMessage::TIMESYNC(t) if t.tc1 == 0 => {
+                self.outgoing.push(MavMessage::TIMESYNC(TIMESYNC_DATA {
+                    tc1: i64::try_from(self.boot_ns(now_ns)).unwrap_or(i64::MAX),
+                    ts1: t.ts1,
+                    target_system: u8::try_from(sender.system_id).unwrap_or(0),
+                    target_component: sender.component_id,
+                }));
             }
             MavMessage::SET_POSITION_TARGET_LOCAL_NED(sp) => {
                 if addressed_to_us(sp.target_system, sp.target_component)
