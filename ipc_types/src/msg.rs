@@ -471,7 +471,9 @@ pub struct LinkHealth {
     /// Datagrams from an address other than the autopilot's, dropped unread.
     #[cfg_attr(feature = "serde", serde(default))]
     pub wrong_address: u64,
-    /// Frames from a system or component other than the autopilot's, dropped.
+    /// Frames from a system or component other than the autopilot's (a ground station or
+    /// a camera behind a MAVLink router), ignored: routine on a shared link, not an
+    /// attack (px4-link's `from_others`).
     #[cfg_attr(feature = "serde", serde(default))]
     pub wrong_source: u64,
     /// Frames of a message id the dialect does not know, dropped.

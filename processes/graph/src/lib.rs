@@ -41,6 +41,10 @@ pub const STACK_BINARIES: &[&str] = &[
 /// every topic and publish none, and nothing waits for them (the recorder).
 pub const OBSERVER_BINARIES: &[&str] = &["recorder"];
 
+/// Stack binaries for a vehicle's real sensors that the simulated graph does without
+/// (depth-ingest: a depth camera's frames for depth-map `--input depth-frame`).
+pub const SENSOR_BINARIES: &[&str] = &["depth-ingest"];
+
 /// The placeholders a node's `args` may use, filled in per run from [`RunValues`].
 pub const PLACEHOLDERS: &[&str] = &[
     "config",
@@ -52,6 +56,8 @@ pub const PLACEHOLDERS: &[&str] = &[
     "duration",
     "sim_addr",
     "link_addr",
+    "sim_remote",
+    "link_remote",
     "preset",
     "commit_height",
     "search_height_max",
@@ -314,6 +320,12 @@ pub struct RunValues {
     pub sim_addr: String,
     /// `{link_addr}`: where px4-link listens for MAVLink (HOST:PORT).
     pub link_addr: String,
+    /// `{sim_remote}`: where the simulated autopilot sends (px4-link's `link_addr`, or a
+    /// router's endpoint for the autopilot).
+    pub sim_remote: String,
+    /// `{link_remote}`: where px4-link sends (the autopilot's `sim_addr`, or a router's
+    /// endpoint for px4-link).
+    pub link_remote: String,
     /// `{preset}`: the mission's preset point, `x,y,z` in metres.
     pub preset: String,
     /// `{commit_height}`: the mission's commit height, m.
@@ -340,6 +352,8 @@ impl RunValues {
             "duration" => &self.duration,
             "sim_addr" => &self.sim_addr,
             "link_addr" => &self.link_addr,
+            "sim_remote" => &self.sim_remote,
+            "link_remote" => &self.link_remote,
             "preset" => &self.preset,
             "commit_height" => &self.commit_height,
             "search_height_max" => &self.search_height_max,

@@ -10,6 +10,8 @@ fn values() -> RunValues {
     RunValues {
         config: "/c/landing.toml".into(),
         link_addr: "127.0.0.1:9".into(),
+        sim_remote: "127.0.0.1:9".into(),
+        link_remote: "127.0.0.1:8".into(),
         preset: "-4,-2,4.5".into(),
         ..RunValues::default()
     }

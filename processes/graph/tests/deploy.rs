@@ -8,7 +8,7 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-use graph::{Graph, OBSERVER_BINARIES, RunValues, STACK_BINARIES};
+use graph::{Graph, OBSERVER_BINARIES, RunValues, SENSOR_BINARIES, STACK_BINARIES};
 use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::msg;
 use ipc_types::services;
@@ -101,6 +101,7 @@ fn every_stack_binary_is_a_binary_of_the_workspace() {
     let declared: BTreeSet<String> = STACK_BINARIES
         .iter()
         .chain(OBSERVER_BINARIES)
+        .chain(SENSOR_BINARIES)
         .map(|b| b.to_string())
         .collect();
     assert_eq!(declared, bins);
@@ -215,6 +216,8 @@ fn landing_run_processes_starts_the_stack_as_it_did_before_the_graph() {
         duration: "120".into(),
         sim_addr: "127.0.0.1:40001".into(),
         link_addr: "127.0.0.1:40002".into(),
+        sim_remote: "127.0.0.1:40002".into(),
+        link_remote: "127.0.0.1:40001".into(),
         preset: "-4,-2,4.5".into(),
         commit_height: "0.6".into(),
         search_height_max: "6.33".into(),

@@ -530,7 +530,16 @@ impl Px4Link {
             MavMessage::GLOBAL_POSITION_INT(g) => {
                 self.telemetry.global_alt_amsl = Some(f64::from(g.alt) * 1e-3);
             }
-            MavMessage::COMMAND_ACK(ack) => self.on_ack(now_ns, ack.command, ack.result),
+            // Behind a router the autopilot's answers to a ground station's commands
+            // reach us too: only ours (or an ACK addressed to nobody, as older
+            // autopilots send) settle our request.
+            MavMessage::COMMAND_ACK(ack)
+                if (ack.target_system == 0 || ack.target_system == self.settings.system_id)
+                    && (ack.target_component == 0
+                        || ack.target_component == self.settings.component_id) =>
+            {
+                self.on_ack(now_ns, ack.command, ack.result);
+            }
             _ => {}
         }
     }

@@ -610,3 +610,34 @@ fn the_autopilots_home_centres_the_geofence_of_a_link_restarted_in_the_air() {
         "the autopilot's"
     );
 }
+
+#[test]
+fn behind_a_router_an_ack_the_autopilot_sent_a_ground_station_does_not_settle_our_request() {
+    let mut node = LinkNode::new(LinkSettings::default());
+    node.on_message(0, &PX4, &heartbeat());
+    node.on_message(0, &PX4, &home(489.4, 0.0));
+    node.on_request(0, &request(41, LinkRequestKind::Arm as u32));
+    assert_eq!(
+        commands(node.poll(1)),
+        vec![MavCmd::MAV_CMD_COMPONENT_ARM_DISARM]
+    );
+    // The same command, refused to QGroundControl (system 255, component 190).
+    let ack = |system, component, result| {
+        MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+            command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            result,
+            target_system: system,
+            target_component: component,
+            ..Default::default()
+        })
+    };
+    node.on_message(2, &PX4, &ack(255, 190, MavResult::MAV_RESULT_DENIED));
+    assert!(node.take_outcomes().is_empty(), "not ours");
+    node.on_message(3, &PX4, &ack(1, 191, MavResult::MAV_RESULT_ACCEPTED));
+    let got = node.take_outcomes();
+    assert_eq!(got.len(), 1);
+    assert_eq!(
+        (got[0].id, got[0].outcome),
+        (41, LinkOutcomeKind::Accepted as u32)
+    );
+}

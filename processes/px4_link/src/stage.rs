@@ -215,7 +215,9 @@ impl Stage for LinkStage {
             ("sent", c.sent),
             ("parse_errors", u64::from(self.last_link.parse_errors)),
             ("wrong_address", self.wrong_address),
-            ("wrong_source", self.guard.rejected().wrong_source),
+            // Not an attack: frames of other participants (a ground station, a camera
+            // behind a router), ignored. The attacks are the signing counters.
+            ("from_others", self.guard.rejected().wrong_source),
             ("unknown_id", self.guard.rejected().unknown_id),
             ("unsigned", self.guard.rejected().unsigned),
             ("bad_signature", self.guard.rejected().bad_signature),

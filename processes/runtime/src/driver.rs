@@ -683,6 +683,9 @@ pub fn run(
         }
     };
     node.notify.stopping();
+    if let Some(ext) = node.external.as_deref_mut() {
+        ext.finish();
+    }
     if stage.finished() {
         tracing::info!("{} finished", spec.name);
     }

@@ -40,6 +40,9 @@ pub struct UdpStats {
     /// Datagrams the kernel dropped because the socket's receive buffer was full (any
     /// sender): with `datagrams_in`, every datagram that reached the socket is counted.
     pub kernel_drops: u64,
+    /// Datagrams still in the socket when the process stopped, never read (counted at
+    /// the stop).
+    pub unread_at_stop: u64,
 }
 
 /// Why the link could not be opened.
@@ -229,6 +232,17 @@ impl External for UdpLink {
         self.wake = fds.to_vec();
     }
 
+    fn finish(&mut self) {
+        // Non-blocking reads until the queue is empty; a socket that cannot be made
+        // non-blocking is left as it is (its count stays 0).
+        if self.socket.set_nonblocking(true).is_err() {
+            return;
+        }
+        while self.socket.recv_from(&mut self.buf).is_ok() {
+            self.stats.unread_at_stop += 1;
+        }
+    }
+
     fn send(&mut self, _topic: &str, msg: Message<'_>) -> Result<(), StageError> {
         let Message::Mavlink(frame) = msg else {
             return Err(StageError::WrongType {
@@ -259,6 +273,7 @@ impl External for UdpLink {
             ("io_errors", self.stats.io_errors),
             ("foreign_datagrams", self.stats.foreign_datagrams),
             ("kernel_drops", self.kernel_drops()),
+            ("unread_at_stop", self.stats.unread_at_stop),
         ]
     }
 }

@@ -187,6 +187,10 @@ pub trait External {
     /// default ignores them (the wait runs to its timeout, as before).
     fn wake_on(&mut self, _fds: &[i32]) {}
 
+    /// The driver stopped: what arrived and was never taken can be counted now, before
+    /// the stop line. The default does nothing.
+    fn finish(&mut self) {}
+
     /// What the source itself counts (frames a camera thread overwrote, unreadable
     /// files, reconnects), for the process's counter lines after the stage's own.
     fn counters(&self) -> Vec<Counter> {

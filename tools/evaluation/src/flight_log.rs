@@ -173,6 +173,10 @@ pub struct RunSummary {
     /// Faults done to the stack's processes (`--inject`) or processes that exited on
     /// their own during the run (`--processes`).
     pub faults: Vec<FaultRecord>,
+    /// `--router`: the datagrams through the MAVLink router, per endpoint, and what the
+    /// second ground station sent and heard.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub router: Option<serde_json::Value>,
 }
 
 fn norm(v: [f64; 3]) -> f64 {
@@ -305,6 +309,7 @@ impl RunSummary {
             replans,
             collisions,
             faults: Vec::new(),
+            router: None,
         }
     }
 }

@@ -52,6 +52,13 @@ pub struct RunArgs {
     /// CAP_SYS_NICE), as the latency table in docs/recording.md is measured.
     #[arg(long, requires = "processes")]
     realtime: bool,
+    /// --processes: the simulated autopilot and px4-link talk through a MAVLink router
+    /// (mavlink-router's routing: targeted messages to where their system was seen,
+    /// the rest to everyone), with a second ground station (system 255) sending its own
+    /// heartbeats and requests through it; the summary counts every datagram per
+    /// endpoint (`router` in --json).
+    #[arg(long, requires = "processes")]
+    router: bool,
     /// Serve the flight live to Foxglove (Open connection > ws://ADDRESS, Foxglove's
     /// WebSocket protocol) on [recorder] live_address, loopback by default: every topic
     /// --record keeps, as it is published. In lockstep the simulation then keeps to the
@@ -119,6 +126,7 @@ pub fn run(args: &RunArgs, ipc_prefix: Option<&str>) -> Result<bool> {
         raw_images: args.raw_images,
         live: args.live,
         realtime: args.realtime,
+        router: args.router,
         log_dir: args.log_dir.clone(),
         inject: args.inject.clone(),
         ipc_prefix: ipc_prefix.map(str::to_string),

@@ -57,7 +57,10 @@ fn the_install_script_installs_twice_passes_systemds_checks_and_uninstalls() {
     install(&root, &[]);
     // Every process the vehicle runs, and `landing` for `landing clean`.
     let vehicle = graph::STACK_BINARIES.iter().filter(|b| **b != "sim");
-    for b in vehicle.chain(graph::OBSERVER_BINARIES).chain(&["landing"]) {
+    let others = graph::OBSERVER_BINARIES
+        .iter()
+        .chain(graph::SENSOR_BINARIES);
+    for b in vehicle.chain(others).chain(&["landing"]) {
         let p = root.join("usr/local/bin").join(b);
         assert!(p.is_file(), "{} missing", p.display());
     }

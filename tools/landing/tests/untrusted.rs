@@ -123,5 +123,5 @@ fn spoofed_autopilot_heartbeats_and_positions_from_another_port_are_never_taken(
         wrong + drops >= sent && wrong + drops <= sent + lost,
         "{wrong} {drops} {sent}"
     );
-    assert_eq!(counter(&log, "wrong_source"), 0);
+    assert_eq!(counter(&log, "from_others"), 0);
 }

@@ -20,5 +20,6 @@ pub mod processes;
 pub mod procs;
 pub mod px4_sitl;
 pub mod replay;
+pub mod router;
 
 pub use config::StackConfig;

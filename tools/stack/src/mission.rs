@@ -39,6 +39,8 @@ pub struct Mission {
     pub live: bool,
     /// Processes: the deployment's real-time priorities.
     pub realtime: bool,
+    /// `--router`: through a MAVLink router with a second ground station.
+    pub router: bool,
     /// Processes: where each process's log goes (default: a new temporary directory).
     pub log_dir: Option<PathBuf>,
     /// Processes: faults to do in flight.
@@ -225,6 +227,7 @@ impl Mission {
         let mut died = None;
         let mut faults: Vec<FaultRecord> = Vec::new();
         let mut log_dir = None;
+        let mut router = None;
         let (end, referee) = if self.processes {
             let dir = self.log_dir.clone().unwrap_or_else(|| {
                 std::env::temp_dir().join(format!("landing-run-{}", std::process::id()))
@@ -246,12 +249,16 @@ impl Mission {
                 },
                 signing_key: &cfg.px4_link.signing_key,
                 realtime: self.realtime,
+                router: self.router,
                 px4: self.px4.as_deref(),
             };
             let r = processes::run(&launch, &mut rec.truth, &mut progress)?;
             log_dir = Some(dir);
             died = r.died;
             faults = r.faults;
+            router = r.router.map(
+                |(counts, gcs)| serde_json::json!({"endpoints": counts, "ground_station": gcs}),
+            );
             (r.end, r.referee)
         } else {
             let setup = lockstep::Setup {
@@ -300,6 +307,7 @@ impl Mission {
             f.outcome = outcome.name().to_string();
         }
         summary.faults = faults;
+        summary.router = router;
         let mut recordings = Vec::new();
         for r in [rec.pipeline.take(), rec.truth.take()]
             .into_iter()

@@ -58,6 +58,9 @@ pub struct Launch<'a> {
     /// `--realtime`: the deployment's SCHED_FIFO priorities on the processes that have
     /// them (deploy/systemd drop-ins).
     pub realtime: bool,
+    /// `--router`: the autopilot and px4-link talk through a MAVLink router with a
+    /// second ground station behind it (`crate::router`).
+    pub router: bool,
     /// `--autopilot px4-sitl`: this PX4 SITL build flies instead of the built-in
     /// autopilot.
     pub px4: Option<&'a Path>,
@@ -84,6 +87,11 @@ pub struct ProcessesRun {
     pub died: Option<String>,
     /// Faults injected, and processes that exited on their own.
     pub faults: Vec<FaultRecord>,
+    /// With `--router`: what went through the router and the ground station.
+    pub router: Option<(
+        crate::router::RouterCounts,
+        crate::router::GroundStationCounts,
+    )>,
 }
 
 /// The values of the graph's argument placeholders for one run of `scn`: the files, the
@@ -109,6 +117,8 @@ pub fn run_values(
         duration: duration_s.to_string(),
         sim_addr: format!("127.0.0.1:{sim_port}"),
         link_addr: format!("127.0.0.1:{link_port}"),
+        sim_remote: format!("127.0.0.1:{link_port}"),
+        link_remote: format!("127.0.0.1:{sim_port}"),
         // The fsm gets `--preset={preset}`: the `--x=v` form, as a preset may start
         // with a minus sign.
         preset: format!("{},{},{}", preset[0], preset[1], preset[2]),
@@ -193,7 +203,7 @@ pub fn run(
         Some(_) => crate::px4_sitl::PX4_ONBOARD_PORTS,
         None => (free_udp_port()?, free_udp_port()?),
     };
-    let values = run_values(
+    let mut values = run_values(
         scn,
         launch.seed,
         scn.scenario.duration_s,
@@ -202,6 +212,17 @@ pub fn run(
         ports,
         launch.signing_key,
     )?;
+    // Behind a router, each of the two sends to its own endpoint of it; a second
+    // ground station talks to the autopilot through it too.
+    let router = if launch.router {
+        let r = crate::router::Router::start(values.sim_addr.parse()?, values.link_addr.parse()?)?;
+        values.sim_remote = r.autopilot_side().to_string();
+        values.link_remote = r.link_side().to_string();
+        let gcs = crate::router::GroundStation::start(r.ground_station_side())?;
+        Some((r, gcs))
+    } else {
+        None
+    };
     std::fs::create_dir_all(launch.log_dir)
         .with_context(|| format!("creating {}", launch.log_dir.display()))?;
     let mut children = Children::default();
@@ -443,16 +464,27 @@ pub fn run(
             r.datagrams_sent = Some(sent);
         }
     }
+    // The router forwards nothing more while the processes still read: what it
+    // forwarded is what they received.
+    if let Some((r, _)) = &router {
+        r.hold();
+    }
     std::thread::sleep(Duration::from_millis(50));
     drop(children);
     if let Some(e) = failure {
         return Err(e);
     }
+    // The processes are stopped: every datagram is in, or lost, by now.
+    let router = router.map(|(r, gcs)| {
+        let g = gcs.stop();
+        (r.stop(), g)
+    });
     Ok(ProcessesRun {
         end: result.unwrap_or(End::Timeout),
         referee,
         died,
         faults,
+        router,
     })
 }
 
