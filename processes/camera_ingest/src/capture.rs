@@ -135,16 +135,7 @@ impl External for Capture {
             self.thread.give_back(mat);
             delivered?;
         }
-        match news.end {
-            Some(Ok(())) => {
-                tracing::info!(source = %self.source, "end of the recording");
-                Ok(Flow::Ended)
-            }
-            Some(Err(e)) => Err(StageError::Failed(e)),
-            // It said nothing and is gone: it panicked (the join names it).
-            None if self.thread.is_finished() => Ok(Flow::Ended),
-            None => Ok(Flow::Open),
-        }
+        self.thread.flow(news.end)
     }
 
     fn send(&mut self, topic: &str, _msg: Message<'_>) -> Result<(), StageError> {

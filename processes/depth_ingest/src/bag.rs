@@ -183,6 +183,10 @@ fn field_u32(fields: &HashMap<&[u8], &[u8]>, name: &[u8]) -> Option<u32> {
     ))
 }
 
+/// The largest record header, chunk or decompressed chunk read, bytes: librealsense
+/// closes a chunk past 768 KB, so a larger number is damage, not a bigger camera.
+const MAX_RECORD_BYTES: usize = 64 << 20;
+
 const OP_MESSAGE: u8 = 0x02;
 const OP_CHUNK: u8 = 0x05;
 const OP_CONNECTION: u8 = 0x07;
@@ -335,12 +339,16 @@ impl RsBag {
                     let size = field_u32(&fields, b"size")
                         .ok_or_else(|| self.damaged(at, "chunk size"))?
                         as usize;
+                    if size > MAX_RECORD_BYTES {
+                        return Err(self.damaged(at, "a chunk larger than 64 MiB"));
+                    }
                     self.chunk = match compression.as_str() {
                         "none" => data,
                         "lz4" => {
                             let mut out = Vec::with_capacity(size);
+                            // No more than the chunk says it holds (a bomb stops there).
                             lz4::Decoder::new(data.as_slice())
-                                .and_then(|mut d| d.read_to_end(&mut out))
+                                .and_then(|d| d.take(size as u64).read_to_end(&mut out))
                                 .map_err(|_| self.damaged(at, "lz4 chunk"))?;
                             out
                         }
@@ -363,6 +371,9 @@ impl RsBag {
     }
 
     fn read_exact(&mut self, n: usize, at: u64) -> Result<Vec<u8>, BagError> {
+        if n > MAX_RECORD_BYTES {
+            return Err(self.damaged(at, "a record larger than 64 MiB"));
+        }
         let mut buf = vec![0u8; n];
         self.file
             .read_exact(&mut buf)

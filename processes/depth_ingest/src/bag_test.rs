@@ -222,3 +222,32 @@ fn every_truncation_of_a_bag_is_an_error_or_fewer_frames_never_a_panic() {
         std::fs::remove_file(&path).unwrap();
     }
 }
+
+#[test]
+fn a_recording_written_by_librealsense_itself_plays_its_three_frames() {
+    // tests/fixtures: written by pyrealsense2 2.57's recorder (software device, LZ4):
+    // 160x120, fx = fy = 380, a 5 m background and a 2 m box in the middle third.
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../tests/fixtures/realsense-160x120-3-frames.bag");
+    let (info, frames) = play(&path);
+    assert_eq!((info.width, info.height), (160, 120));
+    assert_eq!((info.intrinsics.fx, info.intrinsics.cx), (380.0, 80.0));
+    assert!((info.depth_scale_m - 0.001).abs() < 1e-9);
+    assert_eq!(frames.len(), 3);
+    for f in &frames {
+        assert_eq!(f.depths[60 * 160 + 80], 2000, "the box, 2 m");
+        assert_eq!(f.depths[10 * 160 + 80], 5000, "the background, 5 m");
+    }
+}
+
+#[test]
+fn a_chunk_that_claims_more_than_64_mib_is_damage_not_an_allocation() {
+    let mut bytes = bag("none", 1, true);
+    // The chunk record's `size` field: its value follows "size=".
+    let at = bytes.windows(5).position(|w| w == b"size=").unwrap() + 5;
+    bytes[at..at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    let path = write("huge", &bytes);
+    let err = RsBag::open(&path).err().unwrap();
+    std::fs::remove_file(&path).unwrap();
+    assert!(err.to_string().contains("larger than 64 MiB"), "{err}");
+}

@@ -185,15 +185,7 @@ impl External for DepthCapture {
             self.thread.give_back(image);
             delivered?;
         }
-        match taken.end {
-            Some(Ok(())) => {
-                tracing::info!("end of the recording");
-                Ok(Flow::Ended)
-            }
-            Some(Err(e)) => Err(StageError::Failed(e)),
-            None if self.thread.is_finished() => Ok(Flow::Ended),
-            None => Ok(Flow::Open),
-        }
+        self.thread.flow(taken.end)
     }
 
     fn send(&mut self, topic: &str, _msg: Message<'_>) -> Result<(), StageError> {

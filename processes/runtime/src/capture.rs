@@ -218,6 +218,21 @@ impl<T: Send + 'static> CaptureThread<T> {
         self.worker.is_finished()
     }
 
+    /// What the driver is told after a look that returned `end`: the recording ended,
+    /// the device failed (its line), the thread is gone (it panicked: the join names
+    /// it), or more may come.
+    pub fn flow(&self, end: Option<Result<(), String>>) -> Result<stage::Flow, stage::StageError> {
+        match end {
+            Some(Ok(())) => {
+                tracing::info!("end of the recording");
+                Ok(stage::Flow::Ended)
+            }
+            Some(Err(e)) => Err(stage::StageError::Failed(e)),
+            None if self.is_finished() => Ok(stage::Flow::Ended),
+            None => Ok(stage::Flow::Open),
+        }
+    }
+
     /// Stops the thread and joins it within `timeout`: a read blocked for longer (a
     /// device stuck in its driver) is the thread's exit code (runtime::threads).
     pub fn stop(self, timeout: Duration) -> Result<(), JoinError> {

@@ -115,6 +115,13 @@ pub const TARGETS: &[Target] = &[
         text: false,
     },
     Target {
+        name: "realsense-bag",
+        about: "a RealSense .bag recording, played to its end (depth_ingest::RsBag)",
+        run: realsense_bag,
+        seeds: realsense_bag_seeds,
+        text: false,
+    },
+    Target {
         name: "depth-frame",
         about: "depth frames (sizes, scale, intrinsics, depths) into depth-map's stage",
         run: depth_frame,
@@ -375,6 +382,38 @@ fn calibration(state: &mut State, data: &[u8]) -> u64 {
     match CameraCalibration::load(&path) {
         Ok(c) => hash((c.width, c.height)),
         Err(e) => error_kind(&e),
+    }
+}
+
+fn realsense_bag_seeds(deploy: &Path) -> Vec<Vec<u8>> {
+    // A recording librealsense itself wrote (tests/fixtures, beside deploy/).
+    let fixture = deploy.join("../tests/fixtures/realsense-160x120-3-frames.bag");
+    std::fs::read(fixture).into_iter().collect()
+}
+
+/// Through a file, as depth-ingest reads it: opened, then every image read.
+fn realsense_bag(state: &mut State, data: &[u8]) -> u64 {
+    let dir = state.dir.get_or_insert_with(|| {
+        let d = std::env::temp_dir().join(format!("landing-fuzz-{}", std::process::id()));
+        let _ = std::fs::create_dir_all(&d);
+        d
+    });
+    let path = dir.join("recording.bag");
+    if std::fs::write(&path, data).is_err() {
+        return 0;
+    }
+    let mut bag = match depth_ingest::RsBag::open(&path) {
+        Ok(b) => b,
+        Err(e) => return error_kind(&e),
+    };
+    let mut image = depth_ingest::DepthImage::default();
+    let mut frames = 0u64;
+    loop {
+        match bag.next_image(&mut image) {
+            Ok(Some(_)) => frames += 1,
+            Ok(None) => return hash(("end", frames.min(8))),
+            Err(e) => return error_kind(&e) ^ frames.min(8),
+        }
     }
 }
 
