@@ -273,10 +273,10 @@ impl External for Supervision {
             }
         }
         // The beats are read after the look, however long it took: the watchdog's
-        // deadlines are judged after this wait, and a beat that came meanwhile must count. A beat of a
-        // process found dead and not listed since was sent before it died: read late, it
-        // would count as a restart, which then hangs (in `make test`, a killed fsm was
-        // called hung).
+        // deadlines are judged after this wait, and a beat that came meanwhile must
+        // count. A beat of a process found dead and not listed since was sent before it
+        // died: read late, it would count as a restart, which then hangs (in `make
+        // test`, a killed fsm was called hung).
         for k in 0..self.watched.len() {
             let w = &self.watched[k];
             if w.heartbeat.try_wait(|_| {}).unwrap_or(0) == 0 {

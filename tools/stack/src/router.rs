@@ -145,9 +145,9 @@ impl Router {
     }
 
     /// Stops the router and returns its counts.
-    pub fn stop(self) -> RouterCounts {
+    pub fn stop(mut self) -> RouterCounts {
         self.stop.store(true, Ordering::Relaxed);
-        for t in self.threads {
+        for t in std::mem::take(&mut self.threads) {
             let _ = t.join();
         }
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
@@ -228,16 +228,33 @@ fn destinations(seen: &HashMap<(u8, u8), usize>, from: usize, m: &MavMessage) ->
         return others.collect();
     };
     let component = m.target_component_id().filter(|c| *c != 0);
-    let known: Vec<usize> = seen
-        .iter()
-        .filter(|((s, c), _)| *s == system && component.is_none_or(|want| want == *c))
-        .map(|(_, k)| *k)
-        .filter(|k| *k != from)
-        .collect();
-    if known.is_empty() && !seen.keys().any(|(s, _)| *s == system) {
-        others.collect()
+    let of_system = |want: Option<u8>| -> Vec<usize> {
+        let mut ks: Vec<usize> = seen
+            .iter()
+            .filter(|((s, c), k)| *s == system && **k != from && want.is_none_or(|w| w == *c))
+            .map(|(_, k)| *k)
+            .collect();
+        ks.sort_unstable();
+        ks.dedup();
+        ks
+    };
+    if !seen.keys().any(|(s, _)| *s == system) {
+        // A system never heard: everyone (it may be behind any endpoint).
+        return others.collect();
+    }
+    // The component where it was seen; a component never heard: wherever its system was.
+    let exact = of_system(component);
+    if exact.is_empty() && component.is_some() {
+        of_system(None)
     } else {
-        known
+        exact
+    }
+}
+
+impl Drop for Router {
+    /// A run that failed before [`Router::stop`]: its threads end within a read timeout.
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
     }
 }
 
@@ -257,7 +274,7 @@ pub struct GroundStationCounts {
 /// home position every two seconds, all through the router.
 pub struct GroundStation {
     stop: Arc<AtomicBool>,
-    thread: JoinHandle<GroundStationCounts>,
+    thread: Option<JoinHandle<GroundStationCounts>>,
 }
 
 impl GroundStation {
@@ -270,13 +287,27 @@ impl GroundStation {
         let thread = std::thread::Builder::new()
             .name("ground-station".into())
             .spawn(move || ground_station(&socket, router, &flag))?;
-        Ok(Self { stop, thread })
+        Ok(Self {
+            stop,
+            thread: Some(thread),
+        })
     }
 
     /// Stops it and returns its counts.
-    pub fn stop(self) -> GroundStationCounts {
+    pub fn stop(mut self) -> GroundStationCounts {
         self.stop.store(true, Ordering::Relaxed);
-        self.thread.join().unwrap_or_default()
+        self.thread
+            .take()
+            .and_then(|t| t.join().ok())
+            .unwrap_or_default()
+    }
+}
+
+impl Drop for GroundStation {
+    /// A run that failed before [`GroundStation::stop`]: its thread ends within a read
+    /// timeout.
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
     }
 }
 
