@@ -29,18 +29,6 @@ pub struct Capture {
     camera: String,
     /// Whether a frame of the right size has been seen (the first one is checked).
     checked_size: bool,
-    counts: Counts,
-}
-
-/// What the capture side loses, before the stage sees a frame.
-#[derive(Debug, Default, Clone, Copy)]
-struct Counts {
-    /// Frames a newer one replaced before the driver took them.
-    overwritten: u64,
-    /// Image files that could not be decoded.
-    unreadable: u64,
-    /// Capture reads that failed (disconnections), each followed by a reopen.
-    source_errors: u64,
 }
 
 impl Capture {
@@ -83,7 +71,6 @@ impl Capture {
             height: calibration.height,
             camera: resolved.camera.display().to_string(),
             checked_size: false,
-            counts: Counts::default(),
         })
     }
 
@@ -107,9 +94,6 @@ impl External for Capture {
         deliver: &mut dyn FnMut(Input<'_>, u64) -> Result<(), StageError>,
     ) -> Result<Flow, StageError> {
         let news = self.thread.take(Duration::from_nanos(timeout_ns));
-        self.counts.overwritten += news.overwritten;
-        self.counts.unreadable += news.losses.unreadable;
-        self.counts.source_errors += news.losses.source_errors;
         if let Some((mat, capture_ns)) = news.frame {
             let header = header_for_mat(&mat, capture_ns, 0);
             if !self.checked_size {
@@ -146,11 +130,7 @@ impl External for Capture {
     }
 
     fn counters(&self) -> Vec<Counter> {
-        vec![
-            ("overwritten", self.counts.overwritten),
-            ("dropped_unreadable", self.counts.unreadable),
-            ("source_errors", self.counts.source_errors),
-        ]
+        self.thread.counters()
     }
 }
 

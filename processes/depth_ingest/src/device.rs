@@ -124,13 +124,6 @@ pub struct DepthCapture {
     thread: CaptureThread<DepthImage>,
     header: DepthFrameHeader,
     seq: u64,
-    counts: Counts,
-}
-
-#[derive(Debug, Default, Clone, Copy)]
-struct Counts {
-    overwritten: u64,
-    unreadable: u64,
 }
 
 impl DepthCapture {
@@ -142,7 +135,6 @@ impl DepthCapture {
             thread: CaptureThread::start(device, pacer, ThreadRole::DepthCapture)?,
             header,
             seq: 0,
-            counts: Counts::default(),
         })
     }
 
@@ -166,8 +158,6 @@ impl External for DepthCapture {
         let taken = self
             .thread
             .take(std::time::Duration::from_nanos(timeout_ns));
-        self.counts.overwritten += taken.overwritten;
-        self.counts.unreadable += taken.losses.unreadable;
         if let Some((image, capture_ns)) = taken.frame {
             self.seq += 1;
             let mut header = self.header;
@@ -196,9 +186,6 @@ impl External for DepthCapture {
     }
 
     fn counters(&self) -> Vec<Counter> {
-        vec![
-            ("overwritten", self.counts.overwritten),
-            ("dropped_unreadable", self.counts.unreadable),
-        ]
+        self.thread.counters()
     }
 }

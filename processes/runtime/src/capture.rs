@@ -129,10 +129,6 @@ pub trait Device: Send + 'static {
 pub struct Taken<T> {
     /// The newest frame and its capture time.
     pub frame: Option<(T, u64)>,
-    /// Frames a newer one replaced before they were taken.
-    pub overwritten: u64,
-    /// What the device lost.
-    pub losses: Losses,
     /// The end, once: `Ok` at the end of a recording, `Err` when the device failed.
     pub end: Option<Result<(), String>>,
 }
@@ -202,10 +198,19 @@ impl<T: Send + 'static> CaptureThread<T> {
             .unwrap_or_else(|p| p.into_inner());
         Taken {
             frame: s.frame.take(),
-            overwritten: std::mem::take(&mut s.overwritten),
-            losses: std::mem::take(&mut s.losses),
             end: s.end.take(),
         }
+    }
+
+    /// What was lost before a frame was taken, since the start, for the process's stop
+    /// line: frames a newer one replaced, unreadable recorded frames, failed reads.
+    pub fn counters(&self) -> Vec<stage::Counter> {
+        let s = self.shared.lock();
+        vec![
+            ("overwritten", s.overwritten),
+            ("dropped_unreadable", s.losses.unreadable),
+            ("source_errors", s.losses.source_errors),
+        ]
     }
 
     /// Gives a frame's buffer back for the thread to read the next frame into.

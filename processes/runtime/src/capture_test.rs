@@ -94,8 +94,9 @@ fn the_capture_thread_hands_over_the_newest_frame_and_counts_the_ones_it_replace
     let (frame, _) = taken.frame.unwrap();
     assert_eq!(frame, 9, "the newest");
     // Frames 1, 3, 4, 6, 7, 9 were read (2, 5, 8 unreadable): five replaced.
-    assert_eq!(taken.overwritten, 5);
-    assert_eq!(taken.losses.unreadable, 3);
+    let counted = capture.counters();
+    assert_eq!(counted[0], ("overwritten", 5));
+    assert_eq!(counted[1], ("dropped_unreadable", 3));
     assert_eq!(taken.end, Some(Ok(())));
     let again = capture.take(Duration::from_millis(1));
     assert!(again.frame.is_none() && again.end.is_none(), "each once");

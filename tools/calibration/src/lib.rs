@@ -19,4 +19,4 @@ pub mod synthetic;
 
 pub use board::{BoardError, CharucoSpec};
 pub use camera::{CalibrateError, Calibrated, Detection, Rejected, calibrate, detect};
-pub use mount::{MountError, MountFit, Sample, fit_mount};
+pub use mount::{MountError, MountFit, Sample, fit_mount, fit_mount_and_offset};

@@ -208,6 +208,33 @@ pub fn fit_mount(samples: &[Sample], nominal: &Isometry3<f64>) -> Result<MountFi
     })
 }
 
+/// Fits the mount and the frames' stamp offset together: `samples_at(ms)` gives the
+/// samples with the state looked up `ms` after each frame's stamp (a driver stamping at
+/// readout, an estimator's lag); the offset within `max_ms` at which the pad holds
+/// stillest wins, searched coarse to fine (10, 2, 0.5 ms).
+pub fn fit_mount_and_offset(
+    samples_at: impl Fn(f64) -> Vec<Sample>,
+    nominal: &Isometry3<f64>,
+    max_ms: f64,
+) -> Result<(MountFit, f64), MountError> {
+    let rms =
+        |ms: f64| fit_mount(&samples_at(ms), nominal).map_or(f64::INFINITY, |f| f.rms_position_m);
+    let mut best = (0.0, rms(0.0));
+    for step in [10.0, 2.0, 0.5] {
+        let centre = best.0;
+        for k in -5..=5 {
+            let ms = centre + f64::from(k) * step;
+            if ms.abs() <= max_ms {
+                let r = rms(ms);
+                if r < best.1 {
+                    best = (ms, r);
+                }
+            }
+        }
+    }
+    Ok((fit_mount(&samples_at(best.0), nominal)?, best.0))
+}
+
 #[cfg(test)]
 #[path = "mount_test.rs"]
 mod tests;

@@ -367,33 +367,10 @@ fn mount(a: &MountArgs) -> Result<()> {
             })
             .collect()
     };
-    // The frames' stamps against the state's (a driver stamping at readout, an
-    // estimator's lag): the offset at which the pad holds stillest, unless given.
-    let offset_ms = match a.time_offset_ms {
-        Some(ms) => ms,
-        None => {
-            let rms = |ms: f64| {
-                calibration::fit_mount(&samples_at(ms), &nominal)
-                    .map_or(f64::INFINITY, |f| f.rms_position_m)
-            };
-            let mut best = (0.0, rms(0.0));
-            for step in [10.0, 2.0, 0.5] {
-                let centre = best.0;
-                for k in -5..=5 {
-                    let ms = centre + f64::from(k) * step;
-                    if ms.abs() <= MAX_TIME_OFFSET_MS {
-                        let r = rms(ms);
-                        if r < best.1 {
-                            best = (ms, r);
-                        }
-                    }
-                }
-            }
-            best.0
-        }
+    let (fit, offset_ms) = match a.time_offset_ms {
+        Some(ms) => (calibration::fit_mount(&samples_at(ms), &nominal)?, ms),
+        None => calibration::fit_mount_and_offset(samples_at, &nominal, MAX_TIME_OFFSET_MS)?,
     };
-    let samples = samples_at(offset_ms);
-    let fit = calibration::fit_mount(&samples, &nominal)?;
     // The tilt from the drawing's straight-down mount, as a rotation in the body frame.
     let tilt = fit.body_from_camera.rotation * nominal.rotation.inverse();
     let (roll, pitch, yaw) = tilt.euler_angles();
