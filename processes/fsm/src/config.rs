@@ -136,6 +136,79 @@ pub struct FsmConfig {
     pub goal_period_s: f64,
     /// The pad motion filter.
     pub pad_filter: PadFilterConfig,
+    /// A mount-calibration survey over a static pad before the descent (off by default).
+    pub survey: SurveyConfig,
+}
+
+/// A hover pattern over a static pad for `landing calibrate mount`: the mission's own
+/// flight (a line from the preset down to the pad) shows the camera's roll and yaw on the
+/// body too weakly to find them within a degree; corners of a square at two heights, the
+/// vehicle yawed to either side at each, show every axis (docs/calibration.md).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SurveyConfig {
+    /// Half the side of the square around the pad's centre, m; 0 (the default): no survey.
+    pub half_side_m: f64,
+    /// The two heights above the pad the square is flown at, m.
+    pub heights_m: [f64; 2],
+    /// The vehicle yaws this far from its mission heading, to the left and to the right
+    /// at alternate corners, deg.
+    pub yaw_deg: f64,
+    /// How long to hover at each point once there, s.
+    pub hold_s: f64,
+    /// Within this of a point (and slower than 0.2 m/s) counts as there, m.
+    pub tolerance_m: f64,
+}
+
+impl Default for SurveyConfig {
+    fn default() -> Self {
+        Self {
+            half_side_m: 0.0,
+            heights_m: [1.5, 2.5],
+            yaw_deg: 40.0,
+            hold_s: 2.0,
+            tolerance_m: 0.15,
+        }
+    }
+}
+
+impl SurveyConfig {
+    /// Whether a survey is flown.
+    pub fn enabled(&self) -> bool {
+        self.half_side_m > 0.0
+    }
+
+    /// The survey's points: (offset from the pad's centre in the world's x, y and height
+    /// above the pad, m; yaw from the mission heading, rad), in flying order. Each corner
+    /// is flown low then high, yawed one way then the other: the height and the heading
+    /// change at every point, so the slow drift of a VIO position (a centimetre per
+    /// second or so) does not line up with either and passes for no tilt.
+    pub fn points(&self) -> Vec<([f64; 3], f64)> {
+        let a = self.half_side_m;
+        let yaw = self.yaw_deg.to_radians();
+        let corners = [[a, a], [-a, a], [-a, -a], [a, -a]];
+        let mut out = Vec::with_capacity(8);
+        for c in &corners {
+            for (k, h) in self.heights_m.iter().enumerate() {
+                let sign = if k == 0 { 1.0 } else { -1.0 };
+                out.push(([c[0], c[1], *h], sign * yaw));
+            }
+        }
+        out
+    }
+}
+
+impl Validate for SurveyConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        check_range("survey.half_side_m", self.half_side_m, 0.0, 5.0)?;
+        for (i, h) in self.heights_m.iter().enumerate() {
+            check_range(&format!("survey.heights_m[{i}]"), *h, 0.5, 20.0)?;
+        }
+        check_range("survey.yaw_deg", self.yaw_deg, 0.0, 90.0)?;
+        check_range("survey.hold_s", self.hold_s, 0.0, 60.0)?;
+        check_range("survey.tolerance_m", self.tolerance_m, 0.02, 2.0)?;
+        Ok(())
+    }
 }
 
 /// A command-line override of the fsm binary that cannot be taken.
@@ -236,6 +309,7 @@ impl Default for FsmConfig {
             status_period_s: 0.2,
             goal_period_s: 0.2,
             pad_filter: PadFilterConfig::default(),
+            survey: SurveyConfig::default(),
         }
     }
 }
@@ -391,6 +465,7 @@ impl Validate for FsmConfig {
                 "must not exceed go_around_m (the commit gate must be inside the abort gate)",
             ));
         }
+        self.survey.validate()?;
         self.pad_filter.validate()
     }
 }

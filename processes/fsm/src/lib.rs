@@ -11,7 +11,7 @@ pub mod odometry;
 pub mod pad_filter;
 pub mod stage;
 
-pub use config::{FsmConfig, PadFilterConfig};
+pub use config::{FsmConfig, PadFilterConfig, SurveyConfig};
 pub use mission::{Fsm, Outputs, Transition};
 pub use pad_filter::{PadEstimate, PadFilter, Update};
 pub use stage::FsmStage;

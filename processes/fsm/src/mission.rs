@@ -13,7 +13,7 @@ use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 
 use crate::config::FsmConfig;
 use crate::odometry::Odometry;
-use crate::pad_filter::{PadEstimate, PadFilter, Update};
+use crate::pad_filter::{PadEstimate, PadFilter, Update, wrap};
 
 /// One transition, kept for the log and the tests.
 #[derive(Debug, Clone, PartialEq)]
@@ -168,7 +168,29 @@ pub struct Fsm {
     transitioned: bool,
     transitions: Vec<Transition>,
     safety_ordered: bool,
+    /// The mount-calibration survey under way (`[fsm.survey]`), inside Track.
+    survey: Option<SurveyStep>,
+    /// The survey was flown (once per mission).
+    survey_done: bool,
 }
+
+/// Where the survey stands.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct SurveyStep {
+    /// The point flown to (index into `SurveyConfig::points`).
+    index: usize,
+    /// When the vehicle got there.
+    arrived_ns: Option<u64>,
+    /// The mission heading, turned back to after the survey, rad.
+    yaw0: f64,
+}
+
+/// The yaw within which a survey point counts as reached, rad (5 deg).
+const SURVEY_YAW_TOLERANCE_RAD: f64 = 0.087;
+/// The survey is flown over a pad slower than this only, m/s: a static one.
+const SURVEY_PAD_SPEED_MAX_M_S: f64 = 0.2;
+/// The speed below which a survey point counts as reached, m/s.
+const SURVEY_SPEED_MAX_M_S: f64 = 0.2;
 
 impl Fsm {
     /// A mission with `cfg` (validated), in Idle.
@@ -219,6 +241,8 @@ impl Fsm {
             watchdog_seen_ns: None,
             watchdog_phase: None,
             resume_since: None,
+            survey: None,
+            survey_done: false,
         }
     }
 
@@ -889,6 +913,10 @@ impl Fsm {
             return;
         };
         let Some(p) = self.position() else { return };
+        if self.survey.is_some() {
+            self.survey(now_ns, &est, &p, out);
+            return;
+        }
         let e = (est.position - p).xy();
         let dist = e.norm();
         let chase = self.chasing(&est.velocity);
@@ -918,12 +946,67 @@ impl Fsm {
         if dist < self.cfg.align_m && rel_v < self.cfg.align_speed_m_s {
             let since = *self.align_since.get_or_insert(now_ns);
             if now_ns.saturating_sub(since) as f64 * 1e-9 >= self.cfg.align_hold_s {
+                if self.cfg.survey.enabled()
+                    && !self.survey_done
+                    && est.velocity.xy().norm() < SURVEY_PAD_SPEED_MAX_M_S
+                {
+                    tracing::info!(
+                        points = self.cfg.survey.points().len(),
+                        "aligned over the pad: survey for the mount calibration"
+                    );
+                    self.survey = Some(SurveyStep {
+                        index: 0,
+                        arrived_ns: None,
+                        yaw0: self.yaw_sp,
+                    });
+                    self.align_since = None;
+                    return;
+                }
                 self.h_cmd = p.z - est.position.z;
                 self.go(now_ns, MissionState::Descend, "aligned over the pad".into());
             }
         } else {
             self.align_since = None;
         }
+    }
+
+    /// The survey (`[fsm.survey]`): each point in turn, held once reached (position,
+    /// speed and yaw); then the mission heading again and the usual alignment and
+    /// descent. The points follow the pad's estimate, so the pad stays under the camera.
+    fn survey(&mut self, now_ns: u64, est: &PadEstimate, p: &Vector3<f64>, out: &mut Outputs) {
+        let Some(mut step) = self.survey else { return };
+        let points = self.cfg.survey.points();
+        let Some(&(offset, yaw)) = points.get(step.index) else {
+            tracing::info!(points = points.len(), "survey done");
+            self.survey = None;
+            self.survey_done = true;
+            self.yaw_sp = step.yaw0;
+            self.align_since = None;
+            return;
+        };
+        let target = est.position + Vector3::from(offset);
+        self.yaw_sp = wrap(step.yaw0 + yaw);
+        out.setpoint = Some(self.hold_setpoint(now_ns, target));
+        let yaw_error = self
+            .vehicle()
+            .map(|v| wrap(yaw_of(&v.world_from_body.rotation_xyzw) - self.yaw_sp).abs())
+            .unwrap_or(f64::INFINITY);
+        let there = (target - p).norm() < self.cfg.survey.tolerance_m
+            && self.velocity().norm() < SURVEY_SPEED_MAX_M_S
+            && yaw_error < SURVEY_YAW_TOLERANCE_RAD;
+        if there || step.arrived_ns.is_some() {
+            let since = *step.arrived_ns.get_or_insert(now_ns);
+            if now_ns.saturating_sub(since) as f64 * 1e-9 >= self.cfg.survey.hold_s {
+                tracing::info!(
+                    point = step.index + 1,
+                    of = points.len(),
+                    "survey point held"
+                );
+                step.index += 1;
+                step.arrived_ns = None;
+            }
+        }
+        self.survey = Some(step);
     }
 
     fn go_around(&mut self, now_ns: u64, why: String) {

@@ -131,7 +131,7 @@ fn yaw_of(q: [f64; 4]) -> Option<f64> {
 }
 
 /// `a` wrapped into (-pi, pi].
-fn wrap(a: f64) -> f64 {
+pub(crate) fn wrap(a: f64) -> f64 {
     let w = a.rem_euclid(std::f64::consts::TAU);
     if w > std::f64::consts::PI {
         w - std::f64::consts::TAU

@@ -93,6 +93,10 @@ struct World {
     /// Velocity the vehicle loses against what it was asked for, m/s: the relative wind's
     /// drag at speed, which a velocity loop leaves as a steady lag.
     velocity_loss: Vector3<f64>,
+    /// The vehicle's heading, rad: it turns toward the setpoint's yaw at 1 rad/s.
+    yaw: f64,
+    /// Every step in Track: the vehicle's position relative to the pad, and its heading.
+    track_log: Vec<(Vector3<f64>, f64)>,
 }
 
 impl World {
@@ -141,6 +145,8 @@ impl World {
             arrival_frozen_at: None,
             max_speed_m_s: 5.0,
             velocity_loss: Vector3::zeros(),
+            yaw: 0.0,
+            track_log: Vec::new(),
         }
     }
 
@@ -213,7 +219,7 @@ impl World {
             msg: Header::captured_at(self.t.saturating_sub(self.stamp_lag_ns)),
             world_from_body: Pose {
                 translation: (self.pos + self.error_at(self.t)).into(),
-                rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
+                rotation_xyzw: [0.0, 0.0, (0.5 * self.yaw).sin(), (0.5 * self.yaw).cos()],
             },
             velocity: (self.vel + self.error_rate_at(self.t)).into(),
             armed: u32::from(self.armed),
@@ -323,6 +329,10 @@ impl World {
                 }
                 target_v =
                     Vector3::from(sp.velocity) - self.error_rate_at(self.t) + (p - estimate) * 2.0;
+                let turn = (sp.yaw - self.yaw + std::f64::consts::PI)
+                    .rem_euclid(std::f64::consts::TAU)
+                    - std::f64::consts::PI;
+                self.yaw += turn.clamp(-dt, dt);
             }
         }
         match self.mode {
@@ -375,6 +385,9 @@ impl World {
         }
         if let Some(p) = &mut self.pad {
             *p += self.pad_vel * dt;
+        }
+        if let (MissionState::Track, Some(p)) = (self.fsm.state(), self.pad) {
+            self.track_log.push((self.pos - p, self.yaw));
         }
         self.t += DT;
         if self.telemetry {
@@ -519,6 +532,53 @@ fn a_whole_mission_passes_every_nominal_state_in_order() {
     let st = w.fsm.status(w.t);
     assert_eq!(st.state, MissionState::Landed as u32);
     assert_eq!(st.reason.as_str(), "touched down, disarmed");
+}
+
+#[test]
+fn a_survey_over_a_static_pad_holds_at_every_corner_at_both_heights_yawed_then_lands() {
+    let mut cfg = config();
+    cfg.survey.half_side_m = 0.6;
+    let points = cfg.survey.points();
+    let hold = cfg.survey.hold_s;
+    let mut w = World::new(cfg);
+    w.expect(MissionState::Landed, 120.0);
+    assert_eq!(points.len(), 8);
+    // Each point held for its hold time: that many steps within 0.2 m and 6 deg of it.
+    for (offset, yaw) in &points {
+        let at = w
+            .track_log
+            .iter()
+            .filter(|(rel, y)| (rel - Vector3::from(*offset)).norm() < 0.2 && (y - yaw).abs() < 0.1)
+            .count();
+        let steps = (hold * 1e9 / DT as f64) as usize;
+        assert!(at >= steps, "{offset:?} {yaw}: {at} steps of {steps}");
+    }
+    // The mission heading again for the descent, and the touchdown on the pad.
+    assert!(w.yaw.abs() < 0.01, "{}", w.yaw);
+    assert!((w.pos - w.pad.unwrap()).xy().norm() < 0.12);
+    let path: Vec<_> = w.fsm.transitions().iter().map(|t| t.to).collect();
+    assert_eq!(
+        &path[2..],
+        &[
+            MissionState::Track,
+            MissionState::Descend,
+            MissionState::Land,
+            MissionState::Landed
+        ],
+        "{:?}",
+        w.reasons()
+    );
+}
+
+#[test]
+fn a_survey_is_not_flown_over_a_moving_pad() {
+    let mut cfg = config();
+    cfg.survey.half_side_m = 0.6;
+    let mut w = World::new(cfg);
+    w.pad = Some(Vector3::new(-1.0, -0.5, PAD_HEIGHT));
+    w.pad_vel = Vector3::new(1.0, 0.2, 0.0);
+    w.expect(MissionState::Landed, 60.0);
+    assert!(w.track_log.iter().all(|(_, y)| y.abs() < 1e-9));
 }
 
 #[test]

@@ -21,6 +21,7 @@ fn flight(truth: &Isometry3<f64>, n: usize) -> Vec<Sample> {
             );
             let camera_from_pad = (world_from_body * truth).inverse() * world_from_pad;
             Sample {
+                at_s: i as f64 * 0.05,
                 world_from_body,
                 camera_from_pad,
             }

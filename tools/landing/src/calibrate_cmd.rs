@@ -361,6 +361,7 @@ fn mount(a: &MountArgs) -> Result<()> {
                     .capture_ns
                     .saturating_add_signed((offset_ms * 1e6) as i64);
                 Some(calibration::Sample {
+                    at_s: o.msg.capture_ns as f64 * 1e-9,
                     world_from_body: history.at(at).ok()?,
                     camera_from_pad: iso(&o.camera_from_pad),
                 })
@@ -383,6 +384,7 @@ fn mount(a: &MountArgs) -> Result<()> {
                 "samples": fit.samples,
                 "time_offset_ms": offset_ms,
                 "motion_m": fit.motion_m,
+                "drift_max_m": fit.drift_max_m,
                 "rms_position_m": fit.rms_position_m,
                 "rms_rotation_deg": fit.rms_rotation_deg,
                 "tilt_from_straight_down_deg": [roll.to_degrees(), pitch.to_degrees(), yaw.to_degrees()],
@@ -393,8 +395,8 @@ fn mount(a: &MountArgs) -> Result<()> {
         return Ok(());
     }
     println!(
-        "{} samples of the pad over {:.2} m of flight; the pad holds still to {:.3} m and {:.2} deg RMS",
-        fit.samples, fit.motion_m, fit.rms_position_m, fit.rms_rotation_deg
+        "{} samples of the pad over {:.2} m of flight; the pad holds still to {:.3} m and {:.2} deg RMS, the autopilot's position drifting up to {:.3} m",
+        fit.samples, fit.motion_m, fit.rms_position_m, fit.rms_rotation_deg, fit.drift_max_m
     );
     println!(
         "the frames' stamps are {offset_ms:.1} ms behind the autopilot's state (added to them before the state is looked up)"

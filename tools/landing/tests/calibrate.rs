@@ -128,11 +128,13 @@ fn a_mistaken_board_or_an_empty_directory_is_one_line_naming_what_is_allowed() {
 }
 
 #[test]
-fn landing_calibrate_mount_finds_a_tilted_down_camera_within_one_degree_from_a_flight_over_a_static_pad()
+fn landing_calibrate_mount_finds_a_tilted_down_camera_within_one_degree_from_a_survey_over_a_static_pad()
  {
     // The shipped indoor-static world (a static pad), the preset moved so that the
-    // vehicle flies 2 m to the pad and down from 2 m, and a camera as calibrated but
-    // mounted off its drawing: 2 deg (1 sigma) about each axis, drawn per seed.
+    // vehicle flies 2 m to the pad, and a camera as calibrated but mounted off its
+    // drawing: 2 deg (1 sigma) about each axis, drawn per seed. The stack flies the
+    // shipped configuration with the survey on ([fsm.survey]: a square around the pad
+    // at two heights, yawed either way at each corner) before it lands.
     let dir = std::env::temp_dir().join(format!("calib_mount_{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
@@ -151,8 +153,27 @@ fn landing_calibrate_mount_finds_a_tilted_down_camera_within_one_degree_from_a_f
     std::fs::write(&path, scenario).unwrap();
     let loaded = sim::scenario::load(&path.to_string_lossy(), &workspace().join("deploy")).unwrap();
     let nominal = CameraCalibration::load(loaded.calibration_path()).unwrap();
-    let mut worst: f64 = 0.0;
-    for seed in [3u64, 4] {
+    let config_dir = workspace().join("deploy/config");
+    let config = dir.join("landing.toml");
+    let mut text = std::fs::read_to_string(config_dir.join("landing.toml")).unwrap();
+    for file in ["camera_down_640x480.yaml", "pad.toml"] {
+        let quoted = format!("\"{file}\"");
+        assert!(text.contains(&quoted), "landing.toml names no {file}");
+        text = text.replace(&quoted, &format!("{:?}", config_dir.join(file)));
+    }
+    text += "\n[fsm.survey]\nhalf_side_m = 0.6\n";
+    std::fs::write(&config, text).unwrap();
+    // MOUNT_SEEDS=1-12 runs more (the notes of issue 40 quote twelve).
+    let seeds: Vec<u64> = match std::env::var("MOUNT_SEEDS") {
+        Ok(r) => {
+            let (a, b) = r.split_once('-').unwrap_or((&r, &r));
+            (a.parse().unwrap()..=b.parse().unwrap()).collect()
+        }
+        Err(_) => vec![3, 4, 5],
+    };
+    let (mut worst, mut worst_axis): (f64, f64) = (0.0, 0.0);
+    let mut offs = Vec::new();
+    for seed in seeds {
         let rec = dir.join(format!("flight{seed}.mcap"));
         let (code, out, err) = landing(&[
             "run",
@@ -162,7 +183,13 @@ fn landing_calibrate_mount_finds_a_tilted_down_camera_within_one_degree_from_a_f
             &seed.to_string(),
             "--record",
             &rec.to_string_lossy(),
+            "--config",
+            &config.to_string_lossy(),
         ]);
+        assert!(
+            out.contains("landed") || err.contains("landed"),
+            "{out}\n{err}"
+        );
         assert_eq!(code, Some(0), "{out}\n{err}");
         let (code, out, err) = landing(&[
             "calibrate",
@@ -205,10 +232,15 @@ fn landing_calibrate_mount_finds_a_tilted_down_camera_within_one_degree_from_a_f
             .inverse()
             .rotation;
         let off = (found.inverse() * truth).angle().to_degrees();
+        // Where the camera looks (its optical axis in the body): what puts the pad off
+        // by 1.7 cm per degree and metre of height.
+        let axis = (found * nalgebra::Vector3::z())
+            .angle(&(truth * nalgebra::Vector3::z()))
+            .to_degrees();
         let built = (drawing.inverse() * truth).angle().to_degrees();
         let (r, p, y) = (truth * drawing.inverse()).euler_angles();
         println!(
-            "seed {seed}: the camera is {built:.2} deg off its drawing (roll {:.2} pitch {:.2} yaw {:.2} about body x y z); found within {off:.2} deg ({fit})",
+            "seed {seed}: the camera is {built:.2} deg off its drawing (roll {:.2} pitch {:.2} yaw {:.2} about body x y z); found within {off:.2} deg, its optical axis within {axis:.2} deg ({fit})",
             r.to_degrees(),
             p.to_degrees(),
             y.to_degrees()
@@ -218,11 +250,25 @@ fn landing_calibrate_mount_finds_a_tilted_down_camera_within_one_degree_from_a_f
             "the world must tilt the camera for the test to mean anything"
         );
         worst = worst.max(off);
+        worst_axis = worst_axis.max(axis);
+        offs.push(off);
     }
-    // The issue asks for 1 deg; the mission's own flight over the pad (a slanted line
-    // from the preset down to the pad) shows roll and yaw too weakly for that: 0.6 and
-    // 2.0 deg on these seeds (notes of issue 40). What is held here: the fit settles on
-    // the tilted camera, nowhere near a wrong frame convention (tens of degrees).
-    assert!(worst < 3.0, "the mount was found {worst:.2} deg off");
+    offs.sort_by(f64::total_cmp);
+    println!(
+        "over {} seeds: median {:.2} deg, worst {worst:.2} deg; optical axis worst {worst_axis:.2} deg",
+        offs.len(),
+        offs[offs.len() / 2]
+    );
+    // Without the survey (the mission's flight alone, a slanted line from the preset
+    // down to the pad) roll and yaw showed too weakly: 0.6 and 2.0 deg on seeds 3 and 4.
+    // The optical axis is held to 1 deg. The turn about it is held to 1.5: the
+    // simulated autopilot's heading drifts (0.1 deg per square root of a second, a VIO's),
+    // and in level flight a heading error is the same to the camera as a camera turned
+    // on the body (docs/calibration.md); over 12 seeds 11 were within 1 deg.
+    assert!(
+        worst_axis < 1.0,
+        "the optical axis was found {worst_axis:.2} deg off"
+    );
+    assert!(worst < 1.5, "the mount was found {worst:.2} deg off");
     std::fs::remove_dir_all(&dir).unwrap();
 }
