@@ -8,7 +8,7 @@ APT_PACKAGES := libopencv-dev libopencv-contrib-dev clang libclang-dev pkg-confi
 CARGO ?= cargo
 export CARGO_TERM_COLOR ?= never
 
-.PHONY: demo test bootstrap build lint bench help peers fuzz faults systemd pydeps
+.PHONY: demo test bootstrap build lint bench help peers fuzz faults systemd pydeps realsense
 
 help:
 	@echo "make demo   install what is missing, build (release), run the simulated mission"
@@ -52,6 +52,18 @@ test: lint pydeps
 	$(CARGO) test --release --workspace
 	$(MAKE) --no-print-directory peers
 	$(MAKE) --no-print-directory fuzz
+	$(MAKE) --no-print-directory realsense
+
+# depth-ingest's `realsense` build (a live RealSense, and recordings played by librealsense
+# itself) where librealsense2 is installed and pkg-config finds it (Debian does not
+# package it: docs/jetson.md). Last: it relinks target/release/depth-ingest against it.
+realsense: pydeps
+	@if pkg-config --exists realsense2; then \
+	  echo "librealsense2 $$(pkg-config --modversion realsense2): checking depth-ingest's realsense build"; \
+	  $(CARGO) test --release -p depth_ingest --features realsense --test process; \
+	else \
+	  echo "librealsense2 not found by pkg-config: depth-ingest's realsense build is not checked here (docs/jetson.md)"; \
+	fi
 
 # Every parser of untrusted input (MAVLink, config, scenario, graph, pad layout,
 # calibration, MCAP, camera and depth frames) fuzzed for FUZZ_SECONDS each on stable

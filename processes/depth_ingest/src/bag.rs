@@ -347,8 +347,9 @@ impl RsBag {
                         "lz4" => {
                             let mut out = Vec::with_capacity(size);
                             // No more than the chunk says it holds (a bomb stops there).
-                            lz4::Decoder::new(data.as_slice())
-                                .and_then(|d| d.take(size as u64).read_to_end(&mut out))
+                            lz4_flex::frame::FrameDecoder::new(data.as_slice())
+                                .take(size as u64)
+                                .read_to_end(&mut out)
                                 .map_err(|_| self.damaged(at, "lz4 chunk"))?;
                             out
                         }

@@ -8,7 +8,7 @@ use ipc_types::msg::Intrinsics;
 use serde::Deserialize;
 use stack_config::{Invalid, Validate};
 
-use crate::source::{ALLOWED_SOURCES, DepthSourceSpec};
+use crate::source::{ALLOWED_SOURCES, DepthSourceSpec, RealSenseTarget};
 
 /// depth-ingest's own keys.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -23,6 +23,9 @@ pub struct DepthIngestConfig {
     pub depth_scale_m: f64,
     /// Playback rate, Hz, for a source that does not record it (`file:`).
     pub rate_hz: f64,
+    /// The live stream asked of a RealSense (`realsense:any` or a serial number):
+    /// `[width, height, fps]` (a D435: 640x480 or 848x480 at 6 to 90 Hz).
+    pub mode: [u32; 3],
 }
 
 impl Default for DepthIngestConfig {
@@ -33,6 +36,7 @@ impl Default for DepthIngestConfig {
             intrinsics: [380.0, 380.0, 320.0, 240.0],
             depth_scale_m: 0.001,
             rate_hz: 30.0,
+            mode: [640, 480, 30],
         }
     }
 }
@@ -75,6 +79,16 @@ impl Validate for DepthIngestConfig {
                 format!("{} is not allowed (allowed: 0.1 to 1000)", self.rate_hz),
             ));
         }
+        let [w, h, fps] = self.mode;
+        if !((1..=4096).contains(&w) && (1..=4096).contains(&h) && (1..=1000).contains(&fps)) {
+            return Err(Invalid::new(
+                "mode",
+                format!(
+                    "{:?} is not allowed (allowed: [width, height, fps], 1 to 4096 px and 1 to 1000 Hz)",
+                    self.mode
+                ),
+            ));
+        }
         Ok(())
     }
 }
@@ -82,8 +96,9 @@ impl Validate for DepthIngestConfig {
 /// depth-ingest's source flags; each overrides its `[depth_ingest]` key.
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct SourceFlags {
-    /// Where depth frames come from: `file:<directory of 16-bit PNGs>` or `bag:<RealSense
-    /// .bag>` [default: [depth_ingest] source].
+    /// Where depth frames come from: `file:<directory of 16-bit PNGs>`, `bag:<RealSense
+    /// .bag>`, or with the `realsense` build `realsense:any`, `realsense:<serial>`,
+    /// `realsense:<file.bag>` [default: [depth_ingest] source].
     #[arg(long)]
     pub source: Option<String>,
     /// Playback rate, Hz [default: a bag's recorded rate; [depth_ingest] rate_hz for
@@ -110,6 +125,8 @@ pub struct Source {
     pub depth_scale_m: f64,
     /// The section's rate, likewise.
     pub default_rate_hz: f64,
+    /// The live stream asked of a RealSense: width, height px, fps.
+    pub mode: [u32; 3],
 }
 
 impl SourceFlags {
@@ -138,6 +155,12 @@ impl SourceFlags {
                     config_dir,
                     &p.to_string_lossy(),
                 )),
+                DepthSourceSpec::RealSense(RealSenseTarget::Recording(p)) => {
+                    DepthSourceSpec::RealSense(RealSenseTarget::Recording(
+                        stack_config::resolve_path(config_dir, &p.to_string_lossy()),
+                    ))
+                }
+                live @ DepthSourceSpec::RealSense(_) => live,
             };
         }
         if let Some(r) = self.rate_hz
@@ -155,6 +178,7 @@ impl SourceFlags {
             intrinsics: Intrinsics { fx, fy, cx, cy },
             depth_scale_m: cfg.depth_scale_m,
             default_rate_hz: cfg.rate_hz,
+            mode: cfg.mode,
         })
     }
 }

@@ -27,7 +27,25 @@ enum Reader {
     Png(PngDir),
     /// A RealSense recording (reopened to loop).
     Bag(Box<RsBag>, PathBuf),
+    /// A RealSense through librealsense (None: lost, to reopen).
+    #[cfg(feature = "realsense")]
+    RealSense(Option<Box<depth_ingest::RealSense>>, RealSenseOpen),
 }
+
+/// What reopens a lost RealSense.
+#[cfg(feature = "realsense")]
+struct RealSenseOpen {
+    target: depth_ingest::RealSenseTarget,
+    mode: depth_ingest::LiveMode,
+}
+
+/// How long the capture thread waits for a RealSense frame before it counts the camera
+/// as gone quiet (a recording: at its end).
+#[cfg(feature = "realsense")]
+const REALSENSE_WAIT: std::time::Duration = std::time::Duration::from_millis(1000);
+/// How long before a lost RealSense is opened again.
+#[cfg(feature = "realsense")]
+const REALSENSE_REOPEN: std::time::Duration = std::time::Duration::from_millis(500);
 
 impl DepthDevice {
     /// Opens the source (a bad file is a start-up error, one line) and reads what it says
@@ -69,6 +87,29 @@ impl DepthDevice {
                 };
                 (Reader::Bag(Box::new(bag), path.clone()), rate_hz)
             }
+            #[cfg(feature = "realsense")]
+            DepthSourceSpec::RealSense(target) => {
+                let [width, height, fps] = source.mode;
+                let mode = depth_ingest::LiveMode { width, height, fps };
+                let camera = depth_ingest::RealSense::open(target, mode, source.looping)
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", source.spec))?;
+                let info = camera.info();
+                header.width = info.width;
+                header.height = info.height;
+                header.intrinsics = info.intrinsics;
+                header.depth_scale_m = info.depth_scale_m;
+                // librealsense paces the camera and plays a recording at its rate.
+                let open = RealSenseOpen {
+                    target: target.clone(),
+                    mode,
+                };
+                (Reader::RealSense(Some(Box::new(camera)), open), 0.0)
+            }
+            #[cfg(not(feature = "realsense"))]
+            DepthSourceSpec::RealSense(_) => bail!(
+                "{}: this depth-ingest was built without librealsense: build it with `cargo build --release --features depth_ingest/realsense` where librealsense2 is installed (docs/jetson.md), or play a recording with bag:FILE",
+                source.spec
+            ),
         };
         Ok(Self {
             reader,
@@ -115,6 +156,45 @@ impl Device for DepthDevice {
                 Ok(None) => Step::End(Ok(())),
                 Err(e) => Step::End(Err(e.to_string())),
             },
+            #[cfg(feature = "realsense")]
+            Reader::RealSense(camera, open) => {
+                let Some(cam) = camera else {
+                    *spare = Some(image);
+                    return match depth_ingest::RealSense::open(
+                        &open.target,
+                        open.mode,
+                        self.looping,
+                    ) {
+                        Ok(c) => {
+                            tracing::info!("RealSense reopened");
+                            *camera = Some(Box::new(c));
+                            Step::Skip
+                        }
+                        Err(e) => {
+                            tracing::debug!(error = %e, "RealSense not back yet");
+                            Step::Retry(REALSENSE_REOPEN)
+                        }
+                    };
+                };
+                match cam.next_image(&mut image, REALSENSE_WAIT) {
+                    Ok(Some(())) => Step::Frame(image, monotonic_ns()),
+                    Ok(None) if cam.is_recording() => Step::End(Ok(())),
+                    Ok(None) | Err(depth_ingest::RealSenseError::Library(_)) => {
+                        // A live camera gone quiet or unplugged: reopen it.
+                        tracing::warn!("RealSense lost: reopening");
+                        losses.source_errors += 1;
+                        *camera = None;
+                        *spare = Some(image);
+                        Step::Retry(REALSENSE_REOPEN)
+                    }
+                    Err(e) => {
+                        tracing::debug!(error = %e, "frame skipped");
+                        losses.unreadable += 1;
+                        *spare = Some(image);
+                        Step::Missed
+                    }
+                }
+            }
         }
     }
 }
@@ -130,6 +210,7 @@ impl DepthCapture {
     /// Starts reading `device` at its rate.
     pub fn start(device: DepthDevice) -> Result<Self, SpawnError> {
         let header = device.header;
+        // A rate of 0 (a RealSense, which paces itself) is no pacer.
         let pacer = Pacer::from_rate_hz(device.rate_hz);
         Ok(Self {
             thread: CaptureThread::start(device, pacer, ThreadRole::DepthCapture)?,

@@ -2,20 +2,25 @@
 //! source of depth frames (a RealSense recording, a directory of 16-bit PNGs) and
 //! `landing/depth/frame`, which depth-map reads with `--input depth-frame`.
 //!
-//! The readers ([`bag`], [`png_dir`]) return depth images; [`DepthIngestStage`] checks
+//! The readers ([`bag`], [`png_dir`], and with the `realsense` feature a live camera
+//! through librealsense) return depth images; [`DepthIngestStage`] checks
 //! each frame and writes it into the buffer the driver lends. There is no IPC, no clock
 //! read and no sleep here: the `depth-ingest` binary owns those.
 
 pub mod bag;
 pub mod config;
 pub mod png_dir;
+#[cfg(feature = "realsense")]
+pub mod realsense;
 pub mod source;
 pub mod stage;
 
 pub use bag::{BagError, DepthStreamInfo, RsBag};
 pub use config::{DepthIngestConfig, Source, SourceFlags};
 pub use png_dir::{DepthImage, PngDir, PngDirError, read_png16};
-pub use source::{ALLOWED_SOURCES, DepthSourceSpec, UnknownSource};
+#[cfg(feature = "realsense")]
+pub use realsense::{LiveMode, RealSense, RealSenseError};
+pub use source::{ALLOWED_SOURCES, DepthSourceSpec, RealSenseTarget, UnknownSource};
 pub use stage::{Counts, DepthIngestStage, Rejection};
 
 /// The heartbeat deadline depth-ingest declares, ms: a supervisor calls it hung after

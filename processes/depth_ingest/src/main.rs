@@ -1,5 +1,6 @@
 //! `depth-ingest`: a depth camera's frames as the pipeline's `landing/depth/frame`, read
-//! from a RealSense recording or a directory of 16-bit PNGs on a capture thread
+//! from a RealSense (with the `realsense` build), a RealSense recording or a directory of
+//! 16-bit PNGs on a capture thread
 //! (`device`); each frame is checked and copied once into a loaned shared-memory sample
 //! by `depth_ingest::DepthIngestStage`.
 
@@ -13,8 +14,9 @@ use clap::Parser;
 use depth_ingest::{DepthIngestConfig, DepthIngestStage, SourceFlags};
 use runtime::StageArgs;
 
-/// Publishes depth frames (landing/depth/frame) from a RealSense .bag recording or a
-/// directory of 16-bit PNG depth images, for depth-map `--input depth-frame`. A consumer
+/// Publishes depth frames (landing/depth/frame) from a RealSense (`realsense:`, with the
+/// `realsense` build), a RealSense .bag recording or a directory of 16-bit PNG depth
+/// images, for depth-map `--input depth-frame`. A consumer
 /// that lags loses old frames; nothing queues latency.
 #[derive(Debug, Parser)]
 #[command(name = "depth-ingest", version, about)]

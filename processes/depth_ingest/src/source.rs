@@ -5,8 +5,7 @@ use std::path::PathBuf;
 use std::str::FromStr;
 
 /// What `--source` accepts, for error messages.
-pub const ALLOWED_SOURCES: &str =
-    "file:<directory of 16-bit PNG depth images>, bag:<RealSense .bag recording>";
+pub const ALLOWED_SOURCES: &str = "file:<directory of 16-bit PNG depth images>, bag:<RealSense .bag recording>, realsense:any|<serial number>|<.bag played by librealsense> (the `realsense` build)";
 
 /// Why a `--source` text names no source.
 #[derive(Debug, thiserror::Error)]
@@ -21,6 +20,19 @@ pub enum DepthSourceSpec {
     /// A RealSense recording (`.bag`, as the RealSense Viewer, `rs-record` or
     /// `rs.recorder` write it), read without librealsense.
     Bag(PathBuf),
+    /// A RealSense through librealsense: needs the `realsense` build.
+    RealSense(RealSenseTarget),
+}
+
+/// Which RealSense `realsense:` names.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum RealSenseTarget {
+    /// `realsense:any`: the first one plugged in.
+    Any,
+    /// `realsense:<serial number>` (digits, as `rs-enumerate-devices` prints it).
+    Serial(String),
+    /// `realsense:<file>.bag`: a recording librealsense plays.
+    Recording(PathBuf),
 }
 
 impl FromStr for DepthSourceSpec {
@@ -35,6 +47,13 @@ impl FromStr for DepthSourceSpec {
         match scheme {
             "file" => Ok(Self::File(PathBuf::from(rest))),
             "bag" => Ok(Self::Bag(PathBuf::from(rest))),
+            "realsense" if rest == "any" => Ok(Self::RealSense(RealSenseTarget::Any)),
+            "realsense" if rest.chars().all(|c| c.is_ascii_alphanumeric()) => {
+                Ok(Self::RealSense(RealSenseTarget::Serial(rest.to_string())))
+            }
+            "realsense" if rest.ends_with(".bag") => Ok(Self::RealSense(
+                RealSenseTarget::Recording(PathBuf::from(rest)),
+            )),
             _ => Err(unknown()),
         }
     }
@@ -45,6 +64,11 @@ impl fmt::Display for DepthSourceSpec {
         match self {
             Self::File(p) => write!(f, "file:{}", p.display()),
             Self::Bag(p) => write!(f, "bag:{}", p.display()),
+            Self::RealSense(RealSenseTarget::Any) => write!(f, "realsense:any"),
+            Self::RealSense(RealSenseTarget::Serial(s)) => write!(f, "realsense:{s}"),
+            Self::RealSense(RealSenseTarget::Recording(p)) => {
+                write!(f, "realsense:{}", p.display())
+            }
         }
     }
 }

@@ -236,3 +236,50 @@ fn a_realsense_bag_written_by_librealsense_is_played_and_mapped_with_the_box_it_
     let _ = std::fs::remove_file(&bag);
     assert_the_map_holds_the_box(&r);
 }
+
+/// The `realsense` build (librealsense2 found by pkg-config): the same recording played
+/// by librealsense itself through `realsense:`, the path a live D435 takes.
+#[cfg(feature = "realsense")]
+#[test]
+fn a_realsense_bag_played_by_librealsense_is_mapped_with_the_box_it_shows() {
+    let bag = std::env::temp_dir().join(format!("depth_rs_{}.bag", std::process::id()));
+    let out = Command::new("python3")
+        .arg(workspace().join("tests/peers/realsense_bag.py"))
+        .arg(&bag)
+        .args(["--frames", "30"])
+        .output()
+        .expect("python3");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r = map_of(&format!("realsense:{}", bag.display()), &[], "drs");
+    let _ = std::fs::remove_file(&bag);
+    assert!(r.ingest_log.contains("realsense:"), "{}", r.ingest_log);
+    assert_the_map_holds_the_box(&r);
+}
+
+/// Without librealsense, `realsense:` is one line saying how to get it.
+#[cfg(not(feature = "realsense"))]
+#[test]
+fn a_realsense_source_without_the_realsense_build_says_how_to_build_it() {
+    for source in [
+        "realsense:any",
+        "realsense:123456789012",
+        "realsense:flight.bag",
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_depth-ingest"))
+            .args(["--source", source, "--ipc-prefix", "drs_none"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{err}");
+        let lines: Vec<&str> = err.lines().filter(|l| l.contains("error")).collect();
+        assert_eq!(lines.len(), 1, "{err}");
+        assert!(
+            lines[0].contains("--features depth_ingest/realsense") && lines[0].contains(source),
+            "{err}"
+        );
+    }
+}

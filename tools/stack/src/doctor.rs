@@ -180,9 +180,15 @@ fn depth(cfg: &StackConfig, config_file: &Path) -> Check {
     };
     let (w, h) = (cfg.depth_map.width, cfg.depth_map.height);
     let size = match &source.spec {
-        depth_ingest::DepthSourceSpec::Bag(p) => depth_ingest::RsBag::open(p)
-            .map(|b| (b.info().width, b.info().height))
-            .map_err(|e| e.to_string()),
+        depth_ingest::DepthSourceSpec::Bag(p)
+        | depth_ingest::DepthSourceSpec::RealSense(depth_ingest::RealSenseTarget::Recording(p)) => {
+            depth_ingest::RsBag::open(p)
+                .map(|b| (b.info().width, b.info().height))
+                .map_err(|e| e.to_string())
+        }
+        depth_ingest::DepthSourceSpec::RealSense(_) => realsense_on_usb()
+            .map(|()| (source.mode[0], source.mode[1]))
+            .map_err(|e| format!("{}: {e}", source.spec)),
         depth_ingest::DepthSourceSpec::File(d) => depth_ingest::PngDir::open(d)
             .and_then(|mut dir| {
                 let mut image = depth_ingest::DepthImage::default();
@@ -204,6 +210,25 @@ fn depth(cfg: &StackConfig, config_file: &Path) -> Check {
             ),
         ),
         Err(e) => Check::fail("depth", e),
+    }
+}
+
+/// Intel's USB vendor id: every RealSense enumerates under it.
+const INTEL_USB_VENDOR: &str = "8086";
+
+/// Whether an Intel device is on the USB bus (sysfs), as a RealSense must be before
+/// librealsense can open it. This build may lack librealsense: the doctor reads sysfs.
+fn realsense_on_usb() -> Result<(), String> {
+    let devices = std::fs::read_dir("/sys/bus/usb/devices")
+        .map_err(|e| format!("cannot list USB devices (/sys/bus/usb/devices: {e})"))?;
+    let found = devices.flatten().any(|d| {
+        std::fs::read_to_string(d.path().join("idVendor"))
+            .is_ok_and(|v| v.trim() == INTEL_USB_VENDOR)
+    });
+    if found {
+        Ok(())
+    } else {
+        Err("no Intel RealSense on USB (no device of vendor 8086 in /sys/bus/usb/devices): plug it into a USB 3 port".into())
     }
 }
 
