@@ -23,7 +23,7 @@ pub struct DepthIngestConfig {
     pub depth_scale_m: f64,
     /// Playback rate, Hz, for a source that does not record it (`file:`).
     pub rate_hz: f64,
-    /// The live stream asked of a RealSense (`realsense:any` or a serial number):
+    /// The live stream asked of a camera (`v4l2:`, `realsense:any` or a serial number):
     /// `[width, height, fps]` (a D435: 640x480 or 848x480 at 6 to 90 Hz).
     pub mode: [u32; 3],
 }
@@ -97,7 +97,7 @@ impl Validate for DepthIngestConfig {
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct SourceFlags {
     /// Where depth frames come from: `file:<directory of 16-bit PNGs>`, `bag:<RealSense
-    /// .bag>`, or with the `realsense` build `realsense:any`, `realsense:<serial>`,
+    /// .bag>`, `v4l2:/dev/videoN` (Z16), or with the `realsense` build `realsense:any`, `realsense:<serial>`,
     /// `realsense:<file.bag>` [default: [depth_ingest] source].
     #[arg(long)]
     pub source: Option<String>,
@@ -125,7 +125,7 @@ pub struct Source {
     pub depth_scale_m: f64,
     /// The section's rate, likewise.
     pub default_rate_hz: f64,
-    /// The live stream asked of a RealSense: width, height px, fps.
+    /// The live stream asked of a camera: width, height px, fps.
     pub mode: [u32; 3],
 }
 
@@ -160,7 +160,7 @@ impl SourceFlags {
                         stack_config::resolve_path(config_dir, &p.to_string_lossy()),
                     ))
                 }
-                live @ DepthSourceSpec::RealSense(_) => live,
+                live @ (DepthSourceSpec::RealSense(_) | DepthSourceSpec::V4l2(_)) => live,
             };
         }
         if let Some(r) = self.rate_hz

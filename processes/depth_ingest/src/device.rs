@@ -27,6 +27,8 @@ enum Reader {
     Png(PngDir),
     /// A RealSense recording (reopened to loop).
     Bag(Box<RsBag>, PathBuf),
+    /// A V4L2 device streaming Z16 (None: lost, to reopen).
+    V4l2(Option<Box<depth_ingest::V4l2Depth>>, PathBuf, [u32; 3]),
     /// A RealSense through librealsense (None: lost, to reopen).
     #[cfg(feature = "realsense")]
     RealSense(Option<Box<depth_ingest::RealSense>>, RealSenseOpen),
@@ -38,6 +40,11 @@ struct RealSenseOpen {
     target: depth_ingest::RealSenseTarget,
     mode: depth_ingest::LiveMode,
 }
+
+/// How long the capture thread waits for a V4L2 frame before it counts the device as
+/// gone quiet, and how long before it opens a lost one again.
+const V4L2_WAIT: std::time::Duration = std::time::Duration::from_millis(1000);
+const V4L2_REOPEN: std::time::Duration = std::time::Duration::from_millis(500);
 
 /// How long the capture thread waits for a RealSense frame before it counts the camera
 /// as gone quiet (a recording: at its end).
@@ -86,6 +93,15 @@ impl DepthDevice {
                     ),
                 };
                 (Reader::Bag(Box::new(bag), path.clone()), rate_hz)
+            }
+            DepthSourceSpec::V4l2(path) => {
+                let camera = depth_ingest::V4l2Depth::open(path, source.mode, V4L2_WAIT)?;
+                (header.width, header.height) = camera.size();
+                // The device paces itself.
+                (
+                    Reader::V4l2(Some(Box::new(camera)), path.clone(), source.mode),
+                    0.0,
+                )
             }
             #[cfg(feature = "realsense")]
             DepthSourceSpec::RealSense(target) => {
@@ -156,6 +172,39 @@ impl Device for DepthDevice {
                 Ok(None) => Step::End(Ok(())),
                 Err(e) => Step::End(Err(e.to_string())),
             },
+            Reader::V4l2(camera, path, mode) => {
+                let Some(cam) = camera else {
+                    *spare = Some(image);
+                    return match depth_ingest::V4l2Depth::open(path, *mode, V4L2_WAIT) {
+                        Ok(c) => {
+                            tracing::info!("V4L2 depth device reopened");
+                            *camera = Some(Box::new(c));
+                            Step::Skip
+                        }
+                        Err(e) => {
+                            tracing::debug!(error = %e, "V4L2 depth device not back yet");
+                            Step::Retry(V4L2_REOPEN)
+                        }
+                    };
+                };
+                match cam.next_image(&mut image) {
+                    Ok(()) => Step::Frame(image, monotonic_ns()),
+                    Err(depth_ingest::V4l2Error::ShortBuffer { got, want }) => {
+                        tracing::debug!(got, want, "short frame skipped");
+                        losses.unreadable += 1;
+                        *spare = Some(image);
+                        Step::Missed
+                    }
+                    Err(e) => {
+                        // Silent for a second, or unplugged: reopen it.
+                        tracing::warn!(error = %e, "V4L2 depth device lost: reopening");
+                        losses.source_errors += 1;
+                        *camera = None;
+                        *spare = Some(image);
+                        Step::Retry(V4L2_REOPEN)
+                    }
+                }
+            }
             #[cfg(feature = "realsense")]
             Reader::RealSense(camera, open) => {
                 let Some(cam) = camera else {

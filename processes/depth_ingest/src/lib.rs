@@ -2,8 +2,8 @@
 //! source of depth frames (a RealSense recording, a directory of 16-bit PNGs) and
 //! `landing/depth/frame`, which depth-map reads with `--input depth-frame`.
 //!
-//! The readers ([`bag`], [`png_dir`], and with the `realsense` feature a live camera
-//! through librealsense) return depth images; [`DepthIngestStage`] checks
+//! The readers ([`bag`], [`png_dir`], [`v4l2`], and with the `realsense` feature a live
+//! camera through librealsense) return depth images; [`DepthIngestStage`] checks
 //! each frame and writes it into the buffer the driver lends. There is no IPC, no clock
 //! read and no sleep here: the `depth-ingest` binary owns those.
 
@@ -14,6 +14,7 @@ pub mod png_dir;
 pub mod realsense;
 pub mod source;
 pub mod stage;
+pub mod v4l2;
 
 pub use bag::{BagError, DepthStreamInfo, RsBag};
 pub use config::{DepthIngestConfig, Source, SourceFlags};
@@ -22,6 +23,7 @@ pub use png_dir::{DepthImage, PngDir, PngDirError, read_png16};
 pub use realsense::{LiveMode, RealSense, RealSenseError};
 pub use source::{ALLOWED_SOURCES, DepthSourceSpec, RealSenseTarget, UnknownSource};
 pub use stage::{Counts, DepthIngestStage, Rejection};
+pub use v4l2::{V4l2Depth, V4l2Error};
 
 /// The heartbeat deadline depth-ingest declares, ms: a supervisor calls it hung after
 /// this long without a beat (as every stage of the graph).

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::str::FromStr;
 
 /// What `--source` accepts, for error messages.
-pub const ALLOWED_SOURCES: &str = "file:<directory of 16-bit PNG depth images>, bag:<RealSense .bag recording>, realsense:any|<serial number>|<.bag played by librealsense> (the `realsense` build)";
+pub const ALLOWED_SOURCES: &str = "file:<directory of 16-bit PNG depth images>, bag:<RealSense .bag recording>, v4l2:/dev/videoN (Z16), realsense:any|<serial number>|<.bag played by librealsense> (the `realsense` build)";
 
 /// Why a `--source` text names no source.
 #[derive(Debug, thiserror::Error)]
@@ -20,6 +20,8 @@ pub enum DepthSourceSpec {
     /// A RealSense recording (`.bag`, as the RealSense Viewer, `rs-record` or
     /// `rs.recorder` write it), read without librealsense.
     Bag(PathBuf),
+    /// A V4L2 device streaming Z16 depth (`/dev/videoN`).
+    V4l2(PathBuf),
     /// A RealSense through librealsense: needs the `realsense` build.
     RealSense(RealSenseTarget),
 }
@@ -47,6 +49,7 @@ impl FromStr for DepthSourceSpec {
         match scheme {
             "file" => Ok(Self::File(PathBuf::from(rest))),
             "bag" => Ok(Self::Bag(PathBuf::from(rest))),
+            "v4l2" => Ok(Self::V4l2(PathBuf::from(rest))),
             "realsense" if rest == "any" => Ok(Self::RealSense(RealSenseTarget::Any)),
             "realsense" if rest.chars().all(|c| c.is_ascii_alphanumeric()) => {
                 Ok(Self::RealSense(RealSenseTarget::Serial(rest.to_string())))
@@ -64,6 +67,7 @@ impl fmt::Display for DepthSourceSpec {
         match self {
             Self::File(p) => write!(f, "file:{}", p.display()),
             Self::Bag(p) => write!(f, "bag:{}", p.display()),
+            Self::V4l2(p) => write!(f, "v4l2:{}", p.display()),
             Self::RealSense(RealSenseTarget::Any) => write!(f, "realsense:any"),
             Self::RealSense(RealSenseTarget::Serial(s)) => write!(f, "realsense:{s}"),
             Self::RealSense(RealSenseTarget::Recording(p)) => {

@@ -203,6 +203,25 @@ fn write_pngs(dir: &Path, frames: usize) {
     }
 }
 
+/// Writes `frames` of the scene into `bag` with librealsense's own recorder (pyrealsense2's
+/// software device, tests/peers/realsense_bag.py).
+fn write_bag(bag: &Path, frames: usize) {
+    let writer = workspace().join("tests/peers/realsense_bag.py");
+    let out = Command::new("python3")
+        .arg(&writer)
+        .arg(bag)
+        .args(["--frames", &frames.to_string()])
+        .output()
+        .expect("python3");
+    assert!(
+        out.status.success(),
+        "{} failed (it needs pyrealsense2 older than 2.58: `python3 -m pip install \
+         'pyrealsense2<2.58'`; make test installs it):\n{}",
+        writer.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 #[test]
 fn a_png_sequence_played_by_depth_ingest_is_mapped_with_the_box_it_shows() {
     let dir = std::env::temp_dir().join(format!("depth_pngs_{}", std::process::id()));
@@ -217,20 +236,7 @@ fn a_png_sequence_played_by_depth_ingest_is_mapped_with_the_box_it_shows() {
 #[test]
 fn a_realsense_bag_written_by_librealsense_is_played_and_mapped_with_the_box_it_shows() {
     let bag = std::env::temp_dir().join(format!("depth_{}.bag", std::process::id()));
-    let writer = workspace().join("tests/peers/realsense_bag.py");
-    let out = Command::new("python3")
-        .arg(&writer)
-        .arg(&bag)
-        .args(["--frames", "10"])
-        .output()
-        .expect("python3");
-    assert!(
-        out.status.success(),
-        "{} failed (it needs pyrealsense2 older than 2.58: `python3 -m pip install \
-         'pyrealsense2<2.58'`; make test installs it):\n{}",
-        writer.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    write_bag(&bag, 10);
     // The bag carries its intrinsics, depth units and rate.
     let r = map_of(&format!("bag:{}", bag.display()), &[], "dbag");
     let _ = std::fs::remove_file(&bag);
@@ -243,17 +249,7 @@ fn a_realsense_bag_written_by_librealsense_is_played_and_mapped_with_the_box_it_
 #[test]
 fn a_realsense_bag_played_by_librealsense_is_mapped_with_the_box_it_shows() {
     let bag = std::env::temp_dir().join(format!("depth_rs_{}.bag", std::process::id()));
-    let out = Command::new("python3")
-        .arg(workspace().join("tests/peers/realsense_bag.py"))
-        .arg(&bag)
-        .args(["--frames", "30"])
-        .output()
-        .expect("python3");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    write_bag(&bag, 30);
     let r = map_of(&format!("realsense:{}", bag.display()), &[], "drs");
     let _ = std::fs::remove_file(&bag);
     assert!(r.ingest_log.contains("realsense:"), "{}", r.ingest_log);
@@ -282,4 +278,22 @@ fn a_realsense_source_without_the_realsense_build_says_how_to_build_it() {
             "{err}"
         );
     }
+}
+
+/// A V4L2 depth device that is not there: one line naming it (no device to stream from
+/// here; `depth_ingest::v4l2` unpacks Z16 frames, tested on padded rows).
+#[test]
+fn a_v4l2_depth_device_that_is_not_there_is_one_line_naming_it() {
+    let out = Command::new(env!("CARGO_BIN_EXE_depth-ingest"))
+        .args(["--source", "v4l2:/dev/video77", "--ipc-prefix", "dv4l_none"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    let lines: Vec<&str> = err.lines().filter(|l| l.contains("error")).collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(
+        lines[0].contains("/dev/video77") && lines[0].contains("cannot open it"),
+        "{err}"
+    );
 }

@@ -183,18 +183,19 @@ impl SurveyConfig {
     /// is flown low then high, yawed one way then the other: the height and the heading
     /// change at every point, so the slow drift of a VIO position (a centimetre per
     /// second or so) does not line up with either and passes for no tilt.
-    pub fn points(&self) -> Vec<([f64; 3], f64)> {
+    pub fn points(&self) -> [([f64; 3], f64); 8] {
         let a = self.half_side_m;
         let yaw = self.yaw_deg.to_radians();
         let corners = [[a, a], [-a, a], [-a, -a], [a, -a]];
-        let mut out = Vec::with_capacity(8);
-        for c in &corners {
-            for (k, h) in self.heights_m.iter().enumerate() {
-                let sign = if k == 0 { 1.0 } else { -1.0 };
-                out.push(([c[0], c[1], *h], sign * yaw));
+        let [lo, hi] = self.heights_m;
+        std::array::from_fn(|i| {
+            let c = corners[i / 2];
+            if i % 2 == 0 {
+                ([c[0], c[1], lo], yaw)
+            } else {
+                ([c[0], c[1], hi], -yaw)
             }
-        }
-        out
+        })
     }
 }
 

@@ -482,7 +482,12 @@ impl Node<'_> {
     }
 
     fn line(&self, inputs: &[InSpec], stage: &dyn Stage, what: &str) -> String {
-        let lost: u64 = inputs.iter().map(|i| i.port.gaps()).sum();
+        // On a `newest` input a sequence gap is an older message the buffer dropped while
+        // the stage was busy: the policy takes only the newest, so it counts as skipped.
+        // On a `queue` input every message counts, and a gap is lost data.
+        let (newest, queued): (Vec<&InSpec>, Vec<&InSpec>) = inputs.iter().partition(|i| i.newest);
+        let lost: u64 = queued.iter().map(|i| i.port.gaps()).sum();
+        let overflowed: u64 = newest.iter().map(|i| i.port.gaps()).sum();
         let mut line = stop_line(stage).replacen(" stopped", &format!(" {what}"), 1);
         for (k, v) in self
             .external
@@ -492,10 +497,13 @@ impl Node<'_> {
         {
             line.push_str(&format!(" {k}={v}"));
         }
-        let mut line = format!("{line} skipped={} lost_upstream={lost}", self.skipped);
+        let mut line = format!(
+            "{line} skipped={} lost_upstream={lost}",
+            self.skipped + overflowed
+        );
         if lost > 0 {
             // Which inputs lost them (topic:count), so that a gap can be traced.
-            let by_topic: Vec<String> = inputs
+            let by_topic: Vec<String> = queued
                 .iter()
                 .filter(|i| i.port.gaps() > 0)
                 .map(|i| format!("{}:{}", i.topic, i.port.gaps()))

@@ -186,6 +186,11 @@ fn depth(cfg: &StackConfig, config_file: &Path) -> Check {
                 .map(|b| (b.info().width, b.info().height))
                 .map_err(|e| e.to_string())
         }
+        depth_ingest::DepthSourceSpec::V4l2(p) => {
+            depth_ingest::V4l2Depth::open(p, source.mode, std::time::Duration::from_secs(1))
+                .map(|d| d.size())
+                .map_err(|e| e.to_string())
+        }
         depth_ingest::DepthSourceSpec::RealSense(_) => realsense_on_usb()
             .map(|()| (source.mode[0], source.mode[1]))
             .map_err(|e| format!("{}: {e}", source.spec)),
