@@ -163,6 +163,9 @@ pub struct Fsm {
     lost_velocity: Vector3<f64>,
     lost_since_update: u64,
     mode_lost_since: Option<u64>,
+    /// The heartbeat has shown OFFBOARD since the autopilot accepted it (PX4 beats at
+    /// 1 Hz: until then another mode is the old heartbeat, given `mode_timeout_s`).
+    offboard_shown: bool,
     last_tick_ns: Option<u64>,
     last_status_ns: Option<u64>,
     transitioned: bool,
@@ -233,6 +236,7 @@ impl Fsm {
             lost_velocity: Vector3::zeros(),
             lost_since_update: 0,
             mode_lost_since: None,
+            offboard_shown: true,
             last_tick_ns: None,
             last_status_ns: None,
             transitioned: true,
@@ -554,11 +558,19 @@ impl Fsm {
                 .vehicle()
                 .map(|v| FlightMode::from_raw(v.flight_mode))
                 .unwrap_or(FlightMode::Unknown);
+            // Just accepted, the heartbeat may show the old mode for up to a second (more
+            // on a loaded machine): only `mode_timeout_s` without OFFBOARD is a loss then.
+            let limit_ns = if self.offboard_shown {
+                MODE_LOSS_NS
+            } else {
+                ((self.cfg.mode_timeout_s * 1e9) as u64).max(MODE_LOSS_NS)
+            };
             if mode == FlightMode::Offboard {
                 self.mode_lost_since = None;
+                self.offboard_shown = true;
             } else {
                 let since = *self.mode_lost_since.get_or_insert(now_ns);
-                if now_ns.saturating_sub(since) >= MODE_LOSS_NS {
+                if now_ns.saturating_sub(since) >= limit_ns {
                     self.go(
                         now_ns,
                         MissionState::Abort,
@@ -754,6 +766,7 @@ impl Fsm {
                 match self.drive(now_ns, LinkRequestKind::Offboard, 0.0, out) {
                     Drive::Accepted(_) => {
                         self.mode_lost_since = None;
+                        self.offboard_shown = false;
                         self.takeoff = TakeoffStep::Arming;
                     }
                     Drive::Failed(why) => self.go(now_ns, MissionState::SafeLand, why),

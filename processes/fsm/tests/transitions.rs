@@ -904,6 +904,33 @@ fn a_watchdog_safe_land_order_ends_the_mission_in_safe_land() {
 }
 
 #[test]
+fn a_heartbeat_that_shows_offboard_late_after_its_ack_does_not_abort_the_take_off() {
+    // `make test` once aborted here: OFFBOARD accepted, PX4's 1 Hz heartbeat (late on a
+    // loaded machine) still showing Hold 1 s later.
+    let mut w = World::new(config());
+    while w.count(LinkRequestKind::Offboard) == 0 {
+        w.step();
+    }
+    let until = w.t + 1_500_000_000;
+    while w.t < until {
+        w.mode = FlightMode::Hold;
+        w.step();
+    }
+    w.mode = FlightMode::Offboard;
+    w.expect(MissionState::Landed, 90.0);
+    // Never shown at all, it is a loss after `mode_timeout_s`.
+    let mut w = World::new(config());
+    while w.count(LinkRequestKind::Offboard) == 0 {
+        w.step();
+    }
+    for _ in 0..(4_000_000_000 / DT) {
+        w.mode = FlightMode::Hold;
+        w.step();
+    }
+    assert_eq!(w.state(), MissionState::Abort, "{:?}", w.reasons());
+}
+
+#[test]
 fn a_pilot_taking_over_from_offboard_ends_the_mission() {
     let mut w = World::new(config());
     w.expect(MissionState::Track, 30.0);
