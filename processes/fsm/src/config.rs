@@ -70,6 +70,16 @@ pub struct FsmConfig {
     pub flare_align_m: f64,
     /// Land: descent rate of the final drop, m/s.
     pub drop_rate_m_s: f64,
+    /// Land, below the chase speed: the drop waits while the pad accelerates more than
+    /// this (braking, changing lane), m/s^2: the vehicle follows a changing velocity
+    /// late, and a drop begun in a braking ends past the pad.
+    pub flare_accel_max_m_s2: f64,
+    /// Land: the drop waits while the vehicle moves faster than this relative to the
+    /// pad, m/s (at 0.2 m/s a 0.35 s drop ends 7 cm off).
+    pub flare_speed_gate_m_s: f64,
+    /// Descend and Land, below the chase speed: share of the pad's estimated
+    /// acceleration fed forward to the autopilot (0 = none, 1 = all of it).
+    pub pad_accel_gain: f64,
     /// Land: the oldest pad observation the touchdown may steer by, s. Older, the vehicle
     /// drops at once if it is low and was aligned, else goes around: the filter's
     /// extrapolation is no pad to land on.
@@ -284,6 +294,9 @@ impl Default for FsmConfig {
             flare_height_m: 0.25,
             flare_align_m: 0.04,
             drop_rate_m_s: 0.8,
+            flare_accel_max_m_s2: 0.15,
+            flare_speed_gate_m_s: 0.3,
+            pad_accel_gain: 1.0,
             land_max_pad_age_s: 0.4,
             relative_gain: 1.0,
             relative_velocity_gain: 2.0,
@@ -325,6 +338,14 @@ pub struct PadFilterConfig {
     pub sigma_per_m: f64,
     /// Horizontal acceleration noise of the pad vehicle (white), m/s^2.
     pub accel_noise_xy: f64,
+    /// Horizontal jerk noise of the manoeuvring (constant-acceleration) model, m/s^3.
+    pub jerk_noise_xy: f64,
+    /// Mean time the pad vehicle cruises between manoeuvres, s (the IMM's switching).
+    pub cruise_sojourn_s: f64,
+    /// Mean length of a manoeuvre (a braking, a lane change), s.
+    pub manoeuvre_sojourn_s: f64,
+    /// Initial acceleration uncertainty, m/s^2.
+    pub initial_accel_sigma: f64,
     /// Vertical acceleration noise, m/s^2.
     pub accel_noise_z: f64,
     /// Heading-rate noise (white angular acceleration), rad/s^2.
@@ -350,6 +371,10 @@ impl Default for PadFilterConfig {
             sigma_m: 0.03,
             sigma_per_m: 0.01,
             accel_noise_xy: 0.5,
+            jerk_noise_xy: 1.0,
+            cruise_sojourn_s: 10.0,
+            manoeuvre_sojourn_s: 3.0,
+            initial_accel_sigma: 1.0,
             accel_noise_z: 0.2,
             yaw_accel_noise: 0.5,
             sigma_yaw_rad: 0.03,
@@ -368,6 +393,25 @@ impl Validate for PadFilterConfig {
         check_range("pad_filter.sigma_per_m", self.sigma_per_m, 0.0, 0.5)?;
         check_range("pad_filter.accel_noise_xy", self.accel_noise_xy, 1e-3, 50.0)?;
         check_range("pad_filter.accel_noise_z", self.accel_noise_z, 1e-3, 50.0)?;
+        check_range("pad_filter.jerk_noise_xy", self.jerk_noise_xy, 1e-3, 100.0)?;
+        check_range(
+            "pad_filter.cruise_sojourn_s",
+            self.cruise_sojourn_s,
+            0.1,
+            1e4,
+        )?;
+        check_range(
+            "pad_filter.manoeuvre_sojourn_s",
+            self.manoeuvre_sojourn_s,
+            0.1,
+            1e4,
+        )?;
+        check_range(
+            "pad_filter.initial_accel_sigma",
+            self.initial_accel_sigma,
+            1e-3,
+            100.0,
+        )?;
         check_range(
             "pad_filter.yaw_accel_noise",
             self.yaw_accel_noise,
@@ -423,6 +467,14 @@ impl Validate for FsmConfig {
             ("flare_align_m", self.flare_align_m, 0.005, 1.0),
             ("land_max_pad_age_s", self.land_max_pad_age_s, 0.05, 5.0),
             ("drop_rate_m_s", self.drop_rate_m_s, 0.1, 3.0),
+            (
+                "flare_accel_max_m_s2",
+                self.flare_accel_max_m_s2,
+                0.01,
+                100.0,
+            ),
+            ("pad_accel_gain", self.pad_accel_gain, 0.0, 1.0),
+            ("flare_speed_gate_m_s", self.flare_speed_gate_m_s, 0.01, 5.0),
             ("relative_gain", self.relative_gain, 0.0, 10.0),
             (
                 "relative_velocity_gain",

@@ -1188,10 +1188,13 @@ impl Fsm {
         // whole descent.
         let gate = self.cfg.land_align_m;
         let rel_v = (Vector3::from(v.velocity) - est.velocity).xy().norm();
+        let steady = self.chasing(&est.velocity)
+            || est.manoeuvre_acceleration.xy().norm() < self.cfg.flare_accel_max_m_s2;
         if !self.dropping
             && height <= flare + 0.03
             && e < self.cfg.flare_align_m
-            && rel_v < self.cfg.land_speed_gate_m_s
+            && rel_v < self.cfg.flare_speed_gate_m_s
+            && steady
         {
             self.dropping = true;
         }
@@ -1503,6 +1506,12 @@ impl Fsm {
         let mut a = if self.chasing(&est.velocity) {
             let turn = Vector3::new(-est.velocity.y, est.velocity.x, 0.0) * est.yaw_rate;
             turn.cap_magnitude(CHASE_TURN_ACCEL_MAX_M_S2)
+        } else if matches!(self.state, MissionState::Descend | MissionState::Land) {
+            // A braking or a lane change fed forward: PX4's velocity loop trails a ramp
+            // by its acceleration over MPC_XY_VEL_P_ACC (0.25 m/s in a 0.45 m/s^2
+            // braking).
+            let pad = Vector3::new(est.acceleration.x, est.acceleration.y, 0.0);
+            (pad * self.cfg.pad_accel_gain).cap_magnitude(PAD_ACCEL_MAX_M_S2)
         } else {
             Vector3::zeros()
         };
@@ -1536,6 +1545,10 @@ const TOUCHDOWN_LEAD_M: f64 = 0.1;
 /// The most turning acceleration fed forward, m/s^2 (a car at 50 km/h on a 30 m radius
 /// pulls 6.4; a misread heading rate must not tilt the vehicle further).
 const CHASE_TURN_ACCEL_MAX_M_S2: f64 = 6.0;
+
+/// The most of the pad's acceleration fed forward, m/s^2 (a hard braking; a misread
+/// must not tilt the vehicle further).
+const PAD_ACCEL_MAX_M_S2: f64 = 3.0;
 
 /// The most velocity the chase trim may add, m/s: drag at 14 m/s needs a few tenths.
 const CHASE_TRIM_MAX_M_S: f64 = 1.0;

@@ -1,14 +1,20 @@
-//! The pad's motion: a constant-velocity Kalman filter on each world axis plus one on
-//! the heading, fed by pad observations at their capture time and predicted to "now".
+//! The pad's motion: on each horizontal axis an interacting multiple model (IMM) of a
+//! constant-velocity and a constant-acceleration Kalman filter, a constant-velocity one
+//! on the height and one on the heading, fed by pad observations at their capture time
+//! and predicted to "now".
 //!
-//! Each axis is its own 2-state filter: the measurement noise is diagonal in the world
-//! frame (a range-scaled sphere), so the joint filter would factor into exactly these.
+//! Each axis is its own filter: the measurement noise is diagonal in the world frame (a
+//! range-scaled sphere), so the joint filter would factor into these. Constant velocity
+//! alone lags a braking or a lane change (its velocity trails a 0.45 m/s^2 braking by
+//! about 0.15 m/s, enough to drift 10 cm in a touchdown's drop); constant acceleration
+//! alone is noisier on a cruising vehicle. The IMM weighs the two by how well each
+//! explains the observations (docs/fsm.md, "The pad filter").
 //! Observations arrive late (camera exposure, detection, IPC); the filter runs on capture
 //! times and only the estimate is extrapolated to the caller's clock, which is what
 //! compensates each observation's age.
 
 use ipc_types::msg::PadObservation;
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::config::PadFilterConfig;
 
@@ -58,6 +64,128 @@ impl Axis {
     }
 }
 
+/// One horizontal axis as an interacting multiple model: model 0 constant velocity (the
+/// acceleration held at zero), model 1 constant acceleration; states (x, v, a).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ImmAxis {
+    x: [Vector3<f64>; 2],
+    p: [Matrix3<f64>; 2],
+    /// Model probabilities.
+    mu: [f64; 2],
+}
+
+/// The probability of either model never falls below this: a model written off for good
+/// could not take over when the vehicle starts to brake.
+const MU_MIN: f64 = 1e-3;
+
+/// How far ahead the estimate extrapolates the pad's acceleration, s.
+const ACCEL_HORIZON_S: f64 = 0.5;
+
+/// Process noise of the models over `dt`.
+struct ImmNoise {
+    /// White acceleration of the constant-velocity model, (m/s^2)^2 s.
+    q_cv: f64,
+    /// White jerk of the constant-acceleration model, (m/s^3)^2 s.
+    q_ca: f64,
+    /// Mean time in each model, s.
+    sojourn_s: [f64; 2],
+}
+
+impl ImmAxis {
+    fn new(x: f64, var_x: f64, var_v: f64, var_a: f64) -> Self {
+        let p = Matrix3::from_diagonal(&Vector3::new(var_x, var_v, var_a));
+        let p_cv = Matrix3::from_diagonal(&Vector3::new(var_x, var_v, 0.0));
+        Self {
+            x: [Vector3::new(x, 0.0, 0.0); 2],
+            p: [p_cv, p],
+            mu: [0.9, 0.1],
+        }
+    }
+
+    /// Mixing (each model starts from the others' states weighted by how likely the
+    /// switch was), then each model's prediction over `dt`.
+    fn predict(&mut self, dt: f64, n: &ImmNoise) {
+        let stay = [(-dt / n.sojourn_s[0]).exp(), (-dt / n.sojourn_s[1]).exp()];
+        // pi[i][j]: from model i to model j.
+        let pi = [[stay[0], 1.0 - stay[0]], [1.0 - stay[1], stay[1]]];
+        let c = [
+            pi[0][0] * self.mu[0] + pi[1][0] * self.mu[1],
+            pi[0][1] * self.mu[0] + pi[1][1] * self.mu[1],
+        ];
+        let mut x0 = [Vector3::zeros(); 2];
+        let mut p0 = [Matrix3::zeros(); 2];
+        for j in 0..2 {
+            let w = [pi[0][j] * self.mu[0] / c[j], pi[1][j] * self.mu[1] / c[j]];
+            x0[j] = self.x[0] * w[0] + self.x[1] * w[1];
+            for ((x, p), w) in self.x.iter().zip(&self.p).zip(w) {
+                let d = x - x0[j];
+                p0[j] += (p + d * d.transpose()) * w;
+            }
+        }
+        let (dt2, dt3) = (dt * dt, dt * dt * dt);
+        let f_cv = Matrix3::new(1.0, dt, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0);
+        let q_cv =
+            Matrix3::new(dt3 / 3.0, dt2 / 2.0, 0.0, dt2 / 2.0, dt, 0.0, 0.0, 0.0, 0.0) * n.q_cv;
+        let f_ca = Matrix3::new(1.0, dt, dt2 / 2.0, 0.0, 1.0, dt, 0.0, 0.0, 1.0);
+        let (dt4, dt5) = (dt3 * dt, dt3 * dt2);
+        let q_ca = Matrix3::new(
+            dt5 / 20.0,
+            dt4 / 8.0,
+            dt3 / 6.0,
+            dt4 / 8.0,
+            dt3 / 3.0,
+            dt2 / 2.0,
+            dt3 / 6.0,
+            dt2 / 2.0,
+            dt,
+        ) * n.q_ca;
+        self.x = [f_cv * x0[0], f_ca * x0[1]];
+        self.p = [
+            f_cv * p0[0] * f_cv.transpose() + q_cv,
+            f_ca * p0[1] * f_ca.transpose() + q_ca,
+        ];
+        self.mu = c;
+    }
+
+    /// The models combined: state and covariance.
+    fn combined(&self) -> (Vector3<f64>, Matrix3<f64>) {
+        let x = self.x[0] * self.mu[0] + self.x[1] * self.mu[1];
+        let mut p = Matrix3::zeros();
+        for j in 0..2 {
+            let d = self.x[j] - x;
+            p += (self.p[j] + d * d.transpose()) * self.mu[j];
+        }
+        (x, p)
+    }
+
+    /// Innovation and its variance of the combined prediction, for the gate.
+    fn innovation(&self, z: f64, r: f64) -> (f64, f64) {
+        let (x, p) = self.combined();
+        (z - x[0], p[(0, 0)] + r)
+    }
+
+    /// Each model updated with a position measurement `z` of variance `r`, and the model
+    /// probabilities with each model's likelihood of it.
+    fn update(&mut self, z: f64, r: f64) {
+        let mut like = [0.0; 2];
+        for ((x, p), l) in self.x.iter_mut().zip(&mut self.p).zip(&mut like) {
+            let e = z - x[0];
+            let s = p[(0, 0)] + r;
+            let k = p.column(0) / s;
+            *x += k * e;
+            *p -= k * p.row(0);
+            *p = (*p + p.transpose()) * 0.5;
+            *l = (-0.5 * e * e / s).exp() / s.sqrt();
+        }
+        let w = [like[0] * self.mu[0], like[1] * self.mu[1]];
+        let sum = w[0] + w[1];
+        if sum.is_finite() && sum > 0.0 {
+            let m1 = (w[1] / sum).clamp(MU_MIN, 1.0 - MU_MIN);
+            self.mu = [1.0 - m1, m1];
+        }
+    }
+}
+
 /// What became of one observation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Update {
@@ -85,6 +213,12 @@ pub struct PadEstimate {
     pub yaw: f64,
     /// Heading rate, rad/s.
     pub yaw_rate: f64,
+    /// Horizontal acceleration, m/s^2 (the models' weighted mean: near zero while the
+    /// vehicle cruises).
+    pub acceleration: Vector3<f64>,
+    /// Horizontal acceleration by the manoeuvring model alone, m/s^2: it sees a braking
+    /// begin within a few frames, where the weighted mean takes twice as long.
+    pub manoeuvre_acceleration: Vector3<f64>,
     /// 1-sigma position uncertainty per axis, m.
     pub position_sigma: Vector3<f64>,
     /// Time since the last used observation's capture, s.
@@ -108,7 +242,8 @@ pub struct FilterCounters {
 #[derive(Debug, Clone)]
 pub struct PadFilter {
     cfg: PadFilterConfig,
-    axes: Option<[Axis; 3]>,
+    /// East and north (IMM), and up (constant velocity).
+    axes: Option<([ImmAxis; 2], Axis)>,
     yaw: Axis,
     /// Capture time the state refers to, ns.
     t_ns: u64,
@@ -171,7 +306,7 @@ impl PadFilter {
             return Update::Dropped;
         };
         let t = obs.msg.capture_ns.min(now_ns);
-        let Some(mut axes) = self.axes else {
+        let Some(axes) = self.axes else {
             self.start(t, &z, r, yaw);
             return Update::Started;
         };
@@ -181,21 +316,18 @@ impl PadFilter {
             return Update::Dropped;
         }
         let dt = (t - self.t_ns) as f64 * 1e-9;
-        let q = [
-            self.cfg.accel_noise_xy.powi(2),
-            self.cfg.accel_noise_xy.powi(2),
-            self.cfg.accel_noise_z.powi(2),
+        let noise = self.imm_noise();
+        let (mut xy, mut up) = axes;
+        for a in &mut xy {
+            a.predict(dt, &noise);
+        }
+        up.predict(dt, self.cfg.accel_noise_z.powi(2));
+        let innovations = [
+            xy[0].innovation(z.x, r),
+            xy[1].innovation(z.y, r),
+            up.innovation(z.z, r),
         ];
-        for (a, qa) in axes.iter_mut().zip(q) {
-            a.predict(dt, qa);
-        }
-        let mut nis = 0.0;
-        let mut innovations = [(0.0, 1.0); 3];
-        for (k, a) in axes.iter().enumerate() {
-            let (e, s) = a.innovation(z[k], r);
-            nis += e * e / s;
-            innovations[k] = (e, s);
-        }
+        let nis: f64 = innovations.iter().map(|(e, s)| e * e / s).sum();
         if !(nis.is_finite() && nis <= self.cfg.gate_chi2) {
             self.rejects_in_row += 1;
             if self.rejects_in_row >= self.cfg.max_rejects {
@@ -207,10 +339,11 @@ impl PadFilter {
             return Update::Rejected;
         }
         self.rejects_in_row = 0;
-        for (a, (e, s)) in axes.iter_mut().zip(innovations) {
-            a.update(e, s);
-        }
-        self.axes = Some(axes);
+        xy[0].update(z.x, r);
+        xy[1].update(z.y, r);
+        let (e, s) = innovations[2];
+        up.update(e, s);
+        self.axes = Some((xy, up));
         self.yaw.predict(dt, self.cfg.yaw_accel_noise.powi(2));
         if let Some(y) = yaw {
             let (e, s) = self.yaw.innovation(y, self.cfg.sigma_yaw_rad.powi(2));
@@ -236,21 +369,33 @@ impl PadFilter {
         }
         let age_s = at_ns.saturating_sub(self.t_ns) as f64 * 1e-9;
         let dt = age_s.min(2.0);
+        // The acceleration is trusted for a short extrapolation only (latency, a missed
+        // frame); beyond it the pad goes on at its velocity, as a braking car stops
+        // rather than reversing.
+        let dt_a = dt.min(ACCEL_HORIZON_S);
+        let dt_v = dt - dt_a;
+        let (mut xy, mut up) = axes;
+        let noise = self.imm_noise();
         let mut p = Vector3::zeros();
         let mut v = Vector3::zeros();
+        let mut acc = Vector3::zeros();
+        let mut manoeuvre_acc = Vector3::zeros();
         let mut sigma = Vector3::zeros();
-        let q = [
-            self.cfg.accel_noise_xy.powi(2),
-            self.cfg.accel_noise_xy.powi(2),
-            self.cfg.accel_noise_z.powi(2),
-        ];
-        for k in 0..3 {
-            let mut a = axes[k];
-            a.predict(dt, q[k]);
-            p[k] = a.x;
-            v[k] = a.v;
-            sigma[k] = a.pxx.max(0.0).sqrt();
+        for (k, a) in xy.iter_mut().enumerate() {
+            if dt_a > 0.0 {
+                a.predict(dt_a, &noise);
+            }
+            let (x, cov) = a.combined();
+            p[k] = x[0] + x[1] * dt_v;
+            v[k] = x[1];
+            acc[k] = x[2];
+            manoeuvre_acc[k] = a.x[1][2];
+            sigma[k] = (cov[(0, 0)] + cov[(1, 1)] * dt_v * dt_v).max(0.0).sqrt();
         }
+        up.predict(dt, self.cfg.accel_noise_z.powi(2));
+        p.z = up.x;
+        v.z = up.v;
+        sigma.z = up.pxx.max(0.0).sqrt();
         let mut y = self.yaw;
         y.predict(dt, self.cfg.yaw_accel_noise.powi(2));
         let est = PadEstimate {
@@ -258,6 +403,8 @@ impl PadFilter {
             velocity: v,
             yaw: wrap(y.x),
             yaw_rate: y.v,
+            acceleration: acc,
+            manoeuvre_acceleration: manoeuvre_acc,
             position_sigma: sigma,
             age_s,
         };
@@ -265,9 +412,19 @@ impl PadFilter {
             .position
             .iter()
             .chain(est.velocity.iter())
+            .chain(est.acceleration.iter())
+            .chain(est.manoeuvre_acceleration.iter())
             .all(|x| x.is_finite())
             && est.yaw.is_finite();
         finite.then_some(est)
+    }
+
+    fn imm_noise(&self) -> ImmNoise {
+        ImmNoise {
+            q_cv: self.cfg.accel_noise_xy.powi(2),
+            q_ca: self.cfg.jerk_noise_xy.powi(2),
+            sojourn_s: [self.cfg.cruise_sojourn_s, self.cfg.manoeuvre_sojourn_s],
+        }
     }
 
     /// World position, its variance, and the heading of `obs`; `None` when unusable.
@@ -292,11 +449,11 @@ impl PadFilter {
 
     fn start(&mut self, t: u64, z: &Vector3<f64>, r: f64, yaw: Option<f64>) {
         let vv = self.cfg.initial_speed_sigma.powi(2);
-        self.axes = Some([
-            Axis::new(z.x, r, vv),
-            Axis::new(z.y, r, vv),
+        let va = self.cfg.initial_accel_sigma.powi(2);
+        self.axes = Some((
+            [ImmAxis::new(z.x, r, vv, va), ImmAxis::new(z.y, r, vv, va)],
             Axis::new(z.z, r, 1.0),
-        ]);
+        ));
         self.yaw = Axis::new(
             yaw.unwrap_or(0.0),
             if yaw.is_some() { 0.01 } else { 10.0 },
@@ -308,3 +465,7 @@ impl PadFilter {
         self.counters.accepted += 1;
     }
 }
+
+#[cfg(test)]
+#[path = "pad_filter_test.rs"]
+mod tests;

@@ -95,6 +95,11 @@ struct World {
     velocity_loss: Vector3<f64>,
     /// The vehicle's heading, rad: it turns toward the setpoint's yaw at 1 rad/s.
     yaw: f64,
+    /// Once the mission reaches Land, the pad brakes at this rate (m/s^2) to a stop.
+    brake_in_land_m_s2: f64,
+    /// When the vehicle dropped (in Land, within 10 cm of the pad: it waits for its gates
+    /// 15-25 cm up), ns.
+    drop_t: Option<u64>,
     /// Every step in Track: the vehicle's position relative to the pad, and its heading.
     track_log: Vec<(Vector3<f64>, f64)>,
 }
@@ -141,6 +146,8 @@ impl World {
             contact_t: None,
             contact_speed_m_s: None,
             contact_offset_m: None,
+            brake_in_land_m_s2: 0.0,
+            drop_t: None,
             stamp_lag_ns: 0,
             arrival_frozen_at: None,
             max_speed_m_s: 5.0,
@@ -385,6 +392,17 @@ impl World {
         }
         if let Some(p) = &mut self.pad {
             *p += self.pad_vel * dt;
+        }
+        if self.brake_in_land_m_s2 > 0.0 && self.land_at().is_some() {
+            let speed = self.pad_vel.norm();
+            let slower = (speed - self.brake_in_land_m_s2 * dt).max(0.0);
+            if speed > 0.0 {
+                self.pad_vel *= slower / speed;
+            }
+        }
+        let below_flare = self.pad.is_some_and(|p| self.pos.z - p.z < 0.1);
+        if self.drop_t.is_none() && self.fsm.state() == MissionState::Land && below_flare {
+            self.drop_t = Some(self.t);
         }
         if let (MissionState::Track, Some(p)) = (self.fsm.state(), self.pad) {
             self.track_log.push((self.pos - p, self.yaw));
@@ -1165,6 +1183,49 @@ fn a_pad_estimate_low_by_a_hand_width_still_finds_the_contact_at_once() {
         let off = (w.pos - w.pad.unwrap()).xy().norm();
         assert!(off < 0.08, "{low_by} m low: {off:.3} m off");
     }
+}
+
+#[test]
+fn a_drop_waits_for_a_braking_pad_to_stop_braking() {
+    // The pad brakes at 0.45 m/s^2 from 1 m/s as the touchdown begins (paper-braking's
+    // rate); the vehicle follows a changed velocity 0.3 s late, as PX4's velocity loop.
+    // A drop begun in the braking ends past the pad.
+    let mut w = World::new(config());
+    w.pad = Some(Vector3::new(-1.0, -0.5, PAD_HEIGHT));
+    w.pad_vel = Vector3::new(1.0, 0.0, 0.0);
+    w.response_s = 0.3;
+    w.brake_in_land_m_s2 = 0.45;
+    w.expect(MissionState::Landed, 60.0);
+    let land = w.land_at().unwrap();
+    let dropped = w.drop_t.expect("a drop") as f64 * 1e-9 - land as f64 * 1e-9;
+    // The braking lasts 2.2 s from the commit; the filter sees it end a little later.
+    assert!(
+        dropped > 2.0,
+        "dropped {dropped:.2} s after the commit, in the braking"
+    );
+    let off = w.contact_offset_m.unwrap();
+    assert!(off < 0.05, "touched down {off:.3} m off the pad");
+
+    // Without the gate the same flight drops in the braking.
+    let mut cfg = config();
+    cfg.flare_accel_max_m_s2 = 100.0;
+    let mut w = World::new(cfg);
+    w.pad = Some(Vector3::new(-1.0, -0.5, PAD_HEIGHT));
+    w.pad_vel = Vector3::new(1.0, 0.0, 0.0);
+    w.response_s = 0.3;
+    w.brake_in_land_m_s2 = 0.45;
+    w.expect(MissionState::Landed, 60.0);
+    let land = w.land_at().unwrap();
+    let dropped = w.drop_t.expect("a drop") as f64 * 1e-9 - land as f64 * 1e-9;
+    let off_ungated = w.contact_offset_m.unwrap();
+    assert!(
+        dropped < 2.0,
+        "dropped {dropped:.2} s after the commit without the gate"
+    );
+    assert!(
+        off_ungated > off + 0.03,
+        "without the gate {off_ungated:.3} m off, with it {off:.3} m"
+    );
 }
 
 /// A pad on a road vehicle at 30 km/h passing under the preset point, and a vehicle that

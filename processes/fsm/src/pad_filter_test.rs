@@ -1,0 +1,126 @@
+use ipc_types::msg::{Header, PadObservation, Pose};
+use nalgebra::Vector3;
+
+use super::{PadFilter, Update};
+use crate::config::PadFilterConfig;
+
+const FRAME_NS: u64 = 33_333_333;
+
+/// An observation of the pad at `at`, captured at `t_ns`, from 0.5 m.
+fn observation(t_ns: u64, at: Vector3<f64>) -> PadObservation {
+    PadObservation {
+        msg: Header::captured_at(t_ns),
+        camera_from_pad: Pose {
+            translation: [0.0, 0.0, 0.5],
+            rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
+        },
+        world_from_pad: Pose {
+            translation: at.into(),
+            rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
+        },
+        world_valid: 1,
+        marker_count: 4,
+        ..PadObservation::default()
+    }
+}
+
+/// A deterministic +-1 cm jitter, as PnP's at half a metre.
+fn jitter(k: u64) -> Vector3<f64> {
+    let h = |s: u64| ((k.wrapping_mul(2_654_435_761).wrapping_add(s) % 2001) as f64 / 1000.0) - 1.0;
+    Vector3::new(h(17), h(91), h(5)) * 0.01
+}
+
+/// Feeds the filter a pad moving along x, `speed(t)` m/s, for `seconds`; returns the
+/// time of the last frame.
+fn fly(f: &mut PadFilter, seconds: f64, speed: impl Fn(f64) -> f64) -> u64 {
+    let mut x = 0.0;
+    let frames = (seconds * 1e9 / FRAME_NS as f64) as u64;
+    let mut t = 0;
+    for k in 0..frames {
+        t = k * FRAME_NS;
+        let ts = t as f64 * 1e-9;
+        x += speed(ts) * FRAME_NS as f64 * 1e-9;
+        let u = f.update(
+            t + 30_000_000,
+            &observation(t, Vector3::new(x, 0.0, 0.4) + jitter(k)),
+        );
+        assert!(
+            matches!(u, Update::Accepted | Update::Started),
+            "frame {k}: {u:?}"
+        );
+    }
+    t
+}
+
+#[test]
+fn a_braking_pad_is_followed_without_the_constant_velocity_lag() {
+    // 1 m/s, then 0.45 m/s^2 of braking from 4 s: a constant-velocity filter of the same
+    // noise trails it by about 0.17 m/s.
+    let braking = |t: f64| {
+        if t < 4.0 {
+            1.0
+        } else {
+            (1.0 - 0.45 * (t - 4.0)).max(0.0)
+        }
+    };
+    let mut f = PadFilter::new(PadFilterConfig::default());
+    let t = fly(&mut f, 5.0, braking);
+    let est = f.estimate(t).expect("an estimate");
+    let truth = braking(t as f64 * 1e-9);
+    assert!(
+        (est.velocity.x - truth).abs() < 0.08,
+        "velocity {:.3} against {truth:.3}",
+        est.velocity.x
+    );
+    assert!(
+        est.acceleration.x < -0.2,
+        "acceleration {:.3}",
+        est.acceleration.x
+    );
+    assert!(
+        est.manoeuvre_acceleration.x < -0.35,
+        "manoeuvre acceleration {:.3}",
+        est.manoeuvre_acceleration.x
+    );
+}
+
+#[test]
+fn a_cruising_pad_shows_no_acceleration() {
+    let mut f = PadFilter::new(PadFilterConfig::default());
+    let t = fly(&mut f, 6.0, |_| 0.9);
+    let est = f.estimate(t).expect("an estimate");
+    assert!(
+        (est.velocity.x - 0.9).abs() < 0.05,
+        "velocity {:.3}",
+        est.velocity.x
+    );
+    assert!(
+        est.acceleration.xy().norm() < 0.1,
+        "acceleration {:?}",
+        est.acceleration
+    );
+    let m = est.manoeuvre_acceleration.xy().norm();
+    assert!(m < 0.1, "manoeuvre acceleration {m:.3}");
+}
+
+#[test]
+fn a_long_extrapolation_carries_the_velocity_not_the_acceleration() {
+    // Lost two seconds into a braking: the pad stops, it does not reverse.
+    let braking = |t: f64| {
+        if t < 3.0 {
+            1.0
+        } else {
+            (1.0 - 0.5 * (t - 3.0)).max(0.0)
+        }
+    };
+    let mut f = PadFilter::new(PadFilterConfig::default());
+    let t = fly(&mut f, 4.0, braking);
+    let now = f.estimate(t).expect("an estimate");
+    let later = f.estimate(t + 2_000_000_000).expect("an estimate");
+    let moved = later.position.x - now.position.x;
+    assert!(
+        moved > 0.0,
+        "the extrapolation went backwards: {moved:.3} m"
+    );
+    assert!(later.position.iter().all(|c| c.is_finite()));
+}
