@@ -74,9 +74,6 @@ pub struct FsmConfig {
     /// this (braking, changing lane), m/s^2: the vehicle follows a changing velocity
     /// late, and a drop begun in a braking ends past the pad.
     pub flare_accel_max_m_s2: f64,
-    /// Land: the drop waits while the vehicle moves faster than this relative to the
-    /// pad, m/s (at 0.2 m/s a 0.35 s drop ends 7 cm off).
-    pub flare_speed_gate_m_s: f64,
     /// Descend and Land, below the chase speed: share of the pad's estimated
     /// acceleration fed forward to the autopilot (0 = none, 1 = all of it).
     pub pad_accel_gain: f64,
@@ -295,7 +292,6 @@ impl Default for FsmConfig {
             flare_align_m: 0.04,
             drop_rate_m_s: 0.8,
             flare_accel_max_m_s2: 0.15,
-            flare_speed_gate_m_s: 0.3,
             pad_accel_gain: 1.0,
             land_max_pad_age_s: 0.4,
             relative_gain: 1.0,
@@ -474,7 +470,6 @@ impl Validate for FsmConfig {
                 100.0,
             ),
             ("pad_accel_gain", self.pad_accel_gain, 0.0, 1.0),
-            ("flare_speed_gate_m_s", self.flare_speed_gate_m_s, 0.01, 5.0),
             ("relative_gain", self.relative_gain, 0.0, 10.0),
             (
                 "relative_velocity_gain",

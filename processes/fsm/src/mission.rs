@@ -1193,7 +1193,7 @@ impl Fsm {
         if !self.dropping
             && height <= flare + 0.03
             && e < self.cfg.flare_align_m
-            && rel_v < self.cfg.flare_speed_gate_m_s
+            && rel_v < self.cfg.land_speed_gate_m_s
             && steady
         {
             self.dropping = true;
