@@ -154,6 +154,8 @@ pub struct Fsm {
     touch_since: Option<u64>,
     /// The drop got under way (a vehicle committed at the pad's height has not dropped).
     drop_moving: bool,
+    /// Since when the drop has waited for the pad to stop manoeuvring, all else ready.
+    manoeuvre_wait_since: Option<u64>,
     /// The gear is on the pad: the motors are being switched off.
     touched: bool,
     lost_z0: f64,
@@ -230,6 +232,7 @@ impl Fsm {
             dropping: false,
             touch_since: None,
             drop_moving: false,
+            manoeuvre_wait_since: None,
             touched: false,
             lost_z0: 0.0,
             now_ns: 0,
@@ -1091,6 +1094,7 @@ impl Fsm {
             self.dropping = false;
             self.touch_since = None;
             self.drop_moving = false;
+            self.manoeuvre_wait_since = None;
             self.touched = false;
             self.go(
                 now_ns,
@@ -1185,17 +1189,24 @@ impl Fsm {
         // Down to the flare height at the touchdown rate (slowing to a hover when off the
         // commit gate); there, wait until the vehicle is right over the pad and moving
         // with it, then drop: a gust has a fraction of a second to push it off, not the
-        // whole descent.
+        // whole descent. Below the chase speed, also wait while the pad brakes or changes
+        // lane (a drop begun in one ends 8-16 cm off), for at most MANOEUVRE_WAIT_MAX_S: a
+        // slow vehicle circling for good is a steady turn the feed-forward follows.
         let gate = self.cfg.land_align_m;
         let rel_v = (Vector3::from(v.velocity) - est.velocity).xy().norm();
-        let steady = self.chasing(&est.velocity)
-            || est.manoeuvre_acceleration.xy().norm() < self.cfg.flare_accel_max_m_s2;
-        if !self.dropping
+        let ready = !self.dropping
             && height <= flare + 0.03
             && e < self.cfg.flare_align_m
-            && rel_v < self.cfg.land_speed_gate_m_s
-            && steady
-        {
+            && rel_v < self.cfg.land_speed_gate_m_s;
+        let manoeuvring = !self.chasing(&est.velocity)
+            && est.manoeuvre_acceleration.xy().norm() >= self.cfg.flare_accel_max_m_s2;
+        let waited = if ready && manoeuvring {
+            let since = *self.manoeuvre_wait_since.get_or_insert(now_ns);
+            now_ns.saturating_sub(since) as f64 * 1e-9
+        } else {
+            0.0
+        };
+        if ready && (!manoeuvring || waited >= MANOEUVRE_WAIT_MAX_S) {
             self.dropping = true;
         }
         let rate = if self.dropping {
@@ -1545,6 +1556,10 @@ const TOUCHDOWN_LEAD_M: f64 = 0.1;
 /// The most turning acceleration fed forward, m/s^2 (a car at 50 km/h on a 30 m radius
 /// pulls 6.4; a misread heading rate must not tilt the vehicle further).
 const CHASE_TURN_ACCEL_MAX_M_S2: f64 = 6.0;
+
+/// The longest the drop waits for a manoeuvring pad, s: a braking or a lane change lasts
+/// 2-3 s.
+const MANOEUVRE_WAIT_MAX_S: f64 = 4.0;
 
 /// The most of the pad's acceleration fed forward, m/s^2 (a hard braking; a misread
 /// must not tilt the vehicle further).
