@@ -1193,30 +1193,10 @@ fn a_pad_estimate_low_by_a_hand_width_still_finds_the_contact_at_once() {
     }
 }
 
-#[test]
-fn a_drop_waits_for_a_braking_pad_to_stop_braking() {
-    // The pad brakes at 0.45 m/s^2 from 1 m/s as the touchdown begins (paper-braking's
-    // rate); the vehicle follows a changed velocity 0.3 s late, as PX4's velocity loop.
-    // A drop begun in the braking ends past the pad.
-    let mut w = World::new(config());
-    w.pad = Some(Vector3::new(-1.0, -0.5, PAD_HEIGHT));
-    w.pad_vel = Vector3::new(1.0, 0.0, 0.0);
-    w.response_s = 0.3;
-    w.brake_in_land_m_s2 = 0.45;
-    w.expect(MissionState::Landed, 60.0);
-    let land = w.land_at().unwrap();
-    let dropped = w.drop_t.expect("a drop") as f64 * 1e-9 - land as f64 * 1e-9;
-    // The braking lasts 2.2 s from the commit; the filter sees it end a little later.
-    assert!(
-        dropped > 2.0,
-        "dropped {dropped:.2} s after the commit, in the braking"
-    );
-    let off = w.contact_offset_m.unwrap();
-    assert!(off < 0.05, "touched down {off:.3} m off the pad");
-
-    // Without the gate the same flight drops in the braking.
-    let mut cfg = config();
-    cfg.flare_accel_max_m_s2 = 100.0;
+/// The pad brakes at 0.45 m/s^2 from 1 m/s as the touchdown begins (paper-braking's
+/// rate); the vehicle follows a changed velocity 0.3 s late, as PX4's velocity loop.
+/// Returns when the drop came after the commit (s) and how far off the pad it touched (m).
+fn braking_touchdown(cfg: FsmConfig) -> (f64, f64) {
     let mut w = World::new(cfg);
     w.pad = Some(Vector3::new(-1.0, -0.5, PAD_HEIGHT));
     w.pad_vel = Vector3::new(1.0, 0.0, 0.0);
@@ -1225,7 +1205,23 @@ fn a_drop_waits_for_a_braking_pad_to_stop_braking() {
     w.expect(MissionState::Landed, 60.0);
     let land = w.land_at().unwrap();
     let dropped = w.drop_t.expect("a drop") as f64 * 1e-9 - land as f64 * 1e-9;
-    let off_ungated = w.contact_offset_m.unwrap();
+    (dropped, w.contact_offset_m.unwrap())
+}
+
+#[test]
+fn a_drop_waits_for_a_braking_pad_to_stop_braking() {
+    let (dropped, off) = braking_touchdown(config());
+    // The braking lasts 2.2 s from the commit; the filter sees it end a little later.
+    assert!(
+        dropped > 2.0,
+        "dropped {dropped:.2} s after the commit, in the braking"
+    );
+    assert!(off < 0.05, "touched down {off:.3} m off the pad");
+
+    // Without the wait the same flight drops in the braking, and ends past the pad.
+    let mut cfg = config();
+    cfg.flare_accel_max_m_s2 = 100.0;
+    let (dropped, off_ungated) = braking_touchdown(cfg);
     assert!(
         dropped < 2.0,
         "dropped {dropped:.2} s after the commit without the gate"
