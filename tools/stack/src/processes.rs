@@ -279,6 +279,9 @@ pub fn run(
         let file = log_file(launch.log_dir, &node.name)?;
         let child = start(node, &values, &prefix, launch, file)?;
         children.push(&node.name, child);
+        if node.binary == "watchdog" {
+            children.stop_first(&node.name);
+        }
         if !node.start_last {
             // Let each stage open its ports before the simulator's clock starts.
             std::thread::sleep(Duration::from_millis(150));

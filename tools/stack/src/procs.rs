@@ -9,14 +9,24 @@ use std::time::{Duration, Instant};
 use anyhow::Result;
 
 /// Child processes, stopped when dropped (also on error paths): SIGTERM, then SIGKILL
-/// after 3 s, as systemd does.
+/// after 3 s, as systemd does; those marked [`Children::stop_first`] before the rest.
 #[derive(Default)]
-pub struct Children(pub Vec<(String, Child)>);
+pub struct Children {
+    list: Vec<(String, Child)>,
+    first: Vec<String>,
+}
 
 impl Children {
     /// Adds a started child under `name`.
     pub fn push(&mut self, name: &str, child: Child) {
-        self.0.push((name.to_string(), child));
+        self.list.push((name.to_string(), child));
+    }
+
+    /// Stops the child started as `name` (a supervisor) before the others, and waits for
+    /// it: stopped together, the others' exits reach a watchdog still running as deaths
+    /// (a faultless `make test` flight logged `px4-link died` 16 ms after the stop).
+    pub fn stop_first(&mut self, name: &str) {
+        self.first.push(name.to_string());
     }
 
     /// The first child that has exited, with its status.
@@ -26,7 +36,7 @@ impl Children {
 
     /// The first child that has exited and is not among `seen`.
     pub fn newly_exited(&mut self, seen: &[String]) -> Option<(String, std::process::ExitStatus)> {
-        self.0
+        self.list
             .iter_mut()
             .filter(|(n, _)| !seen.contains(n))
             .find_map(|(n, c)| match c.try_wait() {
@@ -38,7 +48,7 @@ impl Children {
     /// Puts `child` in the place of the one started as `name` (restarted), reaping the
     /// old one.
     pub fn replace(&mut self, name: &str, child: Child) {
-        match self.0.iter_mut().find(|(n, _)| n == name) {
+        match self.list.iter_mut().find(|(n, _)| n == name) {
             Some((_, c)) => {
                 let _ = c.wait();
                 *c = child;
@@ -50,39 +60,53 @@ impl Children {
     /// Waits for the child started as `name` to exit (after a kill): its iceoryx2 node is
     /// dead from then on, so the process started in its place may take the name.
     pub fn reap(&mut self, name: &str) {
-        if let Some((_, c)) = self.0.iter_mut().find(|(n, _)| n == name) {
+        if let Some((_, c)) = self.list.iter_mut().find(|(n, _)| n == name) {
             let _ = c.wait();
         }
     }
 
     /// The process id of the child started as `name`.
     pub fn pid_of(&self, name: &str) -> Option<u32> {
-        self.0.iter().find(|(n, _)| n == name).map(|(_, c)| c.id())
+        self.list
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, c)| c.id())
     }
 }
 
 impl Drop for Children {
     fn drop(&mut self) {
-        for (_, c) in &mut self.0 {
-            // SIGTERM first: the processes shut down cleanly and release shared memory;
-            // SIGCONT after it, so a stopped (hung, injected) process can act on it.
-            // SAFETY: signalling our own child.
-            unsafe {
-                libc::kill(c.id() as i32, libc::SIGTERM);
-                libc::kill(c.id() as i32, libc::SIGCONT);
-            }
+        let (first, rest): (Vec<_>, Vec<_>) = self
+            .list
+            .iter_mut()
+            .partition(|(n, _)| self.first.contains(n));
+        terminate(first.into_iter().map(|(_, c)| c));
+        terminate(rest.into_iter().map(|(_, c)| c));
+    }
+}
+
+/// SIGTERM to every one of `children`, then SIGKILL to those still running after 3 s.
+fn terminate<'a>(children: impl Iterator<Item = &'a mut Child>) {
+    let mut children: Vec<&mut Child> = children.collect();
+    for c in &children {
+        // SIGTERM first: the processes shut down cleanly and release shared memory;
+        // SIGCONT after it, so a stopped (hung, injected) process can act on it.
+        // SAFETY: signalling our own child.
+        unsafe {
+            libc::kill(c.id() as i32, libc::SIGTERM);
+            libc::kill(c.id() as i32, libc::SIGCONT);
         }
-        let end = Instant::now() + Duration::from_secs(3);
-        for (_, c) in &mut self.0 {
-            while Instant::now() < end {
-                if let Ok(Some(_)) = c.try_wait() {
-                    break;
-                }
-                std::thread::sleep(Duration::from_millis(20));
+    }
+    let end = Instant::now() + Duration::from_secs(3);
+    for c in &mut children {
+        while Instant::now() < end {
+            if let Ok(Some(_)) = c.try_wait() {
+                break;
             }
-            let _ = c.kill();
-            let _ = c.wait();
+            std::thread::sleep(Duration::from_millis(20));
         }
+        let _ = c.kill();
+        let _ = c.wait();
     }
 }
 
