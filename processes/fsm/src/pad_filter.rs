@@ -6,9 +6,9 @@
 //! Each axis is its own filter: the measurement noise is diagonal in the world frame (a
 //! range-scaled sphere), so the joint filter would factor into these. Constant velocity
 //! alone lags a braking or a lane change (its velocity trails a 0.45 m/s^2 braking by
-//! about 0.15 m/s, enough to drift 10 cm in a touchdown's drop); constant acceleration
+//! about 0.17 m/s, enough to drift 10 cm in a touchdown's drop); constant acceleration
 //! alone is noisier on a cruising vehicle. The IMM weighs the two by how well each
-//! explains the observations (docs/fsm.md, "The pad filter").
+//! explains the observations (docs/fsm.md, "Pad motion filter").
 //! Observations arrive late (camera exposure, detection, IPC); the filter runs on capture
 //! times and only the estimate is extrapolated to the caller's clock, which is what
 //! compensates each observation's age.
