@@ -863,7 +863,7 @@ impl Text {
 #[repr(C)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("landing::FsmStatus/v1")]
+#[type_name("landing::FsmStatus/v2")]
 pub struct FsmStatus {
     /// Sequence, time, stage stamps.
     pub msg: Header,
@@ -883,6 +883,9 @@ pub struct FsmStatus {
     pub pad_position: [f64; 3],
     /// Estimated pad velocity, world, m/s.
     pub pad_velocity: [f64; 3],
+    /// Estimated pad acceleration, world, m/s^2 (the filter's models weighted; what the
+    /// touchdown feeds forward): a recording shows what the drop's wait saw.
+    pub pad_acceleration: [f64; 3],
 }
 
 /// What a safety command orders.

@@ -90,7 +90,7 @@ macro_rules! for_each_payload {
                     = "landing::SafetyCommand/v1",
                 /// The mission status (fsm).
                 FsmStatus($crate::msg::FsmStatus => $crate::msg::FsmStatus)
-                    = "landing::FsmStatus/v1",
+                    = "landing::FsmStatus/v2",
                 /// The watchdog's view of the stack; boxed when owned (1.7 kB).
                 WatchdogView($crate::msg::WatchdogView => Box<$crate::msg::WatchdogView>)
                     = "landing::WatchdogView/v4",

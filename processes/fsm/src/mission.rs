@@ -461,6 +461,7 @@ impl Fsm {
             reserved: 0,
             pad_position: est.map(|e| e.position.into()).unwrap_or([0.0; 3]),
             pad_velocity: est.map(|e| e.velocity.into()).unwrap_or([0.0; 3]),
+            pad_acceleration: est.map(|e| e.acceleration.into()).unwrap_or([0.0; 3]),
         }
     }
 

@@ -246,7 +246,7 @@ fn a_channel_of_another_type_or_no_json_is_an_error_naming_both() {
     .unwrap();
     assert_eq!(
         errors,
-        ["/fsm/status: holds landing::FsmStatus/v1, not landing::VehicleState/v2"]
+        ["/fsm/status: holds landing::FsmStatus/v2, not landing::VehicleState/v2"]
     );
     // The caller's error names the message it met, and says what went wrong.
     let e = read_recording(&path, |m| {
@@ -260,7 +260,7 @@ fn a_channel_of_another_type_or_no_json_is_an_error_naming_both() {
     let source = std::error::Error::source(&e).map(ToString::to_string);
     assert_eq!(
         source.as_deref(),
-        Some("/vehicle/state: holds landing::VehicleState/v2, not landing::FsmStatus/v1")
+        Some("/vehicle/state: holds landing::VehicleState/v2, not landing::FsmStatus/v2")
     );
 }
 
