@@ -74,6 +74,10 @@ pub struct FsmConfig {
     /// this (braking, changing lane), m/s^2: the vehicle follows a changing velocity
     /// late, and a drop begun in a braking ends past the pad.
     pub flare_accel_max_m_s2: f64,
+    /// ... and until the pad has stayed under that acceleration this long, s: a lane
+    /// change's acceleration turns over in its middle, where the pad moves sideways
+    /// fastest, and a drop begun there ends 10-13 cm off.
+    pub flare_quiet_s: f64,
     /// Descend and Land, below the chase speed: share of the pad's estimated
     /// acceleration fed forward to the autopilot (0 = none, 1 = all of it).
     pub pad_accel_gain: f64,
@@ -292,6 +296,7 @@ impl Default for FsmConfig {
             flare_align_m: 0.04,
             drop_rate_m_s: 0.8,
             flare_accel_max_m_s2: 0.15,
+            flare_quiet_s: 0.5,
             pad_accel_gain: 1.0,
             land_max_pad_age_s: 0.4,
             relative_gain: 1.0,
@@ -463,6 +468,7 @@ impl Validate for FsmConfig {
             ("flare_align_m", self.flare_align_m, 0.005, 1.0),
             ("land_max_pad_age_s", self.land_max_pad_age_s, 0.05, 5.0),
             ("drop_rate_m_s", self.drop_rate_m_s, 0.1, 3.0),
+            ("flare_quiet_s", self.flare_quiet_s, 0.0, 5.0),
             (
                 "flare_accel_max_m_s2",
                 self.flare_accel_max_m_s2,

@@ -156,6 +156,8 @@ pub struct Fsm {
     drop_moving: bool,
     /// Since when the drop has waited for the pad to stop manoeuvring, all else ready.
     manoeuvre_wait_since: Option<u64>,
+    /// When the pad was last seen manoeuvring (below the chase speed), ns.
+    manoeuvre_seen_ns: Option<u64>,
     /// The gear is on the pad: the motors are being switched off.
     touched: bool,
     lost_z0: f64,
@@ -233,6 +235,7 @@ impl Fsm {
             touch_since: None,
             drop_moving: false,
             manoeuvre_wait_since: None,
+            manoeuvre_seen_ns: None,
             touched: false,
             lost_z0: 0.0,
             now_ns: 0,
@@ -1060,6 +1063,7 @@ impl Fsm {
         };
         let Some(p) = self.position() else { return };
         self.integrate_chase_trim(&est, &p, dt);
+        self.note_manoeuvre(now_ns, &est);
         let e = (est.position - p).xy().norm();
         if e > self.cfg.go_around_m {
             self.go_around(now_ns, format!("{e:.2} m off the pad while descending"));
@@ -1202,8 +1206,13 @@ impl Fsm {
             && height <= flare + 0.03
             && e < self.cfg.flare_align_m
             && rel_v < self.cfg.land_speed_gate_m_s;
-        let manoeuvring = !self.chasing(&est.velocity)
-            && est.manoeuvre_acceleration.xy().norm() >= self.cfg.flare_accel_max_m_s2;
+        self.note_manoeuvre(now_ns, &est);
+        // Quiet for a while, not for a moment: in a lane change's middle the acceleration
+        // turns over, under the gate for a few tenths of a second, while the pad moves
+        // sideways fastest and is about to slow down.
+        let manoeuvring = self
+            .manoeuvre_seen_ns
+            .is_some_and(|seen| now_ns.saturating_sub(seen) as f64 * 1e-9 < self.cfg.flare_quiet_s);
         let waited = if ready && manoeuvring {
             let since = *self.manoeuvre_wait_since.get_or_insert(now_ns);
             now_ns.saturating_sub(since) as f64 * 1e-9
@@ -1479,6 +1488,16 @@ impl Fsm {
     /// held the racer 5-10 cm behind the pad, outside the flare gate, for the whole
     /// touchdown (highspeed-30). Below the chase speed it stays zero, so the paper's
     /// flights are flown as before.
+    /// Below the chase speed, remembers when the pad last accelerated past the drop's
+    /// gate (Descend and Land watch it, so a manoeuvre ending at the commit still counts).
+    fn note_manoeuvre(&mut self, now_ns: u64, est: &PadEstimate) {
+        if !self.chasing(&est.velocity)
+            && est.manoeuvre_acceleration.xy().norm() >= self.cfg.flare_accel_max_m_s2
+        {
+            self.manoeuvre_seen_ns = Some(now_ns);
+        }
+    }
+
     fn integrate_chase_trim(&mut self, est: &PadEstimate, p: &Vector3<f64>, dt: f64) {
         if !self.chasing(&est.velocity) {
             self.chase_trim = Vector3::zeros();

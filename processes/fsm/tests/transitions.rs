@@ -99,6 +99,9 @@ struct World {
     brake_in_land_m_s2: f64,
     /// The pad's velocity turns at this rate, rad/s (a vehicle circling).
     pad_turn_rate: f64,
+    /// Once the mission reaches Descend, the pad changes lane: (delay s, sideways m, over
+    /// s), the scenarios' quintic profile, along +y.
+    lane_change_in_descend: Option<(f64, f64, f64)>,
     /// Vehicle states reach the fsm this long after they were measured (stamped then),
     /// ns: px4-link and iceoryx2 on a loaded machine.
     telemetry_delay_ns: u64,
@@ -155,6 +158,7 @@ impl World {
             contact_offset_m: None,
             brake_in_land_m_s2: 0.0,
             pad_turn_rate: 0.0,
+            lane_change_in_descend: None,
             telemetry_delay_ns: 0,
             telemetry_queue: std::collections::VecDeque::new(),
             drop_t: None,
@@ -211,8 +215,13 @@ impl World {
 
     /// When the vehicle first entered Land, ns.
     fn land_at(&self) -> Option<u64> {
+        self.entered(MissionState::Land)
+    }
+
+    /// When the mission first entered `state`, ns.
+    fn entered(&self, state: MissionState) -> Option<u64> {
         let mut t = self.fsm.transitions().iter();
-        t.find(|t| t.to == MissionState::Land).map(|t| t.at_ns)
+        t.find(|t| t.to == state).map(|t| t.at_ns)
     }
 
     fn ground(&self) -> f64 {
@@ -414,6 +423,11 @@ impl World {
             if speed > 0.0 {
                 self.pad_vel *= slower / speed;
             }
+        }
+        let descend = self.entered(MissionState::Descend);
+        if let (Some((delay, offset, over)), Some(from)) = (self.lane_change_in_descend, descend) {
+            let u = ((self.t.saturating_sub(from) as f64 * 1e-9 - delay) / over).clamp(0.0, 1.0);
+            self.pad_vel.y = offset * 30.0 * u * u * (1.0 - u) * (1.0 - u) / over;
         }
         let below_flare = self.pad.is_some_and(|p| self.pos.z - p.z < 0.1);
         if self.drop_t.is_none() && self.fsm.state() == MissionState::Land && below_flare {
@@ -1243,6 +1257,46 @@ fn a_drop_waits_for_a_braking_pad_to_stop_braking() {
     assert!(
         off_ungated > off + 0.03,
         "without the gate {off_ungated:.3} m off, with it {off:.3} m"
+    );
+}
+
+/// The pad changes lane by 1 m over 3 s (paper-lane-change's) `delay_s` after the commit.
+/// Returns when the drop came after the commit (s) and how far off the pad it touched (m).
+fn lane_change_touchdown(cfg: FsmConfig, delay_s: f64) -> (f64, f64) {
+    let mut w = World::new(cfg);
+    w.pad = Some(Vector3::new(-1.0, -0.5, PAD_HEIGHT));
+    w.pad_vel = Vector3::new(0.9, 0.0, 0.0);
+    w.response_s = 0.3;
+    w.lane_change_in_descend = Some((delay_s, 1.0, 3.0));
+    w.expect(MissionState::Landed, 60.0);
+    let land = w.land_at().unwrap();
+    let dropped = w.drop_t.expect("a drop") as f64 * 1e-9 - land as f64 * 1e-9;
+    (dropped, w.contact_offset_m.unwrap())
+}
+
+#[test]
+fn a_drop_waits_out_the_middle_of_a_lane_change() {
+    // The commit comes 2.4 s into Descend, the lane change 2 s into it: at the flare
+    // height the pad accelerates sideways, then its acceleration turns over in the
+    // middle of the change (0.6 m/s sideways, about to slow down).
+    let (dropped, off) = lane_change_touchdown(config(), 2.0);
+    assert!(
+        dropped > 2.6,
+        "dropped {dropped:.2} s after the commit, before the lane change ended"
+    );
+    assert!(off < 0.03, "touched down {off:.3} m off the pad");
+
+    // Quiet for a moment is enough without the hold: the drop begins mid-change.
+    let mut cfg = config();
+    cfg.flare_quiet_s = 0.0;
+    let (dropped, off_unheld) = lane_change_touchdown(cfg, 2.0);
+    assert!(
+        dropped < 2.6,
+        "dropped {dropped:.2} s after the commit without the hold"
+    );
+    assert!(
+        off_unheld > off + 0.03,
+        "without the hold {off_unheld:.3} m off, with it {off:.3} m"
     );
 }
 
