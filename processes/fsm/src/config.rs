@@ -68,6 +68,11 @@ pub struct FsmConfig {
     pub flare_height_m: f64,
     /// Land: horizontal error below which the vehicle drops from the flare height, m.
     pub flare_align_m: f64,
+    /// Land: over this long at the flare height the drop's gate widens from
+    /// `flare_align_m` to `land_align_m` (quadratically: tight at first), s: a vehicle
+    /// that cannot get that close (a steady turn, gusts) drops a little wider rather
+    /// than time out.
+    pub flare_relax_s: f64,
     /// Land: descent rate of the final drop, m/s.
     pub drop_rate_m_s: f64,
     /// Land, below the chase speed: the drop waits while the pad accelerates more than
@@ -293,7 +298,8 @@ impl Default for FsmConfig {
             land_speed_gate_m_s: 0.3,
             land_rate_m_s: 0.7,
             flare_height_m: 0.25,
-            flare_align_m: 0.04,
+            flare_align_m: 0.025,
+            flare_relax_s: 4.0,
             drop_rate_m_s: 0.8,
             flare_accel_max_m_s2: 0.15,
             flare_quiet_s: 0.5,
@@ -466,6 +472,7 @@ impl Validate for FsmConfig {
             ("go_around_m", self.go_around_m, 0.05, 5.0),
             ("flare_height_m", self.flare_height_m, 0.05, 3.0),
             ("flare_align_m", self.flare_align_m, 0.005, 1.0),
+            ("flare_relax_s", self.flare_relax_s, 0.1, 60.0),
             ("land_max_pad_age_s", self.land_max_pad_age_s, 0.05, 5.0),
             ("drop_rate_m_s", self.drop_rate_m_s, 0.1, 3.0),
             ("flare_quiet_s", self.flare_quiet_s, 0.0, 5.0),

@@ -158,6 +158,8 @@ pub struct Fsm {
     manoeuvre_wait_since: Option<u64>,
     /// When the pad was last seen manoeuvring (below the chase speed), ns.
     manoeuvre_seen_ns: Option<u64>,
+    /// Since when the touchdown has waited at the flare height, ns.
+    flare_since: Option<u64>,
     /// The gear is on the pad: the motors are being switched off.
     touched: bool,
     lost_z0: f64,
@@ -236,6 +238,7 @@ impl Fsm {
             drop_moving: false,
             manoeuvre_wait_since: None,
             manoeuvre_seen_ns: None,
+            flare_since: None,
             touched: false,
             lost_z0: 0.0,
             now_ns: 0,
@@ -1100,6 +1103,7 @@ impl Fsm {
             self.touch_since = None;
             self.drop_moving = false;
             self.manoeuvre_wait_since = None;
+            self.flare_since = None;
             self.touched = false;
             self.go(
                 now_ns,
@@ -1202,10 +1206,19 @@ impl Fsm {
         // slow vehicle circling for good is a steady turn the feed-forward follows.
         let gate = self.cfg.land_align_m;
         let rel_v = (Vector3::from(v.velocity) - est.velocity).xy().norm();
-        let ready = !self.dropping
-            && height <= flare + 0.03
-            && e < self.cfg.flare_align_m
-            && rel_v < self.cfg.land_speed_gate_m_s;
+        let at_flare = !self.dropping && height <= flare + 0.03;
+        let at_flare_s = if at_flare {
+            let since = *self.flare_since.get_or_insert(now_ns);
+            now_ns.saturating_sub(since) as f64 * 1e-9
+        } else {
+            0.0
+        };
+        // Tight at first (a drop begun 4 cm off ends 5-8 cm off in wind), wider the
+        // longer the wait: a steady turn or gusts may never let the vehicle that close.
+        let relax = (at_flare_s / self.cfg.flare_relax_s).clamp(0.0, 1.0);
+        let align =
+            self.cfg.flare_align_m + (gate - self.cfg.flare_align_m).max(0.0) * relax * relax;
+        let ready = at_flare && e < align && rel_v < self.cfg.land_speed_gate_m_s;
         self.note_manoeuvre(now_ns, &est);
         // Quiet for a while, not for a moment: in a lane change's middle the acceleration
         // turns over, under the gate for a few tenths of a second, while the pad moves
