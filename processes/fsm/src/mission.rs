@@ -158,8 +158,8 @@ pub struct Fsm {
     manoeuvre_wait_since: Option<u64>,
     /// When the pad was last seen manoeuvring (below the chase speed), ns.
     manoeuvre_seen_ns: Option<u64>,
-    /// Since when the touchdown has waited at the flare height, ns.
-    flare_since: Option<u64>,
+    /// How long the touchdown has waited at the flare height for alignment alone, s.
+    flare_waited_s: f64,
     /// The gear is on the pad: the motors are being switched off.
     touched: bool,
     lost_z0: f64,
@@ -238,7 +238,7 @@ impl Fsm {
             drop_moving: false,
             manoeuvre_wait_since: None,
             manoeuvre_seen_ns: None,
-            flare_since: None,
+            flare_waited_s: 0.0,
             touched: false,
             lost_z0: 0.0,
             now_ns: 0,
@@ -1103,7 +1103,7 @@ impl Fsm {
             self.touch_since = None;
             self.drop_moving = false;
             self.manoeuvre_wait_since = None;
-            self.flare_since = None;
+            self.flare_waited_s = 0.0;
             self.touched = false;
             self.go(
                 now_ns,
@@ -1207,18 +1207,6 @@ impl Fsm {
         let gate = self.cfg.land_align_m;
         let rel_v = (Vector3::from(v.velocity) - est.velocity).xy().norm();
         let at_flare = !self.dropping && height <= flare + 0.03;
-        let at_flare_s = if at_flare {
-            let since = *self.flare_since.get_or_insert(now_ns);
-            now_ns.saturating_sub(since) as f64 * 1e-9
-        } else {
-            0.0
-        };
-        // Tight at first (a drop begun 4 cm off ends 5-8 cm off in wind), wider the
-        // longer the wait: a steady turn or gusts may never let the vehicle that close.
-        let relax = (at_flare_s / self.cfg.flare_relax_s).clamp(0.0, 1.0);
-        let align =
-            self.cfg.flare_align_m + (gate - self.cfg.flare_align_m).max(0.0) * relax * relax;
-        let ready = at_flare && e < align && rel_v < self.cfg.land_speed_gate_m_s;
         self.note_manoeuvre(now_ns, &est);
         // Quiet for a while, not for a moment: in a lane change's middle the acceleration
         // turns over, under the gate for a few tenths of a second, while the pad moves
@@ -1226,13 +1214,24 @@ impl Fsm {
         let manoeuvring = self
             .manoeuvre_seen_ns
             .is_some_and(|seen| now_ns.saturating_sub(seen) as f64 * 1e-9 < self.cfg.flare_quiet_s);
-        let waited = if ready && manoeuvring {
+        let waited = if at_flare && manoeuvring {
             let since = *self.manoeuvre_wait_since.get_or_insert(now_ns);
             now_ns.saturating_sub(since) as f64 * 1e-9
         } else {
             0.0
         };
-        if ready && (!manoeuvring || waited >= MANOEUVRE_WAIT_MAX_S) {
+        let held_by_manoeuvre = manoeuvring && waited < MANOEUVRE_WAIT_MAX_S;
+        // Tight at first (a drop begun 4 cm off ends 5-8 cm off in wind), wider the
+        // longer the vehicle has waited for nothing but alignment: a steady turn or gusts
+        // may never let it that close. Time held by a manoeuvre does not count: after a
+        // long turn the gate would be wide open the moment the pad straightens.
+        if at_flare && !held_by_manoeuvre {
+            self.flare_waited_s += dt;
+        }
+        let relax = (self.flare_waited_s / self.cfg.flare_relax_s).clamp(0.0, 1.0);
+        let align =
+            self.cfg.flare_align_m + (gate - self.cfg.flare_align_m).max(0.0) * relax * relax;
+        if at_flare && !held_by_manoeuvre && e < align && rel_v < self.cfg.land_speed_gate_m_s {
             self.dropping = true;
         }
         let rate = if self.dropping {
