@@ -1230,6 +1230,12 @@ fn braking_touchdown(cfg: FsmConfig) -> (f64, f64) {
     w.pad_vel = Vector3::new(1.0, 0.0, 0.0);
     w.response_s = 0.3;
     w.brake_in_land_m_s2 = 0.45;
+    drop_and_contact(w)
+}
+
+/// Flies `w` to Landed; when the drop came after the commit (s) and how far off the pad
+/// the vehicle touched (m).
+fn drop_and_contact(mut w: World) -> (f64, f64) {
     w.expect(MissionState::Landed, 60.0);
     let land = w.land_at().unwrap();
     let dropped = w.drop_t.expect("a drop") as f64 * 1e-9 - land as f64 * 1e-9;
@@ -1260,18 +1266,15 @@ fn a_drop_waits_for_a_braking_pad_to_stop_braking() {
     );
 }
 
-/// The pad changes lane by 1 m over 3 s (paper-lane-change's) `delay_s` after the commit.
-/// Returns when the drop came after the commit (s) and how far off the pad it touched (m).
+/// The pad changes lane by 1 m over 3 s (paper-lane-change's), `delay_s` after the
+/// mission enters Descend; the vehicle follows a changed velocity 0.3 s late.
 fn lane_change_touchdown(cfg: FsmConfig, delay_s: f64) -> (f64, f64) {
     let mut w = World::new(cfg);
     w.pad = Some(Vector3::new(-1.0, -0.5, PAD_HEIGHT));
     w.pad_vel = Vector3::new(0.9, 0.0, 0.0);
     w.response_s = 0.3;
     w.lane_change_in_descend = Some((delay_s, 1.0, 3.0));
-    w.expect(MissionState::Landed, 60.0);
-    let land = w.land_at().unwrap();
-    let dropped = w.drop_t.expect("a drop") as f64 * 1e-9 - land as f64 * 1e-9;
-    (dropped, w.contact_offset_m.unwrap())
+    drop_and_contact(w)
 }
 
 #[test]
