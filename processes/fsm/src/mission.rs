@@ -154,7 +154,7 @@ pub struct Fsm {
     touch_since: Option<u64>,
     /// The drop got under way (a vehicle committed at the pad's height has not dropped).
     drop_moving: bool,
-    /// Since when the drop has waited for the pad to stop manoeuvring, all else ready.
+    /// Since when the drop has waited at the flare height for the pad to stop manoeuvring.
     manoeuvre_wait_since: Option<u64>,
     /// When the pad was last seen manoeuvring (below the chase speed), ns.
     manoeuvre_seen_ns: Option<u64>,
@@ -1495,11 +1495,6 @@ impl Fsm {
         velocity.xy().norm() > self.cfg.chase_speed_m_s
     }
 
-    /// Chasing, integrates the pad-relative horizontal error into `chase_trim` (tracking,
-    /// descending, touching down until the drop): at 30 km/h the relative wind's drag
-    /// held the racer 5-10 cm behind the pad, outside the flare gate, for the whole
-    /// touchdown (highspeed-30). Below the chase speed it stays zero, so the paper's
-    /// flights are flown as before.
     /// Below the chase speed, remembers when the pad last accelerated past the drop's
     /// gate (Descend and Land watch it, so a manoeuvre ending at the commit still counts).
     fn note_manoeuvre(&mut self, now_ns: u64, est: &PadEstimate) {
@@ -1510,6 +1505,11 @@ impl Fsm {
         }
     }
 
+    /// Chasing, integrates the pad-relative horizontal error into `chase_trim` (tracking,
+    /// descending, touching down until the drop): at 30 km/h the relative wind's drag
+    /// held the racer 5-10 cm behind the pad, outside the flare gate, for the whole
+    /// touchdown (highspeed-30). Below the chase speed it stays zero, so the paper's
+    /// flights are flown as before.
     fn integrate_chase_trim(&mut self, est: &PadEstimate, p: &Vector3<f64>, dt: f64) {
         if !self.chasing(&est.velocity) {
             self.chase_trim = Vector3::zeros();
