@@ -48,6 +48,12 @@ lint: bootstrap
 pydeps:
 	@python3 -c 'import numpy, pyrealsense2' 2>/dev/null || python3 -m pip install --quiet --disable-pip-version-check numpy 'pyrealsense2<2.58'
 
+# The units `cargo test --release --workspace` builds, so that after it in `make test` this
+# builds nothing: `cargo build -p sim` (or `--workspace` without the test targets) unifies
+# the crates' features differently and rebuilt recorder and everything above it twice,
+# 3.5 minutes of CI.
+TEST_BUILD := $(CARGO) build --release --workspace --all-targets
+
 test: lint pydeps
 	$(CARGO) test --release --workspace
 	$(MAKE) --no-print-directory peers
@@ -70,7 +76,7 @@ realsense: pydeps
 # Rust: executions per target are printed; a panic, hang or unbounded allocation fails.
 FUZZ_SECONDS ?= 5
 fuzz:
-	$(CARGO) build --release -p fuzz
+	$(TEST_BUILD)
 	./target/release/landing-fuzz --seconds $(FUZZ_SECONDS)
 
 # Independent MAVLink peers fly the simulator as they fly PX4 SITL: pymavlink, and
@@ -81,12 +87,11 @@ fuzz:
 peers:
 	@python3 -c 'import pymavlink' 2>/dev/null || python3 -m pip install --quiet --disable-pip-version-check pymavlink
 	@python3 -c 'import mavsdk, sys; sys.exit(not mavsdk.__version__.startswith("4."))' 2>/dev/null || python3 -m pip install --quiet --disable-pip-version-check 'mavsdk>=4,<5'
-	$(CARGO) build --release -p sim
+	$(TEST_BUILD)
 	python3 tests/peers/pymavlink_flight.py target/release/sim
 	python3 tests/peers/mavsdk_flight.py target/release/sim
 	python3 tests/peers/px4_sitl_peer.py target/release/sim
 	@python3 -c 'import mcap, foxglove_schemas_protobuf' 2>/dev/null || python3 -m pip install --quiet --disable-pip-version-check mcap foxglove-schemas-protobuf
-	$(CARGO) build --release -p landing -p recorder
 	@rm -rf target/peers && mkdir -p target/peers
 	./target/release/landing run --scenario indoor-static --record target/peers/lockstep.mcap --raw-images >/dev/null
 	python3 tests/peers/foxglove_reader.py target/peers/lockstep.mcap --expect-raw-images

@@ -163,7 +163,7 @@ fn the_simulator_dying_ends_the_run_with_a_summary_naming_it() {
 
 #[test]
 fn an_fsm_killed_while_tracking_is_found_by_the_watchdog_which_orders_a_landing() {
-    let _machine = common::beside_others();
+    let _machine = common::one_stack();
     // The watchdog finds the fsm's node dead and orders px4-link to land (AUTO.LAND);
     // had px4-link died too, PX4's offboard-loss failsafe (COM_OBL_RC_ACT = 4 in the
     // airframe, deploy/README.md) would land after COM_OF_LOSS_T. The vehicle must end on
@@ -309,7 +309,7 @@ fn landing_clean_removes_what_a_stack_killed_outright_left_behind() {
 
 #[test]
 fn landing_status_shows_a_process_hung_in_flight_and_the_watchdogs_order() {
-    let _machine = common::beside_others();
+    let _machine = common::one_stack();
     let p = prefix("status");
     let landing = start(
         &["--processes", "--json", "--inject", "stop:planner@track"],

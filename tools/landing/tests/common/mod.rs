@@ -12,8 +12,11 @@ use serde_json::Value;
 /// CPU, and paper-sim touched down at 1.03 m/s; a restarted planner's flight 10.2 cm off,
 /// where 8 alone landed 1.8-4.7 cm off). A vehicle's computer runs one stack: a flight
 /// judged by how it lands has the machine to itself ([`one_stack`], a write lock that
-/// waits for the others and holds the next ones off); flights judged only by how they end
-/// share it ([`beside_others`]). A lockstep flight beside them stays as the load.
+/// waits for the others and holds the next ones off), and so has a flight judged by which
+/// fault the watchdog found: starved beside another stack, a process misses its 250 ms
+/// heartbeat deadline with nothing injected (a `make test` run: aruco-pnp "hung" in
+/// goto-preset before the planner hang the test injected). Flights judged only by how they
+/// end share it ([`beside_others`]). A lockstep flight beside them stays as the load.
 static MACHINE: RwLock<()> = RwLock::new(());
 
 /// Holds the machine for one real-time stack, alone, until dropped.
