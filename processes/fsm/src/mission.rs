@@ -9,7 +9,7 @@ use ipc_types::msg::{
     LinkRequest, LinkRequestKind, MissionState, PadObservation, PlannerGoal, SafetyAction,
     SafetyCommand, Setpoint, Stage, Text, Trajectory, VehicleState,
 };
-use nalgebra::{Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{Rotation3, UnitQuaternion, Vector2, Vector3};
 
 use crate::config::FsmConfig;
 use crate::odometry::Odometry;
@@ -1553,11 +1553,10 @@ impl Fsm {
             let turn = Vector3::new(-est.velocity.y, est.velocity.x, 0.0) * est.yaw_rate;
             turn.cap_magnitude(CHASE_TURN_ACCEL_MAX_M_S2)
         } else if matches!(self.state, MissionState::Descend | MissionState::Land) {
-            // A braking or a lane change fed forward: PX4's velocity loop trails a ramp
-            // by its acceleration over MPC_XY_VEL_P_ACC (0.25 m/s in a 0.45 m/s^2
+            // A braking, a lane change or a turn fed forward: PX4's velocity loop trails a
+            // ramp by its acceleration over MPC_XY_VEL_P_ACC (0.25 m/s in a 0.45 m/s^2
             // braking).
-            let pad = Vector3::new(est.acceleration.x, est.acceleration.y, 0.0);
-            (pad * self.cfg.pad_accel_gain).cap_magnitude(PAD_ACCEL_MAX_M_S2)
+            (pad_acceleration(est) * self.cfg.pad_accel_gain).cap_magnitude(PAD_ACCEL_MAX_M_S2)
         } else {
             Vector3::zeros()
         };
@@ -1581,6 +1580,28 @@ impl Fsm {
         self.setpoint(now_ns, p, v, a)
     }
 }
+
+/// The pad's horizontal acceleration, fed forward below the chase speed: along its velocity
+/// the models' weighted mean (a braking), across it the heading rate times the speed (a
+/// vehicle points along its velocity, so its heading turns as its velocity does, in a curve
+/// and in a lane change). The weighted mean across as well fed about 0.6 of a steady turn's
+/// pull: the constant-velocity model keeps weight while the pad cruises round at a
+/// constant speed, and the vehicle trailed the pad 6-9 cm at the flare height (paper-turn).
+fn pad_acceleration(est: &PadEstimate) -> Vector3<f64> {
+    let v = est.velocity.xy();
+    let a = est.acceleration.xy();
+    let speed = v.norm();
+    // At a crawl the heading says little about the velocity's direction.
+    if speed < HEADING_SPEED_MIN_M_S {
+        return Vector3::new(a.x, a.y, 0.0);
+    }
+    let along = v / speed;
+    let f = along * a.dot(&along) + Vector2::new(-v.y, v.x) * est.yaw_rate;
+    Vector3::new(f.x, f.y, 0.0)
+}
+
+/// The slowest pad whose heading rate is taken for its velocity's, m/s.
+const HEADING_SPEED_MIN_M_S: f64 = 0.2;
 
 /// How far the touchdown's position setpoint may lead the vehicle down, m: with PX4's
 /// MPC_Z_P of 1, the descent asked for stays within 0.1 m/s of the touchdown's rate however
