@@ -415,7 +415,7 @@ impl Fsm {
         self.now_ns = self.now_ns.max(now_ns);
         let dt = self
             .last_tick_ns
-            .map(|t| now_ns.saturating_sub(t) as f64 * 1e-9)
+            .map(|t| secs_since(t, now_ns))
             .unwrap_or(0.0)
             .min(0.2);
         self.last_tick_ns = Some(now_ns);
@@ -438,7 +438,7 @@ impl Fsm {
         if self.transitioned
             || self
                 .last_status_ns
-                .is_none_or(|t| now_ns.saturating_sub(t) as f64 * 1e-9 >= self.cfg.status_period_s)
+                .is_none_or(|t| secs_since(t, now_ns) >= self.cfg.status_period_s)
         {
             self.transitioned = false;
             self.last_status_ns = Some(now_ns);
@@ -506,7 +506,7 @@ impl Fsm {
     }
 
     fn elapsed_s(&self, now_ns: u64) -> f64 {
-        now_ns.saturating_sub(self.since_ns()) as f64 * 1e-9
+        secs_since(self.since_ns(), now_ns)
     }
 
     fn vehicle(&self) -> Option<&VehicleState> {
@@ -520,7 +520,7 @@ impl Fsm {
     /// 100 ms, on a loaded machine), and the touchdown dropped off the centre.
     fn position(&self) -> Option<Vector3<f64>> {
         self.vehicle.as_ref().map(|(t, v)| {
-            let age = (self.now_ns.saturating_sub(*t) as f64 * 1e-9).min(CARRY_MAX_S);
+            let age = secs_since(*t, self.now_ns).min(CARRY_MAX_S);
             Vector3::from(v.world_from_body.translation) + Vector3::from(v.velocity) * age
         })
     }
@@ -554,7 +554,7 @@ impl Fsm {
         // would land the vehicle on the next fault. Over the pad the descent goes on.
         let unsupervised = self
             .watchdog_seen_ns
-            .is_some_and(|t| now_ns.saturating_sub(t) as f64 * 1e-9 > self.cfg.watchdog_timeout_s);
+            .is_some_and(|t| secs_since(t, now_ns) > self.cfg.watchdog_timeout_s);
         if unsupervised && !matches!(self.state, MissionState::Descend | MissionState::Land) {
             self.go(now_ns, MissionState::SafeLand, "watchdog silent".into());
             return;
@@ -664,8 +664,7 @@ impl Fsm {
     /// The newest telemetry of a connected link arrived within `telemetry_timeout_s`.
     pub fn link_fresh(&self, now_ns: u64) -> bool {
         self.telemetry_arrived_ns != 0
-            && now_ns.saturating_sub(self.telemetry_arrived_ns) as f64 * 1e-9
-                <= self.cfg.telemetry_timeout_s
+            && secs_since(self.telemetry_arrived_ns, now_ns) <= self.cfg.telemetry_timeout_s
     }
 
     fn idle(&mut self, now_ns: u64, out: &mut Outputs) {
@@ -792,7 +791,7 @@ impl Fsm {
                 }
             }
             TakeoffStep::Climbing { since_ns } => {
-                let t = now_ns.saturating_sub(since_ns) as f64 * 1e-9;
+                let t = secs_since(since_ns, now_ns);
                 let rate = self.cfg.takeoff_climb_m_s;
                 let z = (self.hold.z + rate * t).min(alt.max(self.hold.z));
                 let vz = if z < alt { rate } else { 0.0 };
@@ -968,7 +967,7 @@ impl Fsm {
         let rel_v = (self.velocity() - est.velocity).xy().norm();
         if dist < self.cfg.align_m && rel_v < self.cfg.align_speed_m_s {
             let since = *self.align_since.get_or_insert(now_ns);
-            if now_ns.saturating_sub(since) as f64 * 1e-9 >= self.cfg.align_hold_s {
+            if secs_since(since, now_ns) >= self.cfg.align_hold_s {
                 if self.cfg.survey.enabled()
                     && !self.survey_done
                     && est.velocity.xy().norm() < SURVEY_PAD_SPEED_MAX_M_S
@@ -1019,7 +1018,7 @@ impl Fsm {
             && yaw_error < SURVEY_YAW_TOLERANCE_RAD;
         if there || step.arrived_ns.is_some() {
             let since = *step.arrived_ns.get_or_insert(now_ns);
-            if now_ns.saturating_sub(since) as f64 * 1e-9 >= self.cfg.survey.hold_s {
+            if secs_since(since, now_ns) >= self.cfg.survey.hold_s {
                 tracing::info!(
                     point = step.index + 1,
                     of = points.len(),
@@ -1095,7 +1094,7 @@ impl Fsm {
         // The gates must hold a moment: one lucky frame of a noisy estimate is no commit.
         let held = gates && {
             let since = *self.align_since.get_or_insert(now_ns);
-            now_ns.saturating_sub(since) as f64 * 1e-9 >= 0.5 * self.cfg.align_hold_s
+            secs_since(since, now_ns) >= 0.5 * self.cfg.align_hold_s
         };
         if held {
             self.z_cmd = p.z;
@@ -1180,7 +1179,7 @@ impl Fsm {
         let far = height < TOUCH_HEIGHT_FAR_M && vz > -TOUCH_STILL_M_S;
         if self.drop_moving && !on_ground && still && (near || far) {
             let since = *self.touch_since.get_or_insert(now_ns);
-            let held = now_ns.saturating_sub(since) as f64 * 1e-9;
+            let held = secs_since(since, now_ns);
             let hold = if near { TOUCH_HOLD_S } else { TOUCH_HOLD_FAR_S };
             self.touched |= held >= hold;
         } else {
@@ -1213,10 +1212,10 @@ impl Fsm {
         // sideways fastest and is about to slow down.
         let manoeuvring = self
             .manoeuvre_seen_ns
-            .is_some_and(|seen| now_ns.saturating_sub(seen) as f64 * 1e-9 < self.cfg.flare_quiet_s);
+            .is_some_and(|seen| secs_since(seen, now_ns) < self.cfg.flare_quiet_s);
         let waited = if at_flare && manoeuvring {
             let since = *self.manoeuvre_wait_since.get_or_insert(now_ns);
-            now_ns.saturating_sub(since) as f64 * 1e-9
+            secs_since(since, now_ns)
         } else {
             0.0
         };
@@ -1380,7 +1379,7 @@ impl Fsm {
     /// The caller stops calling once the mode shows.
     fn drive_mode(&mut self, now_ns: u64, kind: LinkRequestKind, out: &mut Outputs) -> Drive {
         if let Some(w) = self.mode_wait.filter(|w| w.kind == kind) {
-            let waited_s = now_ns.saturating_sub(w.since_ns) as f64 * 1e-9;
+            let waited_s = secs_since(w.since_ns, now_ns);
             if waited_s < self.cfg.mode_timeout_s {
                 return Drive::Waiting;
             }
@@ -1423,7 +1422,7 @@ impl Fsm {
     ) {
         let due = self
             .last_goal_ns
-            .is_none_or(|t| now_ns.saturating_sub(t) as f64 * 1e-9 >= self.cfg.goal_period_s);
+            .is_none_or(|t| secs_since(t, now_ns) >= self.cfg.goal_period_s);
         if !due
             || !position
                 .iter()
@@ -1476,7 +1475,7 @@ impl Fsm {
     /// The current trajectory sampled now; the hold point before the first one.
     fn trajectory_setpoint(&self, now_ns: u64) -> Setpoint {
         if let Some((_, s, t0)) = &self.trajectory {
-            let t = now_ns.saturating_sub(*t0) as f64 * 1e-9;
+            let t = secs_since(*t0, now_ns);
             let d = s.duration();
             let st = s.eval(t.min(d));
             if st.is_finite() {
@@ -1598,6 +1597,12 @@ fn pad_acceleration(est: &PadEstimate) -> Vector3<f64> {
     let along = v / speed;
     let f = along * a.dot(&along) + Vector2::new(-v.y, v.x) * est.yaw_rate;
     Vector3::new(f.x, f.y, 0.0)
+}
+
+/// Seconds from `since_ns` to `now_ns`: zero, never a wrapped time, if `now_ns` is the
+/// earlier (the one way every wait and age in the mission is measured).
+fn secs_since(since_ns: u64, now_ns: u64) -> f64 {
+    now_ns.saturating_sub(since_ns) as f64 * 1e-9
 }
 
 /// The slowest pad whose heading rate is taken for its velocity's, m/s.
