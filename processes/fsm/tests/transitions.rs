@@ -1336,8 +1336,9 @@ fn circling() -> World {
 #[test]
 fn a_pad_circling_for_good_below_the_chase_speed_is_still_landed_on() {
     // The drop's wait for the end of a manoeuvre is bounded; the turn is fed forward; the
-    // vehicle trails the turn a little (1.5 cm off at contact), and the drop's gate widens as the wait
-    // grows (with the gate held at flare_align_m the touchdown timed out).
+    // vehicle trails the turn a little (1.5 cm off at contact), and the drop's gate
+    // widens as the wait grows (with the gate held at flare_align_m the touchdown timed
+    // out).
     let mut w = circling();
     w.expect(MissionState::Landed, 90.0);
     let off = w.contact_offset_m.unwrap();
