@@ -9,7 +9,7 @@ use ipc_types::msg::{
     LinkRequest, LinkRequestKind, MissionState, PadObservation, PlannerGoal, SafetyAction,
     SafetyCommand, Setpoint, Stage, Text, Trajectory, VehicleState,
 };
-use nalgebra::{Rotation3, UnitQuaternion, Vector2, Vector3};
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 
 use crate::config::FsmConfig;
 use crate::odometry::Odometry;
@@ -1549,8 +1549,7 @@ impl Fsm {
         // autopilot's position and velocity gains need to make it (0.7 m at 30 km/h on a
         // 60 m radius).
         let mut a = if self.chasing(&est.velocity) {
-            let turn = Vector3::new(-est.velocity.y, est.velocity.x, 0.0) * est.yaw_rate;
-            turn.cap_magnitude(CHASE_TURN_ACCEL_MAX_M_S2)
+            turn_acceleration(est).cap_magnitude(CHASE_TURN_ACCEL_MAX_M_S2)
         } else if matches!(self.state, MissionState::Descend | MissionState::Land) {
             // A braking, a lane change or a turn fed forward: PX4's velocity loop trails a
             // ramp by its acceleration over MPC_XY_VEL_P_ACC (0.25 m/s in a 0.45 m/s^2
@@ -1583,7 +1582,7 @@ impl Fsm {
 /// The pad's horizontal acceleration, fed forward below the chase speed: along its velocity
 /// the models' weighted mean (a braking), across it the heading rate times the speed (a
 /// vehicle points along its velocity, so its heading turns as its velocity does, in a curve
-/// and in a lane change). The weighted mean across as well fed about 0.6 of a steady turn's
+/// and in a lane change). The weighted mean across as well fed 0.4-0.6 of a steady turn's
 /// pull: the constant-velocity model keeps weight while the pad cruises round at a
 /// constant speed, and the vehicle trailed the pad 6-9 cm at the flare height (paper-turn).
 fn pad_acceleration(est: &PadEstimate) -> Vector3<f64> {
@@ -1594,9 +1593,14 @@ fn pad_acceleration(est: &PadEstimate) -> Vector3<f64> {
     if speed < HEADING_SPEED_MIN_M_S {
         return Vector3::new(a.x, a.y, 0.0);
     }
-    let along = v / speed;
-    let f = along * a.dot(&along) + Vector2::new(-v.y, v.x) * est.yaw_rate;
-    Vector3::new(f.x, f.y, 0.0)
+    let along = v / speed * a.dot(&(v / speed));
+    Vector3::new(along.x, along.y, 0.0) + turn_acceleration(est)
+}
+
+/// The pad's velocity turned at its heading rate: the pull of the curve it drives, for
+/// the chase and below it alike.
+fn turn_acceleration(est: &PadEstimate) -> Vector3<f64> {
+    Vector3::new(-est.velocity.y, est.velocity.x, 0.0) * est.yaw_rate
 }
 
 /// Seconds from `since_ns` to `now_ns`: zero, never a wrapped time, if `now_ns` is the
