@@ -87,6 +87,9 @@ pub enum ProcessError {
         /// What the OS said.
         error: std::io::Error,
     },
+    /// The writer thread cannot be started.
+    #[error("cannot start the recorder's writer thread: {0}")]
+    Thread(std::io::Error),
     /// Neither a file nor the live view was asked for.
     #[error(
         "nothing to do: give --out FILE.mcap (or --out-dir DIR), --live, or both ([recorder] live = true)"
@@ -157,7 +160,8 @@ impl RecorderStage {
             |p| p.display().to_string(),
         );
         tracing::info!(out = %out, topics = spec.inputs.len(), "recording");
-        Ok((Self::new(rec), spec, out))
+        let stage = Self::new(rec).map_err(ProcessError::Thread)?;
+        Ok((stage, spec, out))
     }
 }
 

@@ -70,6 +70,9 @@ pub enum RecordError {
         /// The type given now.
         got: &'static str,
     },
+    /// The writer thread panicked: what it had not written is lost.
+    #[error("the recorder's writer thread panicked")]
+    WriterPanicked,
 }
 
 /// How camera frames are stored.

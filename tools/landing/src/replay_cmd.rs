@@ -60,6 +60,14 @@ fn print(r: &ReplayReport) {
         r.missing.len(),
         r.extra
     );
+    if r.lost > 0 {
+        println!(
+            "  the recording lost {} {}s (the recorder fell behind); the {} recorded after the first loss are not compared",
+            r.lost,
+            r.unit(),
+            r.not_compared
+        );
+    }
     for f in &r.flown {
         println!("  in flight: {f}");
     }

@@ -71,6 +71,12 @@ pub struct ReplayReport {
     pub missing: Vec<u64>,
     /// Outputs the replay made that the flight did not record.
     pub extra: u64,
+    /// Outputs the flight published that the recording lost (the recorder fell behind:
+    /// gaps in the publisher's sequence numbers).
+    pub lost: u64,
+    /// Recorded outputs after the first lost one, not compared: what the lost one was
+    /// made from is not in the recording, and a stage with memory (a map) carries it.
+    pub not_compared: u64,
     /// The flight's outputs compared, for people (the fsm: its transitions; empty for
     /// stages with many outputs).
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -78,6 +84,11 @@ pub struct ReplayReport {
 }
 
 impl ReplayReport {
+    /// What one output of the stage is called: map, trajectory, capture, transition.
+    pub fn unit(&self) -> &'static str {
+        plan::unit(&self.stage)
+    }
+
     /// True when the replay made every recorded output, identical, and nothing else.
     pub fn reproduced(&self) -> bool {
         self.different == 0 && self.missing.is_empty() && self.extra == 0
@@ -306,6 +317,10 @@ struct Plan<'a> {
     recorded: Vec<Output>,
     /// The flight's outputs for people.
     flown: Vec<String>,
+    /// Outputs the recording lost (gaps in their publisher's sequence numbers).
+    lost: u64,
+    /// Recorded outputs after the first loss: their inputs are not all known.
+    not_compared: u64,
 }
 
 /// The flight's config, scenario and seed, from the recording's metadata.
@@ -393,13 +408,11 @@ pub fn replay(req: &Request) -> Result<ReplayReport> {
         .is_some()
     {}
     let replayed = plan::outputs(&req.stage, made.iter().map(|(t, m)| (t.as_str(), m)))?;
-    Ok(compare(
-        &req.stage,
-        inputs,
-        &plan.recorded,
-        &replayed,
-        plan.flown,
-    ))
+    let mut report = compare(&req.stage, inputs, &plan.recorded, &replayed, plan.flown);
+    report.lost = plan.lost;
+    report.not_compared = plan.not_compared;
+    report.recorded += plan.not_compared;
+    Ok(report)
 }
 
 /// Pairs the replay's outputs with the flight's by key and compares them.
@@ -421,6 +434,8 @@ fn compare(
         differences: vec![],
         missing: vec![],
         extra: 0,
+        lost: 0,
+        not_compared: 0,
         flown,
     };
     for f in recorded {

@@ -28,6 +28,7 @@ use std::path::Path;
 use anyhow::{Result, bail};
 use ipc_types::msg::{MissionState, Stage as StageId};
 use ipc_types::topics;
+use recorder::RecordedMap;
 use serde_json::Value;
 use stage::OwnedMessage;
 
@@ -176,12 +177,20 @@ fn depth<'a>(rec: &'a Recording, file: &Path) -> Result<Plan<'a>> {
     if rec.depths.is_empty() {
         bail!("{}: no depth frames (/sim/depth)", file.display());
     }
+    // A map the recording lost (the recorder fell behind: a gap in the publisher's
+    // sequence numbers) may have integrated a frame the replay cannot tell, and every map
+    // after it keeps that frame's cells: only the maps before the first loss compare.
+    let (maps, lost) = before_first_loss(maps);
     let mut frames: BTreeMap<u64, &OwnedMessage> = rec
         .depths
         .iter()
         .filter_map(|f| Some((f.as_message().header()?.capture_ns, f)))
         .collect();
-    let mut plan = Plan::default();
+    let mut plan = Plan {
+        lost,
+        not_compared: (rec.maps.maps.len() - maps.len()) as u64,
+        ..Plan::default()
+    };
     for m in maps {
         let c = m.header.msg.capture_ns;
         plan.recorded.push(output(
@@ -232,6 +241,20 @@ fn depth<'a>(rec: &'a Recording, file: &Path) -> Result<Plan<'a>> {
     }
     plan.ticks.sort_unstable();
     Ok(plan)
+}
+
+/// The maps before the first one missing from the publisher's sequence, and how many the
+/// sequence says are missing in all. Lockstep maps carry no sequence number (0): nothing
+/// there is lost.
+fn before_first_loss(maps: &[RecordedMap]) -> (&[RecordedMap], u64) {
+    let seqs = || maps.iter().map(|m| m.header.msg.seq);
+    let gap = |(a, b): (u64, u64)| if a > 0 && b > a { b - a - 1 } else { 0 };
+    let lost = seqs().zip(seqs().skip(1)).map(gap).sum();
+    let first = seqs()
+        .zip(seqs().skip(1))
+        .position(|p| gap(p) > 0)
+        .map_or(maps.len(), |i| i + 1);
+    (&maps[..first], lost)
 }
 
 fn planner<'a>(rec: &'a Recording, file: &Path) -> Result<Plan<'a>> {
