@@ -99,9 +99,12 @@ const MODE_LOSS_NS: u64 = 1_000_000_000;
 /// resumes the mission, ns.
 const RESUME_WAIT_NS: u64 = 300_000_000;
 
-/// How far a vehicle state is carried forward to now at most, s: older, it is stale
-/// (`telemetry_timeout_s` acts on it).
-const CARRY_MAX_S: f64 = 0.2;
+/// How far a vehicle state is carried forward to now at most, s: as far as the pad's
+/// estimate is (`lost_after_s`), so that the offset between them is judged at one
+/// instant. At 0.2 s, states 270 ms late at 30 km/h (a simulator behind real time)
+/// put the vehicle 0.5 m behind a pad it was over, and it went around. Staler telemetry
+/// is lost telemetry (`telemetry_timeout_s`).
+const CARRY_MAX_S: f64 = 1.0;
 
 /// The mission state machine.
 #[derive(Debug, Clone)]
