@@ -106,6 +106,9 @@ const RESUME_WAIT_NS: u64 = 300_000_000;
 /// is lost telemetry (`telemetry_timeout_s`).
 const CARRY_MAX_S: f64 = 1.0;
 
+/// Slower than this (m/s, horizontally) a vehicle that gave up may land where it is.
+const BRAKED_M_S: f64 = 0.5;
+
 /// The mission state machine.
 #[derive(Debug, Clone)]
 pub struct Fsm {
@@ -152,6 +155,8 @@ pub struct Fsm {
     chase_trim: Vector3<f64>,
     z_cmd: f64,
     go_arounds: u32,
+    /// Given up over a fast pad: hold here, this high (m), until braked, then land.
+    brake_at_z: Option<f64>,
     dropping: bool,
     /// Since when the dropping vehicle has stood still at the pad's height.
     touch_since: Option<u64>,
@@ -236,6 +241,7 @@ impl Fsm {
             chase_trim: Vector3::zeros(),
             z_cmd: 0.0,
             go_arounds: 0,
+            brake_at_z: None,
             dropping: false,
             touch_since: None,
             drop_moving: false,
@@ -1037,6 +1043,11 @@ impl Fsm {
     fn go_around(&mut self, now_ns: u64, why: String) {
         self.go_arounds += 1;
         if self.go_arounds > self.cfg.max_go_arounds {
+            // Over a fast pad the vehicle flies at the road's speed: landing in place would
+            // meet the road at it (8 m/s at 30 km/h, and it tips over). Brake first, a metre
+            // higher, clear of the vehicle it chased.
+            let fast = self.velocity().xy().norm() > BRAKED_M_S;
+            self.brake_at_z = self.position().filter(|_| fast).map(|p| p.z + 1.0);
             self.go(
                 now_ns,
                 MissionState::SafeLand,
@@ -1368,6 +1379,16 @@ impl Fsm {
         if mode == FlightMode::Land {
             self.mode_wait = None;
             return;
+        }
+        if let Some(z) = self.brake_at_z {
+            let moving = Vector3::from(v.velocity).xy().norm() > BRAKED_M_S;
+            match self.position() {
+                Some(p) if moving && mode == FlightMode::Offboard => {
+                    out.setpoint = Some(self.hold_setpoint(now_ns, Vector3::new(p.x, p.y, z)));
+                    return;
+                }
+                _ => self.brake_at_z = None,
+            }
         }
         if let Drive::Failed(why) = self.drive_mode(now_ns, LinkRequestKind::Land, out) {
             // A vehicle that must land keeps asking; each failure is logged.
