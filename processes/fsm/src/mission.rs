@@ -1046,7 +1046,7 @@ impl Fsm {
             // Over a fast pad the vehicle flies at the road's speed: landing in place would
             // meet the road at it (8 m/s at 30 km/h, and it tips over). Brake first, a metre
             // higher, clear of the vehicle it chased.
-            let fast = self.velocity().xy().norm() > BRAKED_M_S;
+            let fast = self.moving_to_brake();
             self.brake_at_z = self.position().filter(|_| fast).map(|p| p.z + 1.0);
             self.go(
                 now_ns,
@@ -1381,9 +1381,8 @@ impl Fsm {
             return;
         }
         if let Some(z) = self.brake_at_z {
-            let moving = Vector3::from(v.velocity).xy().norm() > BRAKED_M_S;
             match self.position() {
-                Some(p) if moving && mode == FlightMode::Offboard => {
+                Some(p) if self.moving_to_brake() && mode == FlightMode::Offboard => {
                     out.setpoint = Some(self.hold_setpoint(now_ns, Vector3::new(p.x, p.y, z)));
                     return;
                 }
@@ -1514,6 +1513,11 @@ impl Fsm {
 
     /// A pad moving this fast (horizontal `velocity`) is chased: faster than the planner
     /// flies (`chase_speed_m_s`). The one test every chase behaviour is gated on.
+    /// Too fast to land where it is (a vehicle that gave up over a fast pad brakes first).
+    fn moving_to_brake(&self) -> bool {
+        self.velocity().xy().norm() > BRAKED_M_S
+    }
+
     fn chasing(&self, velocity: &Vector3<f64>) -> bool {
         velocity.xy().norm() > self.cfg.chase_speed_m_s
     }

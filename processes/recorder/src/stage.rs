@@ -8,9 +8,11 @@
 //! test`, up to 12 beside two other flights), and a replay cannot follow a map it lost. A
 //! copy is short, so the reading thread keeps up; the writer catches up from the queue.
 
+use std::borrow::Cow;
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::thread::JoinHandle;
 
+use ipc_types::topics;
 use stage::{Counter, Input, Outbox, OwnedMessage, Stage, StageError};
 
 use crate::writer::{RecordError, Recorder};
@@ -26,7 +28,8 @@ const QUEUE: usize = 512;
 /// What the writer thread is given.
 enum Job {
     Record {
-        topic: String,
+        /// The stack's own name for it (no allocation); a topic it does not know, copied.
+        topic: Cow<'static, str>,
         log_time_ns: u64,
         /// Boxed: a message is up to ~700 bytes besides its pixels, a tick 8.
         msg: Box<OwnedMessage>,
@@ -131,7 +134,10 @@ impl Stage for RecorderStage {
     ) -> Result<(), StageError> {
         self.inputs += 1;
         self.send(Job::Record {
-            topic: input.topic.to_string(),
+            topic: topics::find(input.topic).map_or_else(
+                || Cow::Owned(input.topic.to_string()),
+                |t| Cow::Borrowed(t.name),
+            ),
             log_time_ns: now_ns,
             msg: Box::new(input.msg.to_owned()),
         })
