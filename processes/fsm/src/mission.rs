@@ -153,6 +153,12 @@ pub struct Fsm {
     /// the pad's heading frame (along, across): on a curve what it must make up turns
     /// with the pad, and a world-frame integral would forever lag it.
     chase_trim: Vector3<f64>,
+    /// Chasing: the pad's turning pull fed forward, m/s^2, slewed at no more than
+    /// [`CHASE_TURN_JERK_MAX_M_S3`]. A road vehicle's lateral acceleration changes that
+    /// slowly; the heading rate read from the markers low over the pad swings with the
+    /// vehicle's roll, and fed at once it closed a loop (highspeed-50: +-20 deg of roll
+    /// at 1.2 Hz over the pad, touching down tilted 15-22 deg).
+    chase_turn: Vector3<f64>,
     z_cmd: f64,
     go_arounds: u32,
     /// Given up over a fast pad: hold here, this high (m), until braked, then land.
@@ -239,6 +245,7 @@ impl Fsm {
             track_height: 1.0,
             h_cmd: 1.0,
             chase_trim: Vector3::zeros(),
+            chase_turn: Vector3::zeros(),
             z_cmd: 0.0,
             go_arounds: 0,
             brake_at_z: None,
@@ -430,6 +437,7 @@ impl Fsm {
         self.last_tick_ns = Some(now_ns);
         let mut out = Outputs::default();
         self.check_links(now_ns);
+        self.slew_chase_turn(now_ns, dt);
         match self.state {
             MissionState::Idle => self.idle(now_ns, &mut out),
             MissionState::Takeoff => self.takeoff(now_ns, &mut out),
@@ -1532,6 +1540,24 @@ impl Fsm {
         }
     }
 
+    /// Moves the chase's turning feed-forward towards the pad's turning pull now, at most
+    /// `dt` times [`CHASE_TURN_JERK_MAX_M_S3`]; zero when not chasing.
+    fn slew_chase_turn(&mut self, now_ns: u64, dt: f64) {
+        let target = match self.pad_estimate(now_ns) {
+            Some(est) if self.chasing(&est.velocity) => {
+                turn_acceleration(&est).cap_magnitude(CHASE_TURN_ACCEL_MAX_M_S2)
+            }
+            _ => {
+                self.chase_turn = Vector3::zeros();
+                return;
+            }
+        };
+        let step = (target - self.chase_turn).cap_magnitude(CHASE_TURN_JERK_MAX_M_S3 * dt);
+        if step.iter().all(|c| c.is_finite()) {
+            self.chase_turn += step;
+        }
+    }
+
     /// Chasing, integrates the pad-relative horizontal error into `chase_trim` (tracking,
     /// descending, touching down until the drop): at 30 km/h the relative wind's drag
     /// held the racer 5-10 cm behind the pad, outside the flare gate, for the whole
@@ -1577,7 +1603,7 @@ impl Fsm {
         // autopilot's position and velocity gains need to make it (0.7 m at 30 km/h on a
         // 60 m radius).
         let mut a = if self.chasing(&est.velocity) {
-            turn_acceleration(est).cap_magnitude(CHASE_TURN_ACCEL_MAX_M_S2)
+            self.chase_turn
         } else if matches!(self.state, MissionState::Descend | MissionState::Land) {
             // A braking, a lane change or a turn fed forward: PX4's velocity loop trails a
             // ramp by its acceleration over MPC_XY_VEL_P_ACC (0.25 m/s in a 0.45 m/s^2
@@ -1649,6 +1675,11 @@ const TOUCHDOWN_LEAD_M: f64 = 0.1;
 /// The most turning acceleration fed forward, m/s^2 (a car at 50 km/h on a 30 m radius
 /// pulls 6.4; a misread heading rate must not tilt the vehicle further).
 const CHASE_TURN_ACCEL_MAX_M_S2: f64 = 6.0;
+
+/// How fast the chase's turning feed-forward may change, m/s^3: a car's lateral jerk stays
+/// under about 2 even driven hard (comfort is under 1), and a 60 m curve at 30 km/h
+/// (1.16 m/s^2) is fed in 0.6 s.
+const CHASE_TURN_JERK_MAX_M_S3: f64 = 2.0;
 
 /// The longest the drop waits for a manoeuvring pad, s: a braking or a lane change lasts
 /// 2-3 s.
