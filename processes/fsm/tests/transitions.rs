@@ -118,8 +118,6 @@ struct World {
     /// (Hz): low over the pad in highspeed-50 it swung +-2 deg at 1.2 Hz with the vehicle's
     /// roll.
     heading_wobble: (f64, f64),
-    /// The vehicle's acceleration over the last step, m/s^2.
-    accel: Vector3<f64>,
     /// The largest horizontal acceleration the vehicle made in Land, m/s^2 (about its
     /// lean beyond the drag's: 1.7 m/s^2 is 10 deg).
     land_accel_max: f64,
@@ -181,7 +179,6 @@ impl World {
             track_log: Vec::new(),
             descend_accel: Vec::new(),
             heading_wobble: (0.0, 0.0),
-            accel: Vector3::zeros(),
             land_accel_max: 0.0,
         }
     }
@@ -420,11 +417,9 @@ impl World {
             self.vel.x = h.x * keep;
             self.vel.y = h.y * keep;
         }
-        if dt > 0.0 {
-            self.accel = (self.vel - before) / dt;
-        }
-        if self.fsm.state() == MissionState::Land && !self.on_ground() {
-            self.land_accel_max = self.land_accel_max.max(self.accel.xy().norm());
+        if dt > 0.0 && self.fsm.state() == MissionState::Land && !self.on_ground() {
+            let accel = (self.vel - before).xy().norm() / dt;
+            self.land_accel_max = self.land_accel_max.max(accel);
         }
         self.pos += self.vel * dt;
         let g = self.ground();
