@@ -73,6 +73,11 @@ pub struct FsmConfig {
     /// that cannot get that close (a steady turn, gusts) drops a little wider rather
     /// than time out.
     pub flare_relax_s: f64,
+    /// Land, below the chase speed: the drop waits until the camera reads the vehicle
+    /// moving over the pad slower than this, m/s (widening with the wait as the offset's
+    /// gate does, to `land_speed_gate_m_s`): the fall is open loop, and the pad filter's
+    /// velocity lags a braking just begun.
+    pub flare_settle_m_s: f64,
     /// Land: descent rate of the final drop, m/s.
     pub drop_rate_m_s: f64,
     /// Land, below the chase speed: the drop waits while the pad accelerates more than
@@ -300,6 +305,7 @@ impl Default for FsmConfig {
             flare_height_m: 0.25,
             flare_align_m: 0.025,
             flare_relax_s: 4.0,
+            flare_settle_m_s: 0.05,
             drop_rate_m_s: 0.8,
             flare_accel_max_m_s2: 0.15,
             flare_quiet_s: 0.5,
@@ -473,6 +479,7 @@ impl Validate for FsmConfig {
             ("flare_height_m", self.flare_height_m, 0.05, 3.0),
             ("flare_align_m", self.flare_align_m, 0.005, 1.0),
             ("flare_relax_s", self.flare_relax_s, 0.1, 60.0),
+            ("flare_settle_m_s", self.flare_settle_m_s, 0.005, 5.0),
             ("land_max_pad_age_s", self.land_max_pad_age_s, 0.05, 5.0),
             ("drop_rate_m_s", self.drop_rate_m_s, 0.1, 3.0),
             ("flare_quiet_s", self.flare_quiet_s, 0.0, 5.0),

@@ -9,6 +9,7 @@ pub mod config;
 pub mod mission;
 pub mod odometry;
 pub mod pad_filter;
+pub mod relative;
 pub mod stage;
 
 pub use config::{FsmConfig, PadFilterConfig, SurveyConfig};

@@ -25,8 +25,8 @@ pub struct Odometry {
     last: Option<(u64, Vector3<f64>)>,
     /// The odometry at that state.
     odometry: Vector3<f64>,
-    /// (time ns, estimate - odometry), in time order.
-    offsets: VecDeque<(u64, Vector3<f64>)>,
+    /// (time ns, estimate - odometry, estimate), in time order.
+    offsets: VecDeque<(u64, Vector3<f64>, Vector3<f64>)>,
 }
 
 impl Odometry {
@@ -45,29 +45,47 @@ impl Odometry {
         if self.offsets.len() == CAPACITY {
             self.offsets.pop_front();
         }
-        self.offsets.push_back((t_ns, position - self.odometry));
+        self.offsets
+            .push_back((t_ns, position - self.odometry, position));
     }
 
     /// `estimate - odometry` at `t_ns`, interpolated between the states around it (the
     /// oldest or newest one outside them); zero before any state.
     pub fn offset_at(&self, t_ns: u64) -> Vector3<f64> {
-        let i = self.offsets.partition_point(|&(t, _)| t <= t_ns);
+        self.at(t_ns, |&(_, d, _)| d)
+    }
+
+    /// The position estimate at `t_ns`, interpolated as [`Self::offset_at`]: what a pad
+    /// observation placed in the world through, so that subtracting it leaves the camera's
+    /// own relative measurement.
+    pub fn position_at(&self, t_ns: u64) -> Vector3<f64> {
+        self.at(t_ns, |&(_, _, p)| p)
+    }
+
+    fn at(
+        &self,
+        t_ns: u64,
+        field: impl Fn(&(u64, Vector3<f64>, Vector3<f64>)) -> Vector3<f64>,
+    ) -> Vector3<f64> {
+        let i = self.offsets.partition_point(|&(t, _, _)| t <= t_ns);
         match (
             i.checked_sub(1).and_then(|k| self.offsets.get(k)),
             self.offsets.get(i),
         ) {
-            (Some(&(t0, d0)), Some(&(t1, d1))) => {
-                let w = (t_ns - t0) as f64 / (t1 - t0).max(1) as f64;
-                d0 + (d1 - d0) * w
+            (Some(a), Some(b)) => {
+                let w = (t_ns - a.0) as f64 / (b.0 - a.0).max(1) as f64;
+                field(a) + (field(b) - field(a)) * w
             }
-            (Some(&(_, d)), None) | (None, Some(&(_, d))) => d,
+            (Some(a), None) | (None, Some(a)) => field(a),
             (None, None) => Vector3::zeros(),
         }
     }
 
     /// `estimate - odometry` at the newest state.
     pub fn offset_now(&self) -> Vector3<f64> {
-        self.offsets.back().map_or_else(Vector3::zeros, |&(_, d)| d)
+        self.offsets
+            .back()
+            .map_or_else(Vector3::zeros, |&(_, d, _)| d)
     }
 }
 

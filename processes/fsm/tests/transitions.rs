@@ -1293,9 +1293,11 @@ fn a_drop_waits_for_a_braking_pad_to_stop_braking() {
     );
     assert!(off < 0.05, "touched down {off:.3} m off the pad");
 
-    // Without the wait the same flight drops in the braking, and ends past the pad.
+    // Without the wait (nor the camera's settle gate, which also holds it) the same
+    // flight drops in the braking, and ends past the pad.
     let mut cfg = config();
     cfg.flare_accel_max_m_s2 = 100.0;
+    cfg.flare_settle_m_s = 5.0;
     let (dropped, off_ungated) = braking_touchdown(cfg);
     assert!(
         dropped < 2.0,
@@ -1336,6 +1338,7 @@ fn a_drop_waits_out_the_middle_of_a_lane_change() {
     // alone), but not all of it.
     let mut cfg = config();
     cfg.flare_quiet_s = 0.0;
+    cfg.flare_settle_m_s = 5.0;
     let (dropped, off_unheld) = lane_change_touchdown(cfg, 2.0);
     assert!(
         dropped < 2.6,
@@ -1344,6 +1347,27 @@ fn a_drop_waits_out_the_middle_of_a_lane_change() {
     assert!(
         off_unheld > 2.0 * off + 0.005,
         "without the hold {off_unheld:.3} m off, with it {off:.3} m"
+    );
+}
+
+#[test]
+fn a_drop_waits_until_the_camera_reads_the_vehicle_still_over_the_pad() {
+    // The manoeuvre hold switched off: only the camera's relative speed keeps the drop
+    // out of the braking (the vehicle trails the pad's slowing, which the pad filter's
+    // velocity reads late). paper-braking's worst runs began the drop that way, 9-16 cm/s
+    // off the pad's speed.
+    let mut cfg = config();
+    cfg.flare_accel_max_m_s2 = 100.0;
+    let (dropped, off) = braking_touchdown(cfg.clone());
+    cfg.flare_settle_m_s = 5.0;
+    let (dropped_ungated, off_ungated) = braking_touchdown(cfg);
+    assert!(
+        dropped > dropped_ungated + 1.0,
+        "dropped {dropped:.2} s after the commit, {dropped_ungated:.2} s without the gate"
+    );
+    assert!(
+        off_ungated > off + 0.02,
+        "without the gate {off_ungated:.3} m off, with it {off:.3} m"
     );
 }
 
