@@ -106,6 +106,12 @@ pub struct FsmConfig {
     /// Land: cap of that feed-forward, m/s^2. Each m/s^2 tilts the vehicle about 6 deg,
     /// and the touchdown is judged at 15 deg.
     pub relative_accel_max_m_s2: f64,
+    /// Land, below the chase speed: that feed-forward reads the pad's motion relative to
+    /// the vehicle from the camera (a line through its last quarter second of relative
+    /// measurements) while it has fresh ones, instead of the pad filter's velocity minus
+    /// the autopilot's: the latter carries the estimator's velocity noise (3 cm/s in the
+    /// simulator) twice, once filtered, once not.
+    pub relative_velocity_from_camera: bool,
     /// Horizontal error that aborts a descent or a touchdown into a climb back, m.
     pub go_around_m: f64,
     /// Go-arounds before the mission lands in place instead.
@@ -313,6 +319,7 @@ impl Default for FsmConfig {
             land_max_pad_age_s: 0.4,
             relative_gain: 1.0,
             relative_velocity_gain: 2.0,
+            relative_velocity_from_camera: true,
             relative_accel_max_m_s2: 1.0,
             go_around_m: 0.4,
             max_go_arounds: 3,

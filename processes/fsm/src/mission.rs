@@ -1655,7 +1655,14 @@ impl Fsm {
         // The touchdown only: higher up, the pad estimate's noise through this feedback
         // set the descent oscillating (paper-sim seed 3 at 3 m, +-0.8 m/s).
         if self.state == MissionState::Land {
-            let dv = (v - self.velocity()).xy() * self.cfg.relative_velocity_gain;
+            // The pad's velocity relative to the vehicle, plus what the setpoint adds to
+            // the pad's own (the pull toward its centre, the trim).
+            let camera = self.cfg.relative_velocity_from_camera && !self.chasing(&est.velocity);
+            let relative = match self.relative.velocity(now_ns) {
+                Some(u) if camera => u + (v - est.velocity),
+                _ => v - self.velocity(),
+            };
+            let dv = relative.xy() * self.cfg.relative_velocity_gain;
             let dv = dv.cap_magnitude(self.cfg.relative_accel_max_m_s2);
             a += Vector3::new(dv.x, dv.y, 0.0);
         }

@@ -121,6 +121,13 @@ struct World {
     /// The largest horizontal acceleration the vehicle made in Land, m/s^2 (about its
     /// lean beyond the drag's: 1.7 m/s^2 is 10 deg).
     land_accel_max: f64,
+    /// Noise on the estimated velocity alone (not the derivative of the position's error),
+    /// m/s: a fresh +-value each 50 ms, as a VIO-fed EKF's velocity (3 cm/s, 50 ms
+    /// correlation in the simulator). The autopilot steers by it.
+    velocity_noise_m_s: f64,
+    /// The largest horizontal speed of the vehicle relative to the pad over the second
+    /// before the drop, m/s.
+    flare_rel_speed_max: f64,
 }
 
 impl World {
@@ -180,6 +187,8 @@ impl World {
             descend_accel: Vec::new(),
             heading_wobble: (0.0, 0.0),
             land_accel_max: 0.0,
+            velocity_noise_m_s: 0.0,
+            flare_rel_speed_max: 0.0,
         }
     }
 
@@ -208,12 +217,27 @@ impl World {
         Vector3::new(sign(), sign(), 0.0) * self.jitter_m
     }
 
-    /// How fast the estimate error changes: the estimated velocity is the true one plus
-    /// this.
+    /// How fast the estimate error changes, plus the velocity's own noise: the estimated
+    /// velocity is the true one plus this.
     fn error_rate_at(&self, t: u64) -> Vector3<f64> {
         (self.error_at(t + 1_000_000) - self.jitter_at(t + 1_000_000) - self.error_at(t)
             + self.jitter_at(t))
             / 1e-3
+            + self.velocity_noise_at(t)
+    }
+
+    /// [`Self::velocity_noise_m_s`] at `t`: constant over each 50 ms.
+    fn velocity_noise_at(&self, t: u64) -> Vector3<f64> {
+        if self.velocity_noise_m_s == 0.0 {
+            return Vector3::zeros();
+        }
+        let mut h = (t / 50_000_000 + 7).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        let mut sign = || {
+            h ^= h >> 31;
+            h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            if h >> 63 == 1 { 1.0 } else { -1.0 }
+        };
+        Vector3::new(sign(), sign(), 0.0) * self.velocity_noise_m_s
     }
 
     fn answer(&mut self, kind: LinkRequestKind, a: Answer) -> &mut Self {
@@ -464,6 +488,14 @@ impl World {
         let below_flare = self.pad.is_some_and(|p| self.pos.z - p.z < 0.1);
         if self.drop_t.is_none() && self.fsm.state() == MissionState::Land && below_flare {
             self.drop_t = Some(self.t);
+        }
+        if let Some(p) = self.pad
+            && self.drop_t.is_none()
+            && self.fsm.state() == MissionState::Land
+            && self.pos.z - p.z < 0.3
+        {
+            let rel = (self.vel - self.pad_vel).xy().norm();
+            self.flare_rel_speed_max = self.flare_rel_speed_max.max(rel);
         }
         if let (MissionState::Track, Some(p)) = (self.fsm.state(), self.pad) {
             self.track_log.push((self.pos - p, self.yaw));
@@ -1325,7 +1357,12 @@ fn a_drop_waits_out_the_middle_of_a_lane_change() {
     // The commit comes 2.4 s into Descend, the lane change 2 s into it: at the flare
     // height the pad accelerates sideways, then its acceleration turns over in the
     // middle of the change (0.6 m/s sideways, about to slow down).
-    let (dropped, off) = lane_change_touchdown(config(), 2.0);
+    // The touchdown's velocity error from the estimates, as when the hold was built: read
+    // from the camera, the drop begun mid-change ends 0.7 cm off rather than 1.8, and the
+    // hold's own part is smaller than this world can tell apart.
+    let mut held = config();
+    held.relative_velocity_from_camera = false;
+    let (dropped, off) = lane_change_touchdown(held.clone(), 2.0);
     assert!(
         dropped > 2.6,
         "dropped {dropped:.2} s after the commit, before the lane change ended"
@@ -1336,7 +1373,7 @@ fn a_drop_waits_out_the_middle_of_a_lane_change() {
     // pad's heading rate fed forward (it yaws into the change) takes most of what that
     // costs here (1.8 cm off against 0.5; 4.0 against 0.8 with the models' weighted mean
     // alone), but not all of it.
-    let mut cfg = config();
+    let mut cfg = held;
     cfg.flare_quiet_s = 0.0;
     cfg.flare_settle_m_s = 5.0;
     let (dropped, off_unheld) = lane_change_touchdown(cfg, 2.0);
@@ -1670,4 +1707,38 @@ fn an_fsm_started_on_the_ground_takes_off_as_always() {
     let mut w = World::new(config());
     w.expect(MissionState::Takeoff, 5.0);
     assert_eq!(w.fsm.reason(), "started, link up");
+}
+
+/// A pad at 0.9 m/s, the estimated velocity noisy by 3 cm/s (a fresh sign each 50 ms, as
+/// the simulator's EKF); the largest acceleration the vehicle made in Land and its
+/// largest speed relative to the pad at the flare height, with the touchdown's velocity
+/// error read from the camera or from the estimates.
+fn noisy_velocity_touchdown(camera: bool) -> (f64, f64) {
+    let mut cfg = config();
+    cfg.relative_velocity_from_camera = camera;
+    let mut w = World::new(cfg);
+    w.pad = Some(Vector3::new(-1.0, -0.5, PAD_HEIGHT));
+    w.pad_vel = Vector3::new(0.9, 0.0, 0.0);
+    w.response_s = 0.3;
+    w.velocity_noise_m_s = 0.03;
+    w.expect(MissionState::Landed, 60.0);
+    (w.land_accel_max, w.flare_rel_speed_max)
+}
+
+#[test]
+fn the_touchdown_reads_its_velocity_error_from_the_camera_not_the_noisy_estimates() {
+    // The pad filter's velocity minus the autopilot's carries the estimator's velocity
+    // noise twice (filtered in the odometry frame, raw in the state); times the
+    // touchdown's gain it rocked the vehicle over the pad. A line through the camera's
+    // relative measurements has no part of it.
+    let (accel, rel) = noisy_velocity_touchdown(true);
+    let (accel_estimates, rel_estimates) = noisy_velocity_touchdown(false);
+    assert!(
+        accel < 0.7 * accel_estimates,
+        "accelerated up to {accel:.2} m/s^2 in Land, {accel_estimates:.2} from the estimates"
+    );
+    assert!(
+        rel < rel_estimates,
+        "moved up to {rel:.3} m/s over the pad at the flare, {rel_estimates:.3} from the estimates"
+    );
 }
