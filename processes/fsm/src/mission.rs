@@ -120,7 +120,7 @@ pub struct Fsm {
     /// The frame the filter runs in (the integrated velocity).
     odometry: Odometry,
     /// The camera's recent relative measurements: how fast the vehicle still moves over
-    /// the pad, for the drop's gate.
+    /// the pad, for the drop's settle gate and the touchdown's velocity feedback.
     relative: RelativeTrack,
     /// The header of the newest observation the pad filter took: the setpoints that
     /// follow the pad carry its capture time and stage stamps on, so that a recording
