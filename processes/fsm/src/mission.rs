@@ -185,6 +185,10 @@ pub struct Fsm {
     now_ns: u64,
     /// The pad's horizontal velocity when it was lost (zero without an estimate).
     lost_velocity: Vector3<f64>,
+    /// The rate the pad's velocity turned at when it was lost, rad/s: Lost follows the
+    /// arc it was driving, not the tangent (a 60 m curve at 30 km/h leaves the tangent by
+    /// 10 m in 5 s, far outside the camera's view).
+    lost_turn_rate: f64,
     lost_since_update: u64,
     mode_lost_since: Option<u64>,
     /// The heartbeat has shown OFFBOARD since the autopilot accepted it (PX4 beats at
@@ -264,6 +268,7 @@ impl Fsm {
             lost_z0: 0.0,
             now_ns: 0,
             lost_velocity: Vector3::zeros(),
+            lost_turn_rate: 0.0,
             lost_since_update: 0,
             mode_lost_since: None,
             offboard_shown: true,
@@ -1335,16 +1340,45 @@ impl Fsm {
     fn enter_lost(&mut self, now_ns: u64) {
         let z0 = self.position().map(|p| p.z).unwrap_or(self.hold.z);
         let estimate = self.pad_estimate(now_ns);
-        self.lost_velocity = estimate
+        // The pad as last seen, and as the filter carries it on to now (straight, its
+        // speed changing as it was).
+        let seen = self
+            .filter
+            .last_update_ns()
+            .and_then(|t| Some((t, self.pad_estimate(t)?)));
+        let flat = |v: &Vector3<f64>| Vector3::new(v.x, v.y, 0.0);
+        let (origin, velocity, unseen_s, speed) = match (&seen, &estimate) {
+            (Some((t, s)), Some(e)) => (
+                s.position,
+                flat(&s.velocity),
+                secs_since(*t, now_ns).min(2.0),
+                e.velocity.xy().norm(),
+            ),
+            _ => (Vector3::zeros(), Vector3::zeros(), 0.0, 0.0),
+        };
+        self.lost_turn_rate = seen
             .as_ref()
-            .map(|e| Vector3::new(e.velocity.x, e.velocity.y, 0.0))
-            .filter(|v| v.iter().all(|c| c.is_finite()))
-            .unwrap_or_else(Vector3::zeros);
+            .map_or(0.0, |(_, s)| self.turn_rate(s, &velocity));
+        // On a curve the pad drove the arc since it was last seen, not the tangent the
+        // filter carries it along: the arc, with the filter's change of speed along it.
+        let (drift, turned) = arc(&velocity, self.lost_turn_rate, unseen_s);
+        let along = turned.try_normalize(1e-9).unwrap_or_else(Vector3::zeros);
+        let speed_change = estimate.as_ref().map_or(Vector3::zeros(), |e| {
+            flat(&(e.position - origin)) - velocity * unseen_s
+        });
+        let speed_change = along * speed_change.dot(&along);
+        let lost_velocity = along * speed;
+        self.lost_velocity = if lost_velocity.iter().all(|c| c.is_finite()) {
+            lost_velocity
+        } else {
+            Vector3::zeros()
+        };
         // Follow where the pad should be, not the vehicle's own offset from it: a pad
         // that outran the camera (a chase at speed) is caught up with, not trailed.
         let predicted = estimate
             .as_ref()
-            .map(|e| Vector3::new(e.position.x, e.position.y, z0))
+            .map(|_| origin + drift + speed_change)
+            .map(|p| Vector3::new(p.x, p.y, z0))
             .filter(|p| p.iter().all(|c| c.is_finite()));
         let why = match estimate {
             Some(e) => format!("no pad for {:.1} s", e.age_s),
@@ -1385,9 +1419,10 @@ impl Fsm {
         let climb =
             ((t - hold_s).max(0.0) * self.cfg.lost_climb_m_s).min(self.cfg.lost_climb_max_m);
         let climbing = t > hold_s && climb < self.cfg.lost_climb_max_m;
-        // Where the pad would be had it kept its velocity (for `lost_follow_s`), above it.
+        // Where the pad would be had it driven on as it was (for `lost_follow_s`: its
+        // speed, and its turn), above it.
         let follow = t.min(self.cfg.lost_follow_s);
-        let drift = self.lost_velocity * follow;
+        let (drift, velocity) = arc(&self.lost_velocity, self.lost_turn_rate, follow);
         let target = Vector3::new(
             self.hold.x + drift.x,
             self.hold.y + drift.y,
@@ -1395,8 +1430,11 @@ impl Fsm {
         );
         let mut sp = self.hold_setpoint(now_ns, target);
         if t < self.cfg.lost_follow_s {
-            sp.velocity[0] = self.lost_velocity.x;
-            sp.velocity[1] = self.lost_velocity.y;
+            let pull = Vector3::new(-velocity.y, velocity.x, 0.0) * self.lost_turn_rate;
+            sp.velocity[0] = velocity.x;
+            sp.velocity[1] = velocity.y;
+            sp.acceleration[0] = pull.x;
+            sp.acceleration[1] = pull.y;
         }
         if climbing {
             sp.velocity[2] = self.cfg.lost_climb_m_s;
@@ -1560,6 +1598,27 @@ impl Fsm {
         velocity.xy().norm() > self.cfg.chase_speed_m_s
     }
 
+    /// The rate the pad's `velocity` turns at, rad/s. Chasing, it is read off the turning
+    /// pull the chase flies (slewed: the heading rate read low over the pad swings with
+    /// the vehicle's roll, +-0.26 rad/s at 1.2 Hz in highspeed-50, and taken as it is would
+    /// send Lost off on a circle that is not there). Below the chase speed the heading
+    /// rate itself, at most [`LOST_TURN_RATE_MAX_RAD_S`].
+    fn turn_rate(&self, est: &PadEstimate, velocity: &Vector3<f64>) -> f64 {
+        let speed2 = velocity.xy().norm_squared();
+        let w = if self.chasing(velocity) {
+            (velocity.x * self.chase_turn.y - velocity.y * self.chase_turn.x) / speed2
+        } else if speed2 >= HEADING_SPEED_MIN_M_S * HEADING_SPEED_MIN_M_S {
+            est.yaw_rate
+        } else {
+            0.0
+        };
+        if w.is_finite() {
+            w.clamp(-LOST_TURN_RATE_MAX_RAD_S, LOST_TURN_RATE_MAX_RAD_S)
+        } else {
+            0.0
+        }
+    }
+
     /// Below the chase speed, remembers when the pad last accelerated past the drop's
     /// gate (Descend and Land watch it, so a manoeuvre ending at the commit still counts).
     fn note_manoeuvre(&mut self, now_ns: u64, est: &PadEstimate) {
@@ -1694,6 +1753,23 @@ fn turn_acceleration(est: &PadEstimate) -> Vector3<f64> {
     Vector3::new(-est.velocity.y, est.velocity.x, 0.0) * est.yaw_rate
 }
 
+/// Where a pad at velocity `v` turning at `w` rad/s is after `t` s, relative to where it
+/// was, and its velocity then: the constant-turn arc (the tangent when `w` is zero).
+fn arc(v: &Vector3<f64>, w: f64, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+    let turned = w * t;
+    let (s, c) = turned.sin_cos();
+    // Along the first velocity, and across it toward the turn.
+    let (along, across) = if turned.abs() < 1e-6 {
+        (t, 0.5 * w * t * t)
+    } else {
+        (s / w, (1.0 - c) / w)
+    };
+    (
+        Vector3::new(v.x * along - v.y * across, v.y * along + v.x * across, 0.0),
+        Vector3::new(v.x * c - v.y * s, v.y * c + v.x * s, 0.0),
+    )
+}
+
 /// Seconds from `since_ns` to `now_ns`: zero, never a wrapped time, if `now_ns` is the
 /// earlier (the one way every wait and age in the mission is measured).
 fn secs_since(since_ns: u64, now_ns: u64) -> f64 {
@@ -1717,6 +1793,10 @@ const CHASE_TURN_ACCEL_MAX_M_S2: f64 = 6.0;
 /// under about 2 even driven hard (comfort is under 1), and a 60 m curve at 30 km/h
 /// (1.16 m/s^2) is fed in 0.6 s.
 const CHASE_TURN_JERK_MAX_M_S3: f64 = 2.0;
+
+/// The fastest turn Lost follows, rad/s: a car's tightest (5 m radius) at the 2 m/s of
+/// the chase speed, 0.4 rad/s; a faster read is noise.
+const LOST_TURN_RATE_MAX_RAD_S: f64 = 0.4;
 
 /// The longest the drop waits for a manoeuvring pad, s: a braking or a lane change lasts
 /// 2-3 s.

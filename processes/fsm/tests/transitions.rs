@@ -1616,6 +1616,33 @@ fn a_fast_pad_lost_is_followed_where_it_should_be_at_the_height_that_saw_it() {
 }
 
 #[test]
+fn a_fast_pad_lost_on_a_curve_is_followed_round_the_curve() {
+    // highspeed-30-curve, 1 run of 300 at 57cbc75: the pad lost 1.3 s into Track on the
+    // 60 m circle, Lost flew the tangent, and the mission landed in the road 107 m away.
+    let mut w = road_chase(config());
+    w.expect(MissionState::Track, 30.0);
+    w.pad_turn_rate = 8.33 / 60.0;
+    w.run_for(4.0);
+    w.pad_visible = false;
+    w.expect(MissionState::Lost, 2.0);
+    w.run_for(4.0);
+    let pad = w.pad.unwrap();
+    // The tangent leaves the circle by 60 (1 - cos 0.69) = 14 m in the 5 s since the pad
+    // was last seen.
+    assert!(
+        (w.pos - pad).xy().norm() < 1.0,
+        "followed the curve: {:?} {:?}",
+        w.pos,
+        pad
+    );
+    w.pad_visible = true;
+    w.expect(MissionState::Track, 1.0);
+    w.expect(MissionState::Landed, 60.0);
+    let off = w.contact_offset_m.unwrap();
+    assert!(off < 0.1, "touched down {off} m off the pad");
+}
+
+#[test]
 fn a_preset_above_what_the_camera_can_read_is_searched_from_its_ceiling() {
     let mut cfg = config();
     cfg.preset_m = [0.0, 0.0, 5.0];
