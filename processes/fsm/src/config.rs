@@ -112,6 +112,18 @@ pub struct FsmConfig {
     /// the autopilot's: the latter carries the estimator's velocity noise (3 cm/s in the
     /// simulator) twice, once filtered, once not.
     pub relative_velocity_from_camera: bool,
+    /// Descend and Land, below the chase speed: the airframe's horizontal drag per
+    /// m/s of airspeed over its mass, 1/s (PX4's multirotor drag coefficient,
+    /// EKF2_BCOEF-like, identified from a log: the steady lean at a known speed). The
+    /// change of the drag since the descent began (the pad's velocity then
+    /// against now, forgotten over [`DRAG_MEMORY_S`]) is fed forward: PX4's velocity
+    /// integrator holds the drag the vehicle flew with, wind and all, and lags it as a
+    /// turn swings it round (8 cm behind the pad and 6 outside on paper-turn's 3 m circle).
+    /// 0 = none, the default: it takes paper-turn's trailing out but costs the other
+    /// scenarios a little (docs/fsm.md, "The drag's swing in a turn").
+    ///
+    /// [`DRAG_MEMORY_S`]: crate::mission::DRAG_MEMORY_S
+    pub drag_per_s: f64,
     /// Horizontal error that aborts a descent or a touchdown into a climb back, m.
     pub go_around_m: f64,
     /// Go-arounds before the mission lands in place instead.
@@ -320,6 +332,7 @@ impl Default for FsmConfig {
             relative_gain: 1.0,
             relative_velocity_gain: 2.0,
             relative_velocity_from_camera: true,
+            drag_per_s: 0.0,
             relative_accel_max_m_s2: 1.0,
             go_around_m: 0.4,
             max_go_arounds: 3,
@@ -497,6 +510,7 @@ impl Validate for FsmConfig {
                 100.0,
             ),
             ("pad_accel_gain", self.pad_accel_gain, 0.0, 1.0),
+            ("drag_per_s", self.drag_per_s, 0.0, 5.0),
             ("relative_gain", self.relative_gain, 0.0, 10.0),
             (
                 "relative_velocity_gain",

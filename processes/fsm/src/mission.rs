@@ -163,6 +163,10 @@ pub struct Fsm {
     /// vehicle's roll, and fed at once it closed a loop (highspeed-50: +-20 deg of roll
     /// at 1.2 Hz over the pad, touching down tilted 15-22 deg).
     chase_turn: Vector3<f64>,
+    /// Descending onto a pad below the chase speed: its horizontal velocity, low-passed
+    /// over [`DRAG_MEMORY_S`] since the descent began, the velocity whose drag PX4's
+    /// integrator holds (`drag_per_s`).
+    drag_ref: Option<Vector3<f64>>,
     z_cmd: f64,
     go_arounds: u32,
     /// Given up over a fast pad: hold here, this high (m), until braked, then land.
@@ -255,6 +259,7 @@ impl Fsm {
             h_cmd: 1.0,
             chase_trim: Vector3::zeros(),
             chase_turn: Vector3::zeros(),
+            drag_ref: None,
             z_cmd: 0.0,
             go_arounds: 0,
             brake_at_z: None,
@@ -455,6 +460,7 @@ impl Fsm {
         let mut out = Outputs::default();
         self.check_links(now_ns);
         self.slew_chase_turn(now_ns, dt);
+        self.follow_drag(now_ns, dt);
         match self.state {
             MissionState::Idle => self.idle(now_ns, &mut out),
             MissionState::Takeoff => self.takeoff(now_ns, &mut out),
@@ -1647,6 +1653,29 @@ impl Fsm {
         }
     }
 
+    /// Descending onto a pad below the chase speed (`drag_per_s` set), low-passes its
+    /// velocity into `drag_ref`, from the velocity it had when the descent began (the
+    /// vehicle aligned over it for `align_hold_s`: PX4's integrator holds that velocity's
+    /// drag); otherwise forgets it.
+    fn follow_drag(&mut self, now_ns: u64, dt: f64) {
+        let following = self.cfg.drag_per_s > 0.0
+            && matches!(self.state, MissionState::Descend | MissionState::Land);
+        let v = match self.pad(now_ns) {
+            Some(est) if following && !self.chasing(&est.velocity) => {
+                Vector3::new(est.velocity.x, est.velocity.y, 0.0)
+            }
+            _ => {
+                self.drag_ref = None;
+                return;
+            }
+        };
+        let r = self.drag_ref.get_or_insert(v);
+        let next = *r + (v - *r) * (dt / DRAG_MEMORY_S).min(1.0);
+        if next.iter().all(|c| c.is_finite()) {
+            *r = next;
+        }
+    }
+
     /// Chasing, integrates the pad-relative horizontal error into `chase_trim` (tracking,
     /// descending, touching down until the drop): at 30 km/h the relative wind's drag
     /// held the racer 5-10 cm behind the pad, outside the flare gate, for the whole
@@ -1701,6 +1730,11 @@ impl Fsm {
         } else {
             Vector3::zeros()
         };
+        // The drag's change since the following began: PX4's integrator holds the old.
+        if let Some(r) = self.drag_ref {
+            let dv = Vector3::new(est.velocity.x - r.x, est.velocity.y - r.y, 0.0);
+            a += dv * self.cfg.drag_per_s;
+        }
         // Dropping, the vehicle only matches the pad's velocity: it was over the pad when
         // the drop began, and chasing the last centimetres now only adds sideways speed
         // at contact.
@@ -1793,6 +1827,12 @@ const CHASE_TURN_ACCEL_MAX_M_S2: f64 = 6.0;
 /// under about 2 even driven hard (comfort is under 1), and a 60 m curve at 30 km/h
 /// (1.16 m/s^2) is fed in 0.6 s.
 const CHASE_TURN_JERK_MAX_M_S3: f64 = 2.0;
+
+/// How long the drag PX4's velocity integrator holds takes to follow a change of
+/// velocity, s: its slow pole (MPC_XY_VEL_P_ACC 1.8, MPC_XY_VEL_I_ACC 0.4) is at 0.26 /s,
+/// and the reference forgets more slowly still, so that a steady turn's drag is fed
+/// forward nearly whole (a linear model of paper-turn: 9.4 cm behind without, 2.4 with).
+pub const DRAG_MEMORY_S: f64 = 10.0;
 
 /// The fastest turn Lost follows, rad/s: a car's tightest (5 m radius) at the 2 m/s of
 /// the chase speed, 0.4 rad/s; a faster read is noise.

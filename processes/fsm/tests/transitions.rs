@@ -128,6 +128,12 @@ struct World {
     /// The largest horizontal speed of the vehicle relative to the pad over the second
     /// before the drop, m/s.
     flare_rel_speed_max: f64,
+    /// The airframe's horizontal drag per m/s over its mass, 1/s, against an autopilot
+    /// whose velocity loop has PX4's integrator (MPC_XY_VEL_I_ACC 0.4; its P gain is
+    /// 1 / `response_s`).
+    drag_per_s: f64,
+    /// The autopilot's velocity integrator, m/s^2: the drag it holds.
+    drag_held: Vector3<f64>,
 }
 
 impl World {
@@ -189,6 +195,8 @@ impl World {
             land_accel_max: 0.0,
             velocity_noise_m_s: 0.0,
             flare_rel_speed_max: 0.0,
+            drag_per_s: 0.0,
+            drag_held: Vector3::zeros(),
         }
     }
 
@@ -370,6 +378,8 @@ impl World {
             self.goal = Some(g);
         }
         let mut target_v = Vector3::zeros();
+        // The part of `target_v` that is the acceleration fed forward (no velocity error).
+        let mut accel_v = Vector3::zeros();
         if let Some(sp) = out.setpoint {
             self.setpoints += 1;
             let finite = sp
@@ -398,6 +408,7 @@ impl World {
                 target_v = Vector3::from(sp.velocity) - self.error_rate_at(self.t)
                     + (p - estimate) * 2.0
                     + Vector3::from(sp.acceleration) * self.response_s;
+                accel_v = Vector3::from(sp.acceleration) * self.response_s;
                 let turn = (sp.yaw - self.yaw + std::f64::consts::PI)
                     .rem_euclid(std::f64::consts::TAU)
                     - std::f64::consts::PI;
@@ -433,6 +444,14 @@ impl World {
         } else {
             target_v
         };
+        if self.drag_per_s > 0.0 && self.armed && !self.on_ground() {
+            // PX4's velocity integrator (MPC_XY_VEL_I_ACC 0.4) against the drag.
+            let e = (target_v - accel_v - before).xy();
+            let drag = before.xy() * self.drag_per_s;
+            self.drag_held += Vector3::new(e.x, e.y, 0.0) * (0.4 * dt);
+            self.vel.x += (self.drag_held.x - drag.x) * dt;
+            self.vel.y += (self.drag_held.y - drag.y) * dt;
+        }
         if self.mode == FlightMode::Land && self.armed {
             // PX4's AUTO.LAND brakes at its horizontal acceleration (MPC_ACC_HOR, 3 m/s^2),
             // not at once: from a chase it meets the ground still moving.
@@ -1429,6 +1448,41 @@ fn a_pad_circling_for_good_below_the_chase_speed_is_still_landed_on() {
     w.expect(MissionState::Landed, 90.0);
     let off = w.contact_offset_m.unwrap();
     assert!(off < 0.03, "touched down {off:.3} m off the pad");
+}
+
+/// How far from the pad's centre the vehicle touched down, m, with `drag_per_s` in the
+/// fsm: paper-turn's pad (0.9 m/s on a 3 m circle) under an airframe with `drag` (1/s)
+/// and PX4's velocity loop (P 1.8, I 0.4).
+fn turn_touchdown_off_m(drag: f64, drag_per_s: f64) -> f64 {
+    let mut cfg = config();
+    cfg.drag_per_s = drag_per_s;
+    let mut w = World::new(cfg);
+    w.pad = Some(Vector3::new(-1.0, -0.5, PAD_HEIGHT));
+    w.pad_vel = Vector3::new(0.9, 0.0, 0.0);
+    w.pad_turn_rate = 0.9 / 3.0;
+    w.response_s = 1.0 / 1.8;
+    w.drag_per_s = drag;
+    w.expect(MissionState::Landed, 90.0);
+    w.contact_offset_m.unwrap()
+}
+
+#[test]
+fn a_turns_swing_of_the_drag_is_fed_forward_where_the_autopilots_integrator_lags_it() {
+    // The simulator's airframe: 0.35 N s/m on 1.5 kg. Its integrator holds the drag of
+    // the velocity the descent began with and lags it as the turn swings it round.
+    let drag = 0.35 / 1.5;
+    let calm = turn_touchdown_off_m(0.0, 0.0);
+    let without = turn_touchdown_off_m(drag, 0.0);
+    let with = turn_touchdown_off_m(drag, drag);
+    assert!(
+        without > calm + 0.02,
+        "the drag should carry the vehicle off: {without:.3} m, {calm:.3} m without drag"
+    );
+    assert!(
+        with < calm + 0.01,
+        "touched down {with:.3} m off with the drag fed forward, {without:.3} m without, \
+         {calm:.3} m with no drag"
+    );
 }
 
 #[test]
