@@ -1436,7 +1436,7 @@ impl Fsm {
         );
         let mut sp = self.hold_setpoint(now_ns, target);
         if t < self.cfg.lost_follow_s {
-            let pull = Vector3::new(-velocity.y, velocity.x, 0.0) * self.lost_turn_rate;
+            let pull = turn_pull(&velocity, self.lost_turn_rate);
             sp.velocity[0] = velocity.x;
             sp.velocity[1] = velocity.y;
             sp.acceleration[0] = pull.x;
@@ -1660,8 +1660,12 @@ impl Fsm {
     fn follow_drag(&mut self, now_ns: u64, dt: f64) {
         let following = self.cfg.drag_per_s > 0.0
             && matches!(self.state, MissionState::Descend | MissionState::Land);
+        if !following {
+            self.drag_ref = None;
+            return;
+        }
         let v = match self.pad(now_ns) {
-            Some(est) if following && !self.chasing(&est.velocity) => {
+            Some(est) if !self.chasing(&est.velocity) => {
                 Vector3::new(est.velocity.x, est.velocity.y, 0.0)
             }
             _ => {
@@ -1730,7 +1734,7 @@ impl Fsm {
         } else {
             Vector3::zeros()
         };
-        // The drag's change since the following began: PX4's integrator holds the old.
+        // The drag's change since the descent began: PX4's integrator holds the old.
         if let Some(r) = self.drag_ref {
             let dv = Vector3::new(est.velocity.x - r.x, est.velocity.y - r.y, 0.0);
             a += dv * self.cfg.drag_per_s;
@@ -1784,7 +1788,12 @@ fn pad_acceleration(est: &PadEstimate) -> Vector3<f64> {
 /// The pad's velocity turned at its heading rate: the pull of the curve it drives, for
 /// the chase and below it alike.
 fn turn_acceleration(est: &PadEstimate) -> Vector3<f64> {
-    Vector3::new(-est.velocity.y, est.velocity.x, 0.0) * est.yaw_rate
+    turn_pull(&est.velocity, est.yaw_rate)
+}
+
+/// The acceleration that turns velocity `v` at `w` rad/s (horizontal, toward the turn).
+fn turn_pull(v: &Vector3<f64>, w: f64) -> Vector3<f64> {
+    Vector3::new(-v.y, v.x, 0.0) * w
 }
 
 /// Where a pad at velocity `v` turning at `w` rad/s is after `t` s, relative to where it
