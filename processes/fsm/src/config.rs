@@ -78,6 +78,13 @@ pub struct FsmConfig {
     /// gate does, to `land_speed_gate_m_s`): the fall is open loop, and the pad filter's
     /// velocity lags a braking just begun.
     pub flare_settle_m_s: f64,
+    /// Land, below the chase speed: the drop also waits until the offset the vehicle will
+    /// have at contact is within the gate: the camera's offset plus its relative velocity
+    /// times this long (the fall), s. 0 = the offset now alone.
+    pub flare_fall_s: f64,
+    /// How far back the line through the camera's relative measurements reaches, s: a
+    /// longer line reads the relative velocity steadier and later.
+    pub relative_window_s: f64,
     /// Land: descent rate of the final drop, m/s.
     pub drop_rate_m_s: f64,
     /// Land, below the chase speed: the drop waits while the pad accelerates more than
@@ -324,6 +331,8 @@ impl Default for FsmConfig {
             flare_align_m: 0.025,
             flare_relax_s: 4.0,
             flare_settle_m_s: 0.05,
+            flare_fall_s: 0.0,
+            relative_window_s: 0.25,
             drop_rate_m_s: 0.8,
             flare_accel_max_m_s2: 0.15,
             flare_quiet_s: 0.5,
@@ -500,6 +509,8 @@ impl Validate for FsmConfig {
             ("flare_align_m", self.flare_align_m, 0.005, 1.0),
             ("flare_relax_s", self.flare_relax_s, 0.1, 60.0),
             ("flare_settle_m_s", self.flare_settle_m_s, 0.005, 5.0),
+            ("flare_fall_s", self.flare_fall_s, 0.0, 2.0),
+            ("relative_window_s", self.relative_window_s, 0.05, 2.0),
             ("land_max_pad_age_s", self.land_max_pad_age_s, 0.05, 5.0),
             ("drop_rate_m_s", self.drop_rate_m_s, 0.1, 3.0),
             ("flare_quiet_s", self.flare_quiet_s, 0.0, 5.0),

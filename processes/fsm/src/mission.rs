@@ -232,13 +232,14 @@ impl Fsm {
     pub fn new(cfg: FsmConfig) -> Self {
         let filter = PadFilter::new(cfg.pad_filter.clone());
         let started = cfg.autostart;
+        let relative = RelativeTrack::new(cfg.relative_window_s);
         Self {
             cfg,
             state: MissionState::Idle,
             started,
             filter,
             odometry: Odometry::default(),
-            relative: RelativeTrack::default(),
+            relative,
             pad_header: None,
             vehicle: None,
             telemetry_arrived_ns: 0,
@@ -1288,11 +1289,19 @@ impl Fsm {
                 .relative
                 .velocity(now_ns)
                 .is_none_or(|u| u.xy().norm() < settle);
+        // Where the vehicle will be over the pad at contact, by the camera: the offset now
+        // plus the relative velocity over the fall.
+        let landing_within = self.cfg.flare_fall_s <= 0.0
+            || self.chasing(&est.velocity)
+            || self.relative.velocity(now_ns).is_none_or(|u| {
+                ((est.position - p).xy() + u.xy() * self.cfg.flare_fall_s).norm() < align
+            });
         if at_flare
             && !held_by_manoeuvre
             && e < align
             && rel_v < self.cfg.land_speed_gate_m_s
             && settled
+            && landing_within
         {
             self.dropping = true;
         }

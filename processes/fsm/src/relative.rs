@@ -16,8 +16,6 @@ use std::collections::VecDeque;
 
 use nalgebra::Vector3;
 
-/// How far back the fit reaches, ns.
-const WINDOW_NS: u64 = 250_000_000;
 /// Fewer observations in the window than this give no velocity (a 30 Hz camera gives 7).
 const MIN_POINTS: usize = 5;
 /// A newest observation older than this gives no velocity, ns: the pad is out of view.
@@ -26,12 +24,29 @@ const MAX_AGE_NS: u64 = 150_000_000;
 const CAPACITY: usize = 64;
 
 /// Recent relative positions `pad - vehicle` (world axes, m) at their capture times.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct RelativeTrack {
     points: VecDeque<(u64, Vector3<f64>)>,
+    /// How far back the fit reaches, ns.
+    window_ns: u64,
+}
+
+impl Default for RelativeTrack {
+    /// A quarter-second line: 7-8 frames at 30 Hz.
+    fn default() -> Self {
+        Self::new(0.25)
+    }
 }
 
 impl RelativeTrack {
+    /// A track fitting its line through the last `window_s` seconds.
+    pub fn new(window_s: f64) -> Self {
+        Self {
+            points: VecDeque::new(),
+            window_ns: (window_s.max(0.0) * 1e9) as u64,
+        }
+    }
+
     /// One observation's relative position at its capture time; an older time than the
     /// newest held, or a non-finite position, is ignored.
     pub fn push(&mut self, t_ns: u64, pad_from_vehicle: Vector3<f64>) {
@@ -45,7 +60,7 @@ impl RelativeTrack {
             self.points.pop_front();
         }
         self.points.push_back((t_ns, pad_from_vehicle));
-        let oldest = t_ns.saturating_sub(WINDOW_NS);
+        let oldest = t_ns.saturating_sub(self.window_ns);
         while self.points.front().is_some_and(|&(t, _)| t < oldest) {
             self.points.pop_front();
         }

@@ -1427,6 +1427,29 @@ fn a_drop_waits_until_the_camera_reads_the_vehicle_still_over_the_pad() {
     );
 }
 
+#[test]
+fn a_drop_waits_until_the_vehicle_will_be_over_the_pad_at_contact() {
+    // The manoeuvre hold and the settle gate switched off: only the offset the camera's
+    // relative velocity carries the vehicle to over the fall keeps the drop out of the
+    // braking (the vehicle trails the slowing pad at about 0.13 m/s, 5 cm over the fall):
+    // 0.62 s after the commit and 5.8 cm off without it, 1.74 s and 3.6 cm with it.
+    let mut cfg = config();
+    cfg.flare_accel_max_m_s2 = 100.0;
+    cfg.flare_settle_m_s = 5.0;
+    cfg.flare_fall_s = 0.0;
+    let (dropped_now, off_now) = braking_touchdown(cfg.clone());
+    cfg.flare_fall_s = 0.4;
+    let (dropped, off) = braking_touchdown(cfg);
+    assert!(
+        dropped > dropped_now + 0.5,
+        "dropped {dropped:.2} s after the commit, {dropped_now:.2} s on the offset now"
+    );
+    assert!(
+        off_now > off + 0.015,
+        "on the offset now {off_now:.3} m off, on the offset at contact {off:.3} m"
+    );
+}
+
 /// A pad circling for good below the chase speed: 1.2 m/s on a 5 m radius, 0.29 m/s^2
 /// toward the centre; the vehicle follows a changed velocity 0.3 s late.
 fn circling() -> World {
