@@ -80,7 +80,8 @@ pub struct FsmConfig {
     pub flare_settle_m_s: f64,
     /// Land, below the chase speed: the drop also waits until the offset the vehicle will
     /// have at contact is within the gate: the camera's offset plus its relative velocity
-    /// times this long (the fall), s. 0 = the offset now alone.
+    /// times this long (the fall), s. 0 = the offset now alone. The vehicle swings over
+    /// the pad at +-10 cm/s, about 1 Hz, and the 0.4 s fall is open loop.
     pub flare_fall_s: f64,
     /// How far back the line through the camera's relative measurements reaches, s: a
     /// longer line reads the relative velocity steadier and later.
@@ -331,7 +332,7 @@ impl Default for FsmConfig {
             flare_align_m: 0.025,
             flare_relax_s: 4.0,
             flare_settle_m_s: 0.05,
-            flare_fall_s: 0.0,
+            flare_fall_s: 0.4,
             relative_window_s: 0.25,
             drop_rate_m_s: 0.8,
             flare_accel_max_m_s2: 0.15,

@@ -1344,11 +1344,13 @@ fn a_drop_waits_for_a_braking_pad_to_stop_braking() {
     );
     assert!(off < 0.05, "touched down {off:.3} m off the pad");
 
-    // Without the wait (nor the camera's settle gate, which also holds it) the same
-    // flight drops in the braking, and ends past the pad.
+    // Without the wait (nor the camera's settle gate and the gate on the offset at
+    // contact, which also hold it) the same flight drops in the braking, and ends past
+    // the pad.
     let mut cfg = config();
     cfg.flare_accel_max_m_s2 = 100.0;
     cfg.flare_settle_m_s = 5.0;
+    cfg.flare_fall_s = 0.0;
     let (dropped, off_ungated) = braking_touchdown(cfg);
     assert!(
         dropped < 2.0,
@@ -1408,12 +1410,13 @@ fn a_drop_waits_out_the_middle_of_a_lane_change() {
 
 #[test]
 fn a_drop_waits_until_the_camera_reads_the_vehicle_still_over_the_pad() {
-    // The manoeuvre hold switched off: only the camera's relative speed keeps the drop
-    // out of the braking (the vehicle trails the pad's slowing, which the pad filter's
+    // The manoeuvre hold and the gate on the offset at contact switched off: only the
+    // camera's relative speed keeps the drop out of the braking (the vehicle trails the pad's slowing, which the pad filter's
     // velocity reads late). paper-braking's worst runs began the drop that way, 9-16 cm/s
     // off the pad's speed.
     let mut cfg = config();
     cfg.flare_accel_max_m_s2 = 100.0;
+    cfg.flare_fall_s = 0.0;
     let (dropped, off) = braking_touchdown(cfg.clone());
     cfg.flare_settle_m_s = 5.0;
     let (dropped_ungated, off_ungated) = braking_touchdown(cfg);
