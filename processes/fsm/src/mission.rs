@@ -1284,16 +1284,14 @@ impl Fsm {
         // (the pad too close to read) the filter's relative speed alone decides.
         let settle = self.cfg.flare_settle_m_s
             + (self.cfg.land_speed_gate_m_s - self.cfg.flare_settle_m_s).max(0.0) * relax * relax;
-        let settled = self.chasing(&est.velocity)
-            || self
-                .relative
-                .velocity(now_ns)
-                .is_none_or(|u| u.xy().norm() < settle);
+        let chasing = self.chasing(&est.velocity);
+        let camera_velocity = self.relative.velocity(now_ns);
+        let settled = chasing || camera_velocity.is_none_or(|u| u.xy().norm() < settle);
         // Where the vehicle will be over the pad at contact, by the camera: the offset now
         // plus the relative velocity over the fall.
         let landing_within = self.cfg.flare_fall_s <= 0.0
-            || self.chasing(&est.velocity)
-            || self.relative.velocity(now_ns).is_none_or(|u| {
+            || chasing
+            || camera_velocity.is_none_or(|u| {
                 ((est.position - p).xy() + u.xy() * self.cfg.flare_fall_s).norm() < align
             });
         if at_flare
