@@ -1191,7 +1191,8 @@ impl Fsm {
         if !self.dropping {
             self.integrate_chase_trim(&est, &p, dt);
         }
-        let e = (est.position - p).xy().norm();
+        let offset = (est.position - p).xy();
+        let e = offset.norm();
         let height = p.z - est.position.z;
         if !on_ground && e > self.cfg.go_around_m && height > 0.15 {
             self.go_around(now_ns, format!("{e:.2} m off the pad at {height:.2} m"));
@@ -1291,9 +1292,8 @@ impl Fsm {
         // plus the relative velocity over the fall.
         let landing_within = self.cfg.flare_fall_s <= 0.0
             || chasing
-            || camera_velocity.is_none_or(|u| {
-                ((est.position - p).xy() + u.xy() * self.cfg.flare_fall_s).norm() < align
-            });
+            || camera_velocity
+                .is_none_or(|u| (offset + u.xy() * self.cfg.flare_fall_s).norm() < align);
         if at_flare
             && !held_by_manoeuvre
             && e < align

@@ -1408,18 +1408,29 @@ fn a_drop_waits_out_the_middle_of_a_lane_change() {
     );
 }
 
+/// The braking touchdown flown with the manoeuvre hold off and `cfg` as given, then again
+/// with `ungate` applied: (drop s after the commit, m off at contact) with the gate, then
+/// without.
+fn braking_with_and_without(
+    mut cfg: FsmConfig,
+    ungate: impl FnOnce(&mut FsmConfig),
+) -> ((f64, f64), (f64, f64)) {
+    cfg.flare_accel_max_m_s2 = 100.0;
+    let gated = braking_touchdown(cfg.clone());
+    ungate(&mut cfg);
+    (gated, braking_touchdown(cfg))
+}
+
 #[test]
 fn a_drop_waits_until_the_camera_reads_the_vehicle_still_over_the_pad() {
     // The manoeuvre hold and the gate on the offset at contact switched off: only the
-    // camera's relative speed keeps the drop out of the braking (the vehicle trails the pad's slowing, which the pad filter's
-    // velocity reads late). paper-braking's worst runs began the drop that way, 9-16 cm/s
-    // off the pad's speed.
+    // camera's relative speed keeps the drop out of the braking (the vehicle trails the
+    // pad's slowing, which the pad filter's velocity reads late). paper-braking's worst
+    // runs began the drop that way, 9-16 cm/s off the pad's speed.
     let mut cfg = config();
-    cfg.flare_accel_max_m_s2 = 100.0;
     cfg.flare_fall_s = 0.0;
-    let (dropped, off) = braking_touchdown(cfg.clone());
-    cfg.flare_settle_m_s = 5.0;
-    let (dropped_ungated, off_ungated) = braking_touchdown(cfg);
+    let ((dropped, off), (dropped_ungated, off_ungated)) =
+        braking_with_and_without(cfg, |c| c.flare_settle_m_s = 5.0);
     assert!(
         dropped > dropped_ungated + 1.0,
         "dropped {dropped:.2} s after the commit, {dropped_ungated:.2} s without the gate"
@@ -1437,12 +1448,10 @@ fn a_drop_waits_until_the_vehicle_will_be_over_the_pad_at_contact() {
     // braking (the vehicle trails the slowing pad at about 0.13 m/s, 5 cm over the fall):
     // 0.62 s after the commit and 5.8 cm off without it, 1.74 s and 3.6 cm with it.
     let mut cfg = config();
-    cfg.flare_accel_max_m_s2 = 100.0;
     cfg.flare_settle_m_s = 5.0;
-    cfg.flare_fall_s = 0.0;
-    let (dropped_now, off_now) = braking_touchdown(cfg.clone());
     cfg.flare_fall_s = 0.4;
-    let (dropped, off) = braking_touchdown(cfg);
+    let ((dropped, off), (dropped_now, off_now)) =
+        braking_with_and_without(cfg, |c| c.flare_fall_s = 0.0);
     assert!(
         dropped > dropped_now + 0.5,
         "dropped {dropped:.2} s after the commit, {dropped_now:.2} s on the offset now"
