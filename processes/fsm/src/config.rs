@@ -48,6 +48,11 @@ pub struct FsmConfig {
     /// velocity per second (1/s^2), in the pad's heading frame: an integral that holds
     /// station over the pad against the relative wind and a curve's pull.
     pub chase_trim_gain: f64,
+    /// Below the chase speed, descending and touching down until the drop, each metre off
+    /// the pad adds this much velocity per second (1/s^2), in the pad's heading frame: in
+    /// wind the autopilot held the vehicle 5-7 cm downwind of the pad for seconds at the
+    /// flare height, until the drop's gate widened to let it go from there. 0 = off.
+    pub flare_trim_gain: f64,
     /// Horizontal error below which descent may start, m.
     pub align_m: f64,
     /// Horizontal speed relative to the pad below which descent may start, m/s.
@@ -320,6 +325,7 @@ impl Default for FsmConfig {
             approach_speed_m_s: 2.0,
             chase_speed_m_s: 2.0,
             chase_trim_gain: 0.3,
+            flare_trim_gain: 0.0,
             align_m: 0.3,
             align_speed_m_s: 0.4,
             align_hold_s: 0.5,
@@ -497,6 +503,7 @@ impl Validate for FsmConfig {
             ("approach_speed_m_s", self.approach_speed_m_s, 0.1, 30.0),
             ("chase_speed_m_s", self.chase_speed_m_s, 0.1, 100.0),
             ("chase_trim_gain", self.chase_trim_gain, 0.0, 10.0),
+            ("flare_trim_gain", self.flare_trim_gain, 0.0, 10.0),
             ("align_m", self.align_m, 0.01, 5.0),
             ("align_speed_m_s", self.align_speed_m_s, 0.01, 10.0),
             ("align_hold_s", self.align_hold_s, 0.0, 10.0),

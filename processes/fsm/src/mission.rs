@@ -157,6 +157,8 @@ pub struct Fsm {
     /// the pad's heading frame (along, across): on a curve what it must make up turns
     /// with the pad, and a world-frame integral would forever lag it.
     chase_trim: Vector3<f64>,
+    /// Whether `chase_trim` was made chasing (or below the chase speed).
+    trim_chasing: bool,
     /// Chasing: the pad's turning pull fed forward, m/s^2, slewed at no more than
     /// [`CHASE_TURN_JERK_MAX_M_S3`]. A road vehicle's lateral acceleration changes that
     /// slowly; the heading rate read from the markers low over the pad swings with the
@@ -259,6 +261,7 @@ impl Fsm {
             track_height: 1.0,
             h_cmd: 1.0,
             chase_trim: Vector3::zeros(),
+            trim_chasing: false,
             chase_turn: Vector3::zeros(),
             drag_ref: None,
             z_cmd: 0.0,
@@ -1693,8 +1696,18 @@ impl Fsm {
     /// touchdown (highspeed-30). Below the chase speed it stays zero, so the paper's
     /// flights are flown as before.
     fn integrate_chase_trim(&mut self, est: &PadEstimate, p: &Vector3<f64>, dt: f64) {
-        if !self.chasing(&est.velocity) {
+        let chasing = self.chasing(&est.velocity);
+        // Below the chase speed the same integral holds station over the pad against the
+        // wind, from the descent to the drop (`flare_trim_gain`); a trim made chasing is
+        // not a paper-speed one, nor the other way round.
+        let flare = !chasing
+            && self.cfg.flare_trim_gain > 0.0
+            && matches!(self.state, MissionState::Descend | MissionState::Land);
+        if chasing != self.trim_chasing || !(chasing || flare) {
             self.chase_trim = Vector3::zeros();
+            self.trim_chasing = chasing;
+        }
+        if !(chasing || flare) {
             return;
         }
         let e = est.position - p;
@@ -1703,10 +1716,15 @@ impl Fsm {
         if e.xy().norm() > self.cfg.direct_range_m {
             return;
         }
+        let (gain, max) = if chasing {
+            (self.cfg.chase_trim_gain, CHASE_TRIM_MAX_M_S)
+        } else {
+            (self.cfg.flare_trim_gain, FLARE_TRIM_MAX_M_S)
+        };
         let pad_from_world = Rotation3::from_axis_angle(&Vector3::z_axis(), -est.yaw);
         let e = pad_from_world * Vector3::new(e.x, e.y, 0.0);
-        let step = e * (self.cfg.chase_trim_gain * dt);
-        let trim = (self.chase_trim + step).cap_magnitude(CHASE_TRIM_MAX_M_S);
+        let step = e * (gain * dt);
+        let trim = (self.chase_trim + step).cap_magnitude(max);
         if trim.iter().all(|c| c.is_finite()) {
             self.chase_trim = trim;
         }
@@ -1864,6 +1882,10 @@ const PAD_ACCEL_MAX_M_S2: f64 = 3.0;
 
 /// The most velocity the chase trim may add, m/s: drag at 14 m/s needs a few tenths.
 const CHASE_TRIM_MAX_M_S: f64 = 1.0;
+
+/// The most velocity the trim below the chase speed may add, m/s: what PX4's velocity
+/// integrator has not yet made of a gust is a few centimetres per second.
+const FLARE_TRIM_MAX_M_S: f64 = 0.3;
 
 /// Touchdown: the drop has stopped (vertical speed relative to the pad above minus
 /// this, m/s) ...
