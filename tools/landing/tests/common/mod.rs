@@ -16,7 +16,8 @@ use serde_json::Value;
 /// fault the watchdog found: starved beside another stack, a process misses its 250 ms
 /// heartbeat deadline with nothing injected (a `make test` run: aruco-pnp "hung" in
 /// goto-preset before the planner hang the test injected). Flights judged only by how they
-/// end share it ([`beside_others`]). A lockstep flight beside them stays as the load.
+/// end share it ([`beside_others`]), and so do lockstep flights in a file with a
+/// judged real-time one (run.rs: a lockstep flight takes a core of the two).
 static MACHINE: RwLock<()> = RwLock::new(());
 
 /// Holds the machine for one real-time stack, alone, until dropped.
