@@ -401,6 +401,13 @@ pub struct PadFilterConfig {
     pub yaw_accel_noise: f64,
     /// Heading noise of an observation, rad.
     pub sigma_yaw_rad: f64,
+    /// Below this speed the pad's velocity is turned at its measured heading rate (a
+    /// vehicle drives where it points; without it the Cartesian models trail a curve's
+    /// velocity by about 2 deg), m/s; 0 (the default): never. Off, because the touchdowns
+    /// were no better with it (docs/fsm.md, "Turning with the heading"). Not above the
+    /// chase speed in any case: low over a fast pad the heading read swings with the
+    /// vehicle's roll, and its rate times the speed would rock the vehicle.
+    pub turn_with_heading_below_m_s: f64,
     /// Initial speed uncertainty, m/s (a 50 km/h vehicle: 14 m/s).
     pub initial_speed_sigma: f64,
     /// Innovation gate: normalized innovation squared above this is an outlier
@@ -427,6 +434,7 @@ impl Default for PadFilterConfig {
             accel_noise_z: 0.2,
             yaw_accel_noise: 0.5,
             sigma_yaw_rad: 0.03,
+            turn_with_heading_below_m_s: 0.0,
             initial_speed_sigma: 14.0,
             gate_chi2: 16.3,
             max_rejects: 5,
@@ -468,6 +476,12 @@ impl Validate for PadFilterConfig {
             50.0,
         )?;
         check_range("pad_filter.sigma_yaw_rad", self.sigma_yaw_rad, 1e-4, 1.0)?;
+        check_range(
+            "pad_filter.turn_with_heading_below_m_s",
+            self.turn_with_heading_below_m_s,
+            0.0,
+            100.0,
+        )?;
         check_range(
             "pad_filter.initial_speed_sigma",
             self.initial_speed_sigma,

@@ -9,6 +9,10 @@
 //! about 0.17 m/s, enough to drift 10 cm in a touchdown's drop); constant acceleration
 //! alone is noisier on a cruising vehicle. The IMM weighs the two by how well each
 //! explains the observations (docs/fsm.md, "Pad motion filter").
+//! A vehicle's velocity turns with its heading: the heading filter's rate turns both
+//! horizontal models' velocity and acceleration at each prediction (a coordinated turn
+//! whose rate is measured, not guessed), so a curve or a lane change is followed without
+//! the Cartesian models' lag (docs/fsm.md, "Turning with the heading").
 //! Observations arrive late (camera exposure, detection, IPC); the filter runs on capture
 //! times and only the estimate is extrapolated to the caller's clock, which is what
 //! compensates each observation's age.
@@ -186,6 +190,24 @@ impl ImmAxis {
     }
 }
 
+/// Turns both models' horizontal velocity and acceleration by `angle` (rad, about up):
+/// the pad's velocity follows its heading. The covariances are left as they are: they are
+/// nearly the same on both axes, so a rotation hardly changes them.
+fn turn(xy: &mut [ImmAxis; 2], angle: f64) {
+    if angle == 0.0 || !angle.is_finite() {
+        return;
+    }
+    let (s, c) = angle.sin_cos();
+    let [ex, ny] = xy;
+    for j in 0..2 {
+        for k in 1..3 {
+            let (a, b) = (ex.x[j][k], ny.x[j][k]);
+            ex.x[j][k] = c * a - s * b;
+            ny.x[j][k] = s * a + c * b;
+        }
+    }
+}
+
 /// What became of one observation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Update {
@@ -213,11 +235,12 @@ pub struct PadEstimate {
     pub yaw: f64,
     /// Heading rate, rad/s.
     pub yaw_rate: f64,
-    /// Horizontal acceleration, m/s^2 (the models' weighted mean: near zero while the
-    /// vehicle cruises).
+    /// Horizontal acceleration, m/s^2 (the models' weighted mean, near zero while the
+    /// vehicle cruises, plus the turn of the velocity at the heading rate).
     pub acceleration: Vector3<f64>,
-    /// Horizontal acceleration by the manoeuvring model alone, m/s^2: it sees a braking
-    /// begin within a few frames, where the weighted mean takes twice as long.
+    /// Horizontal acceleration by the manoeuvring model alone (plus the turn), m/s^2: it
+    /// sees a braking begin within a few frames, where the weighted mean takes twice as
+    /// long.
     pub manoeuvre_acceleration: Vector3<f64>,
     /// 1-sigma position uncertainty per axis, m.
     pub position_sigma: Vector3<f64>,
@@ -245,6 +268,9 @@ pub struct PadFilter {
     /// East and north (IMM), and up (constant velocity).
     axes: Option<([ImmAxis; 2], Axis)>,
     yaw: Axis,
+    /// Whether the heading was measured since the last start (a filter started without
+    /// one has a heading rate of nothing).
+    heading_seen: bool,
     /// Capture time the state refers to, ns.
     t_ns: u64,
     updates: u32,
@@ -282,6 +308,7 @@ impl PadFilter {
             cfg,
             axes: None,
             yaw: Axis::new(0.0, 1.0, 1.0),
+            heading_seen: false,
             t_ns: 0,
             updates: 0,
             rejects_in_row: 0,
@@ -301,13 +328,13 @@ impl PadFilter {
 
     /// Takes in `obs`, received at `now_ns` (same clock as its capture time).
     pub fn update(&mut self, now_ns: u64, obs: &PadObservation) -> Update {
-        let Some((z, r, yaw)) = self.measurement(now_ns, obs) else {
+        let Some((z, r, yaw_seen)) = self.measurement(now_ns, obs) else {
             self.counters.dropped += 1;
             return Update::Dropped;
         };
         let t = obs.msg.capture_ns.min(now_ns);
         let Some(axes) = self.axes else {
-            self.start(t, &z, r, yaw);
+            self.start(t, &z, r, yaw_seen);
             return Update::Started;
         };
         if t < self.t_ns {
@@ -318,9 +345,9 @@ impl PadFilter {
         let dt = (t - self.t_ns) as f64 * 1e-9;
         let noise = self.imm_noise();
         let (mut xy, mut up) = axes;
-        for a in &mut xy {
-            a.predict(dt, &noise);
-        }
+        let mut yaw = self.yaw;
+        yaw.predict(dt, self.cfg.yaw_accel_noise.powi(2));
+        self.predict_xy(&mut xy, dt, yaw.v, &noise);
         up.predict(dt, self.cfg.accel_noise_z.powi(2));
         let innovations = [
             xy[0].innovation(z.x, r),
@@ -332,7 +359,7 @@ impl PadFilter {
             self.rejects_in_row += 1;
             if self.rejects_in_row >= self.cfg.max_rejects {
                 self.counters.restarts += 1;
-                self.start(t, &z, r, yaw);
+                self.start(t, &z, r, yaw_seen);
                 return Update::Restarted;
             }
             self.counters.rejected += 1;
@@ -344,14 +371,15 @@ impl PadFilter {
         let (e, s) = innovations[2];
         up.update(e, s);
         self.axes = Some((xy, up));
-        self.yaw.predict(dt, self.cfg.yaw_accel_noise.powi(2));
-        if let Some(y) = yaw {
+        self.yaw = yaw;
+        if let Some(y) = yaw_seen {
             let (e, s) = self.yaw.innovation(y, self.cfg.sigma_yaw_rad.powi(2));
             let e = wrap(e);
             // A heading jump beyond 3 sigma (a marker misread) moves only the position.
             if e * e / s <= 9.0 {
                 self.yaw.update(e, s);
                 self.yaw.x = wrap(self.yaw.x);
+                self.heading_seen = true;
             }
         }
         self.t_ns = t;
@@ -376,15 +404,15 @@ impl PadFilter {
         let dt_v = dt - dt_a;
         let (mut xy, mut up) = axes;
         let noise = self.imm_noise();
+        if dt_a > 0.0 {
+            self.predict_xy(&mut xy, dt_a, self.yaw.v, &noise);
+        }
         let mut p = Vector3::zeros();
         let mut v = Vector3::zeros();
         let mut acc = Vector3::zeros();
         let mut manoeuvre_acc = Vector3::zeros();
         let mut sigma = Vector3::zeros();
-        for (k, a) in xy.iter_mut().enumerate() {
-            if dt_a > 0.0 {
-                a.predict(dt_a, &noise);
-            }
+        for (k, a) in xy.iter().enumerate() {
             let (x, cov) = a.combined();
             p[k] = x[0] + x[1] * dt_v;
             v[k] = x[1];
@@ -392,6 +420,12 @@ impl PadFilter {
             manoeuvre_acc[k] = a.x[1][2];
             sigma[k] = (cov[(0, 0)] + cov[(1, 1)] * dt_v * dt_v).max(0.0).sqrt();
         }
+        // The turn of the velocity is an acceleration as well, across it: a curve is a
+        // manoeuvre to wait out as a braking is.
+        let w = self.turn_rate(&xy, self.yaw.v);
+        let pull = Vector3::new(-v.y, v.x, 0.0) * w;
+        acc += pull;
+        manoeuvre_acc += pull;
         up.predict(dt, self.cfg.accel_noise_z.powi(2));
         p.z = up.x;
         v.z = up.v;
@@ -417,6 +451,29 @@ impl PadFilter {
             .all(|x| x.is_finite())
             && est.yaw.is_finite();
         finite.then_some(est)
+    }
+
+    /// Both horizontal models predicted over `dt`, their velocity turned at `yaw_rate`
+    /// (half before, half after: the position moves along the arc's chord). Only a heading
+    /// that was measured turns them, and only below `turn_with_heading_below_m_s`.
+    fn predict_xy(&self, xy: &mut [ImmAxis; 2], dt: f64, yaw_rate: f64, noise: &ImmNoise) {
+        let angle = self.turn_rate(xy, yaw_rate) * dt;
+        turn(xy, 0.5 * angle);
+        for a in xy.iter_mut() {
+            a.predict(dt, noise);
+        }
+        turn(xy, 0.5 * angle);
+    }
+
+    /// The rate the models' velocity turns at: the heading's `yaw_rate` once a heading was
+    /// measured and below `turn_with_heading_below_m_s`, else 0.
+    fn turn_rate(&self, xy: &[ImmAxis; 2], yaw_rate: f64) -> f64 {
+        let speed = xy[0].combined().0[1].hypot(xy[1].combined().0[1]);
+        if self.heading_seen && speed < self.cfg.turn_with_heading_below_m_s {
+            yaw_rate
+        } else {
+            0.0
+        }
     }
 
     fn imm_noise(&self) -> ImmNoise {
@@ -459,6 +516,7 @@ impl PadFilter {
             if yaw.is_some() { 0.01 } else { 10.0 },
             1.0,
         );
+        self.heading_seen = yaw.is_some();
         self.t_ns = t;
         self.updates = 1;
         self.rejects_in_row = 0;
