@@ -128,12 +128,13 @@ pub struct FsmConfig {
     /// Descend and Land, below the chase speed: the airframe's horizontal drag per
     /// m/s of airspeed over its mass, 1/s (PX4's multirotor drag coefficient,
     /// EKF2_BCOEF-like, identified from a log: the steady lean at a known speed). The
-    /// change of the drag since the descent began (the pad's velocity then
-    /// against now, forgotten over [`DRAG_MEMORY_S`]) is fed forward: PX4's velocity
-    /// integrator holds the drag the vehicle flew with, wind and all, and lags it as a
-    /// turn swings it round (8 cm behind the pad and 6 outside on paper-turn's 3 m circle).
-    /// 0 = none, the default: it takes paper-turn's trailing out but costs the other
-    /// scenarios a little (docs/fsm.md, "The drag's swing in a turn").
+    /// swing of the drag's direction since the descent began (the pad's velocity now
+    /// against its direction then, forgotten over [`DRAG_MEMORY_S`], at the speed now) is
+    /// fed forward: PX4's velocity integrator holds the drag the vehicle flew with, wind
+    /// and all, and lags it as a turn swings it round (8 cm behind the pad and 6 outside
+    /// on paper-turn's 3 m circle). 0 = none, the default here: an airframe's own value
+    /// belongs in its file (deploy/config/landing.toml sets the simulator's, 0.233;
+    /// docs/fsm.md, "The drag's swing in a turn").
     ///
     /// [`DRAG_MEMORY_S`]: crate::mission::DRAG_MEMORY_S
     pub drag_per_s: f64,

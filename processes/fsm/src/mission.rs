@@ -1759,10 +1759,14 @@ impl Fsm {
         } else {
             Vector3::zeros()
         };
-        // The drag's change since the descent began: PX4's integrator holds the old.
+        // The drag's change since the descent began: PX4's integrator holds the old. Only
+        // the swing of its direction, at the speed now (a turn): the speed's wander comes
+        // and goes faster than the integrator's memory, and fed forward as well it cost the
+        // straight roads what it gained the turn (docs/fsm.md).
         if let Some(r) = self.drag_ref {
-            let dv = Vector3::new(est.velocity.x - r.x, est.velocity.y - r.y, 0.0);
-            a += dv * self.cfg.drag_per_s;
+            let v = Vector3::new(est.velocity.x, est.velocity.y, 0.0);
+            let held = r.try_normalize(1e-3).map_or(v, |u| u * v.norm());
+            a += (v - held) * self.cfg.drag_per_s;
         }
         // Dropping, the vehicle only matches the pad's velocity: it was over the pad when
         // the drop began, and chasing the last centimetres now only adds sideways speed
