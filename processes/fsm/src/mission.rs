@@ -13,7 +13,7 @@ use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 
 use crate::config::FsmConfig;
 use crate::odometry::Odometry;
-use crate::pad_filter::{PadEstimate, PadFilter, Update, wrap};
+use crate::pad_filter::{PadEstimate, PadFilter, Update, turn_pull, wrap};
 use crate::relative::RelativeTrack;
 
 /// One transition, kept for the log and the tests.
@@ -1818,11 +1818,6 @@ fn pad_acceleration(est: &PadEstimate) -> Vector3<f64> {
 /// the chase and below it alike.
 fn turn_acceleration(est: &PadEstimate) -> Vector3<f64> {
     turn_pull(&est.velocity, est.yaw_rate)
-}
-
-/// The acceleration that turns velocity `v` at `w` rad/s (horizontal, toward the turn).
-fn turn_pull(v: &Vector3<f64>, w: f64) -> Vector3<f64> {
-    Vector3::new(-v.y, v.x, 0.0) * w
 }
 
 /// Where a pad at velocity `v` turning at `w` rad/s is after `t` s, relative to where it

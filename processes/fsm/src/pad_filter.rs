@@ -9,10 +9,11 @@
 //! about 0.17 m/s, enough to drift 10 cm in a touchdown's drop); constant acceleration
 //! alone is noisier on a cruising vehicle. The IMM weighs the two by how well each
 //! explains the observations (docs/fsm.md, "Pad motion filter").
-//! A vehicle's velocity turns with its heading: the heading filter's rate turns both
-//! horizontal models' velocity and acceleration at each prediction (a coordinated turn
-//! whose rate is measured, not guessed), so a curve or a lane change is followed without
-//! the Cartesian models' lag (docs/fsm.md, "Turning with the heading").
+//! A vehicle's velocity turns with its heading: with `turn_with_heading_below_m_s` set
+//! (off by default) the heading filter's rate turns both horizontal models' velocity and
+//! acceleration at each prediction (a coordinated turn whose rate is measured, not
+//! guessed), so a curve is followed without the Cartesian models' lag (docs/fsm.md,
+//! "Turning with the heading").
 //! Observations arrive late (camera exposure, detection, IPC); the filter runs on capture
 //! times and only the estimate is extrapolated to the caller's clock, which is what
 //! compensates each observation's age.
@@ -151,6 +152,11 @@ impl ImmAxis {
         self.mu = c;
     }
 
+    /// The models' weighted velocity (the combined state's, without its covariance).
+    fn velocity(&self) -> f64 {
+        self.x[0][1] * self.mu[0] + self.x[1][1] * self.mu[1]
+    }
+
     /// The models combined: state and covariance.
     fn combined(&self) -> (Vector3<f64>, Matrix3<f64>) {
         let x = self.x[0] * self.mu[0] + self.x[1] * self.mu[1];
@@ -206,6 +212,11 @@ fn turn(xy: &mut [ImmAxis; 2], angle: f64) {
             ny.x[j][k] = s * a + c * b;
         }
     }
+}
+
+/// The acceleration that turns velocity `v` at `w` rad/s (horizontal, toward the turn).
+pub(crate) fn turn_pull(v: &Vector3<f64>, w: f64) -> Vector3<f64> {
+    Vector3::new(-v.y, v.x, 0.0) * w
 }
 
 /// What became of one observation.
@@ -422,8 +433,7 @@ impl PadFilter {
         }
         // The turn of the velocity is an acceleration as well, across it: a curve is a
         // manoeuvre to wait out as a braking is.
-        let w = self.turn_rate(&xy, self.yaw.v);
-        let pull = Vector3::new(-v.y, v.x, 0.0) * w;
+        let pull = turn_pull(&v, self.turn_rate(v.xy().norm(), self.yaw.v));
         acc += pull;
         manoeuvre_acc += pull;
         up.predict(dt, self.cfg.accel_noise_z.powi(2));
@@ -457,7 +467,8 @@ impl PadFilter {
     /// (half before, half after: the position moves along the arc's chord). Only a heading
     /// that was measured turns them, and only below `turn_with_heading_below_m_s`.
     fn predict_xy(&self, xy: &mut [ImmAxis; 2], dt: f64, yaw_rate: f64, noise: &ImmNoise) {
-        let angle = self.turn_rate(xy, yaw_rate) * dt;
+        let speed = xy[0].velocity().hypot(xy[1].velocity());
+        let angle = self.turn_rate(speed, yaw_rate) * dt;
         turn(xy, 0.5 * angle);
         for a in xy.iter_mut() {
             a.predict(dt, noise);
@@ -465,10 +476,10 @@ impl PadFilter {
         turn(xy, 0.5 * angle);
     }
 
-    /// The rate the models' velocity turns at: the heading's `yaw_rate` once a heading was
-    /// measured and below `turn_with_heading_below_m_s`, else 0.
-    fn turn_rate(&self, xy: &[ImmAxis; 2], yaw_rate: f64) -> f64 {
-        let speed = xy[0].combined().0[1].hypot(xy[1].combined().0[1]);
+    /// The rate the models' velocity turns at, for a pad at `speed`: the heading's
+    /// `yaw_rate` once a heading was measured and below `turn_with_heading_below_m_s`,
+    /// else 0.
+    fn turn_rate(&self, speed: f64, yaw_rate: f64) -> f64 {
         if self.heading_seen && speed < self.cfg.turn_with_heading_below_m_s {
             yaw_rate
         } else {
