@@ -108,9 +108,13 @@ pub struct FsmConfig {
     /// drops at once if it is low and was aligned, else goes around: the filter's
     /// extrapolation is no pad to land on.
     pub land_max_pad_age_s: f64,
-    /// Descend and Land: velocity added per metre of horizontal error over the pad, 1/s,
-    /// on top of the autopilot's own position gain (0 = the autopilot's alone).
+    /// Descend and Land below the chase speed: velocity added per metre of horizontal
+    /// error over the pad, 1/s, on top of the autopilot's own position gain (0 = the
+    /// autopilot's alone). The vehicle trails a pad changing speed by the acceleration the
+    /// feed-forward misses over the loop's stiffness; this is the stiffness we own.
     pub relative_gain: f64,
+    /// The same above the chase speed, 1/s: the highspeed scenarios were flown at 1.0.
+    pub chase_relative_gain: f64,
     /// Land: acceleration feed-forward per m/s of horizontal velocity error (the
     /// pad-relative velocity wanted minus the vehicle's), 1/s. PX4's velocity loop alone
     /// (MPC_XY_VEL_P_ACC 1.8) lets a 0.2 m/s error stand for half a second, long enough to
@@ -346,7 +350,8 @@ impl Default for FsmConfig {
             flare_quiet_s: 0.5,
             pad_accel_gain: 1.0,
             land_max_pad_age_s: 0.4,
-            relative_gain: 1.0,
+            relative_gain: 2.0,
+            chase_relative_gain: 1.0,
             relative_velocity_gain: 2.0,
             relative_velocity_from_camera: true,
             drag_per_s: 0.0,
@@ -546,6 +551,7 @@ impl Validate for FsmConfig {
             ("pad_accel_gain", self.pad_accel_gain, 0.0, 1.0),
             ("drag_per_s", self.drag_per_s, 0.0, 5.0),
             ("relative_gain", self.relative_gain, 0.0, 10.0),
+            ("chase_relative_gain", self.chase_relative_gain, 0.0, 10.0),
             (
                 "relative_velocity_gain",
                 self.relative_velocity_gain,

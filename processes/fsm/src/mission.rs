@@ -1731,9 +1731,9 @@ impl Fsm {
     }
 
     /// Over the pad at height `z`, moving with it (velocity feed-forward), `vz` down.
-    /// Descending, the horizontal error also feeds the velocity (`relative_gain`): the
-    /// autopilot's own position gain alone lets a gust carry the vehicle off while it
-    /// descends.
+    /// Descending, the horizontal error also feeds the velocity (`relative_gain`, chasing
+    /// `chase_relative_gain`): the autopilot's own position gain alone lets a gust carry
+    /// the vehicle off while it descends, and trails a pad that speeds up.
     fn pad_setpoint(&self, now_ns: u64, est: &PadEstimate, z: f64, vz: f64) -> Setpoint {
         let p = Vector3::new(est.position.x, est.position.y, z);
         let mut v = Vector3::new(est.velocity.x, est.velocity.y, est.velocity.z + vz);
@@ -1775,8 +1775,13 @@ impl Fsm {
             && !self.dropping
             && let Some(u) = self.position()
         {
-            v.x += self.cfg.relative_gain * (est.position.x - u.x);
-            v.y += self.cfg.relative_gain * (est.position.y - u.y);
+            let gain = if self.chasing(&est.velocity) {
+                self.cfg.chase_relative_gain
+            } else {
+                self.cfg.relative_gain
+            };
+            v.x += gain * (est.position.x - u.x);
+            v.y += gain * (est.position.y - u.y);
         }
         // The touchdown only: higher up, the pad estimate's noise through this feedback
         // set the descent oscillating (paper-sim seed 3 at 3 m, +-0.8 m/s).
