@@ -111,7 +111,7 @@ pub struct FsmConfig {
     /// Descend and Land below the chase speed: velocity added per metre of horizontal
     /// error over the pad, 1/s, on top of the autopilot's own position gain (0 = the
     /// autopilot's alone). The vehicle trails a pad changing speed by the acceleration the
-    /// feed-forward misses over the loop's stiffness; this is the stiffness we own.
+    /// feed-forward misses over the loop's stiffness; this is the part of it the fsm owns.
     pub relative_gain: f64,
     /// The same above the chase speed, 1/s: the highspeed scenarios were flown at 1.0.
     pub chase_relative_gain: f64,
