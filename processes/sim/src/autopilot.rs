@@ -657,10 +657,17 @@ impl Autopilot {
         acc_limited.z =
             (acc_sp.z - integral_z).clamp(-p.mpc_acc_down_max, p.mpc_acc_up_max) + integral_z;
 
-        // Acceleration -> thrust vector (PX4 _accelerationControl).
+        // Acceleration -> thrust vector (PX4 _accelerationControl). Decoupled
+        // (MPC_ACC_DECOUPLE 1, PX4's default), the tilt is set against gravity alone: a
+        // downward acceleration lowers the collective and the horizontal thrust with it.
         let hover = self.hover_thrust;
         self.last_acceleration_z = acc_limited.z;
-        let mut body_z = Vector3::new(acc_limited.x, acc_limited.y, GRAVITY_M_S2 + acc_limited.z);
+        let z_specific_force = if p.mpc_acc_decouple == 1 {
+            GRAVITY_M_S2
+        } else {
+            GRAVITY_M_S2 + acc_limited.z
+        };
+        let mut body_z = Vector3::new(acc_limited.x, acc_limited.y, z_specific_force);
         body_z = if body_z.norm() > 1e-6 {
             body_z.normalize()
         } else {

@@ -106,6 +106,13 @@ pub struct AutopilotParams {
     /// 1: the position controller uses the hover thrust estimate once it is valid
     /// instead of MPC_THR_HOVER; 0: MPC_THR_HOVER only (PX4 default 1).
     pub mpc_use_hte: u8,
+    /// 1: the tilt comes from the horizontal acceleration against gravity alone, so a
+    /// descent's downward acceleration takes horizontal thrust away with the collective;
+    /// 0: the tilt includes the vertical acceleration and the horizontal thrust is kept
+    /// (PX4 MPC_ACC_DECOUPLE). PX4's default is 1; here it is 0, the value the stack
+    /// asks a vehicle's PX4 for (deploy/README.md), and the one this autopilot has
+    /// always flown.
+    pub mpc_acc_decouple: u8,
     /// Hover thrust process noise, normalized thrust per s (PX4 HTE_HT_NOISE, 0.0036).
     pub hte_ht_noise: f64,
     /// Innovation gate of the acceleration fusion, standard deviations (PX4 HTE_ACC_GATE, 3).
@@ -219,6 +226,7 @@ impl AutopilotParams {
             mc_yr_int_lim: 0.3,
             imu_dgyro_cutoff: 30.0,
             mpc_use_hte: 1,
+            mpc_acc_decouple: 0,
             hte_ht_noise: 0.0036,
             hte_acc_gate: 3.0,
             hte_ht_err_init: 0.1,
@@ -314,6 +322,13 @@ impl AutopilotParams {
                 "MPC_USE_HTE",
                 self.mpc_use_hte,
                 "must be 0 (MPC_THR_HOVER only) or 1 (hover thrust estimate)",
+            ));
+        }
+        if self.mpc_acc_decouple > 1 {
+            return Err(ParamError::new(
+                "MPC_ACC_DECOUPLE",
+                self.mpc_acc_decouple,
+                "must be 0 (tilt from the whole acceleration) or 1 (tilt against gravity alone)",
             ));
         }
         if !(self.mpc_thr_hover.is_finite()

@@ -281,3 +281,34 @@ fn extreme_but_finite_inputs_stay_within_limits() {
         assert_all_finite(&out);
     }
 }
+
+#[test]
+fn a_decoupled_tilt_sheds_horizontal_thrust_while_accelerating_down() {
+    // PX4's MPC_ACC_DECOUPLE: 1 (its default) sets the tilt against gravity alone, so
+    // the collective's cut for a descent cuts the horizontal thrust by the same share;
+    // 0 tilts further and keeps it. In wind, a drop onto the pad drifts downwind with 1.
+    let horizontal = |decouple: u8| {
+        let params = AutopilotParams {
+            mpc_acc_decouple: decouple,
+            ..AutopilotParams::default()
+        };
+        let mut ap = Autopilot::new(params).unwrap();
+        ap.place(true);
+        let sp = Setpoint {
+            velocity: [Some(1.0), Some(0.0), Some(-1.5)],
+            ..Setpoint::default()
+        };
+        let out = ap.update(0.002, &level_state(Vector3::new(0.0, 0.0, 2.0)), &sp);
+        let a = out.acceleration_setpoint;
+        (out.thrust_setpoint.xy().norm(), a.z)
+    };
+    let (kept, az) = horizontal(0);
+    let (shed, _) = horizontal(1);
+    assert!(az < -1.0, "the descent asks {az} m/s^2");
+    let share = 1.0 + az / GRAVITY_M_S2;
+    assert!(
+        (shed / kept - share).abs() < 0.02,
+        "decoupled {shed:.4}, coupled {kept:.4}: {:.3} of it, the collective's share {share:.3}",
+        shed / kept
+    );
+}

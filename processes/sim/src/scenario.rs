@@ -533,7 +533,8 @@ impl TouchdownLimits {
     }
 }
 
-/// PX4 speed, acceleration and tilt limits; absent ones keep PX4's defaults.
+/// PX4 speed, acceleration and tilt limits, and how the tilt is coupled to the vertical
+/// acceleration; absent ones keep PX4's defaults.
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "SCREAMING_SNAKE_CASE")]
 pub struct Limits {
@@ -551,6 +552,11 @@ pub struct Limits {
     pub mpc_acc_down_max: Option<f64>,
     /// Tilt limit in flight, deg.
     pub mpc_tiltmax_air: Option<f64>,
+    /// The tilt from the whole acceleration (0, the simulator's default and what the
+    /// stack asks for) or against gravity alone (1, PX4's default): decoupled, a
+    /// descent's downward acceleration takes horizontal thrust away, and in wind the
+    /// vehicle drifts downwind as it drops onto the pad.
+    pub mpc_acc_decouple: Option<u8>,
 }
 
 impl Limits {
@@ -567,6 +573,9 @@ impl Limits {
         set(&mut a.mpc_acc_up_max, self.mpc_acc_up_max);
         set(&mut a.mpc_acc_down_max, self.mpc_acc_down_max);
         set(&mut a.mpc_tiltmax_air, self.mpc_tiltmax_air);
+        if let Some(v) = self.mpc_acc_decouple {
+            a.mpc_acc_decouple = v;
+        }
     }
 }
 

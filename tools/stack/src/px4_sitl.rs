@@ -71,6 +71,9 @@ impl Px4Sitl {
             // 4 s after arming, where the outdoor scenarios' pad vehicle drives past
             // (the built-in autopilot ends its ramp at lift-off).
             ("MPC_TKO_RAMP_T", "0.5".into()),
+            // The tilt from the whole acceleration: with PX4's default 1 the drop onto
+            // the pad sheds horizontal thrust and drifts downwind (deploy/README.md).
+            ("MPC_ACC_DECOUPLE", "0".into()),
             // No RC on this vehicle: no stick input, no RC-loss failsafe to trip.
             ("COM_RC_IN_MODE", "4".into()),
             ("NAV_RCL_ACT", "0".into()),
