@@ -1735,6 +1735,7 @@ impl Fsm {
     /// `chase_relative_gain`): the autopilot's own position gain alone lets a gust carry
     /// the vehicle off while it descends, and trails a pad that speeds up.
     fn pad_setpoint(&self, now_ns: u64, est: &PadEstimate, z: f64, vz: f64) -> Setpoint {
+        let chasing = self.chasing(&est.velocity);
         let p = Vector3::new(est.position.x, est.position.y, z);
         let mut v = Vector3::new(est.velocity.x, est.velocity.y, est.velocity.z + vz);
         v += Rotation3::from_axis_angle(&Vector3::z_axis(), est.yaw) * self.chase_trim;
@@ -1749,7 +1750,7 @@ impl Fsm {
         // fed forward, or the vehicle trails outside the curve by the distance the
         // autopilot's position and velocity gains need to make it (0.7 m at 30 km/h on a
         // 60 m radius).
-        let mut a = if self.chasing(&est.velocity) {
+        let mut a = if chasing {
             self.chase_turn
         } else if matches!(self.state, MissionState::Descend | MissionState::Land) {
             // A braking, a lane change or a turn fed forward: PX4's velocity loop trails a
@@ -1764,9 +1765,9 @@ impl Fsm {
         // and goes faster than the integrator's memory, and fed forward as well it cost the
         // straight roads what it gained the turn (docs/fsm.md).
         if let Some(r) = self.drag_ref {
-            let v = Vector3::new(est.velocity.x, est.velocity.y, 0.0);
-            let held = r.try_normalize(1e-3).map_or(v, |u| u * v.norm());
-            a += (v - held) * self.cfg.drag_per_s;
+            let pad_v = Vector3::new(est.velocity.x, est.velocity.y, 0.0);
+            let held = r.try_normalize(1e-3).map_or(pad_v, |u| u * pad_v.norm());
+            a += (pad_v - held) * self.cfg.drag_per_s;
         }
         // Dropping, the vehicle only matches the pad's velocity: it was over the pad when
         // the drop began, and chasing the last centimetres now only adds sideways speed
@@ -1775,7 +1776,7 @@ impl Fsm {
             && !self.dropping
             && let Some(u) = self.position()
         {
-            let gain = if self.chasing(&est.velocity) {
+            let gain = if chasing {
                 self.cfg.chase_relative_gain
             } else {
                 self.cfg.relative_gain
@@ -1788,7 +1789,7 @@ impl Fsm {
         if self.state == MissionState::Land {
             // The pad's velocity relative to the vehicle, plus what the setpoint adds to
             // the pad's own (the pull toward its centre, the trim).
-            let camera = self.cfg.relative_velocity_from_camera && !self.chasing(&est.velocity);
+            let camera = self.cfg.relative_velocity_from_camera && !chasing;
             let relative = match self.relative.velocity(now_ns) {
                 Some(u) if camera => u + (v - est.velocity),
                 _ => v - self.velocity(),
