@@ -115,6 +115,10 @@ pub struct FsmConfig {
     pub relative_gain: f64,
     /// The same above the chase speed, 1/s: the highspeed scenarios were flown at 1.0.
     pub chase_relative_gain: f64,
+    /// The same through the drop, below the chase speed, 1/s (0 = the vehicle only matches
+    /// the pad's velocity once the drop has begun): the wind carries a falling vehicle off
+    /// while its lean catches up with the thrust the drop takes away.
+    pub drop_relative_gain: f64,
     /// Land: acceleration feed-forward per m/s of horizontal velocity error (the
     /// pad-relative velocity wanted minus the vehicle's), 1/s. PX4's velocity loop alone
     /// (MPC_XY_VEL_P_ACC 1.8) lets a 0.2 m/s error stand for half a second, long enough to
@@ -352,6 +356,7 @@ impl Default for FsmConfig {
             land_max_pad_age_s: 0.4,
             relative_gain: 2.0,
             chase_relative_gain: 1.0,
+            drop_relative_gain: 2.0,
             relative_velocity_gain: 2.0,
             relative_velocity_from_camera: true,
             drag_per_s: 0.0,
@@ -552,6 +557,7 @@ impl Validate for FsmConfig {
             ("drag_per_s", self.drag_per_s, 0.0, 5.0),
             ("relative_gain", self.relative_gain, 0.0, 10.0),
             ("chase_relative_gain", self.chase_relative_gain, 0.0, 10.0),
+            ("drop_relative_gain", self.drop_relative_gain, 0.0, 10.0),
             (
                 "relative_velocity_gain",
                 self.relative_velocity_gain,

@@ -1773,13 +1773,13 @@ impl Fsm {
         // the drop began, and chasing the last centimetres now only adds sideways speed
         // at contact.
         if matches!(self.state, MissionState::Descend | MissionState::Land)
-            && !self.dropping
             && let Some(u) = self.position()
         {
-            let gain = if chasing {
-                self.cfg.chase_relative_gain
-            } else {
-                self.cfg.relative_gain
+            let gain = match (chasing, self.dropping) {
+                (true, false) => self.cfg.chase_relative_gain,
+                (true, true) => 0.0,
+                (false, false) => self.cfg.relative_gain,
+                (false, true) => self.cfg.drop_relative_gain,
             };
             v.x += gain * (est.position.x - u.x);
             v.y += gain * (est.position.y - u.y);
