@@ -1769,9 +1769,10 @@ impl Fsm {
             let held = r.try_normalize(1e-3).map_or(pad_v, |u| u * pad_v.norm());
             a += (pad_v - held) * self.cfg.drag_per_s;
         }
-        // Dropping, the vehicle only matches the pad's velocity: it was over the pad when
-        // the drop began, and chasing the last centimetres now only adds sideways speed
-        // at contact.
+        // Dropping, the pull keeps working below the chase speed (`drop_relative_gain`):
+        // as the drop takes thrust away the lean against the wind lags, and the fall
+        // drifted 1-2 cm downwind. Chasing, the vehicle only matches the pad's velocity:
+        // at 30 km/h the last centimetres chased only add sideways speed at contact.
         if matches!(self.state, MissionState::Descend | MissionState::Land)
             && let Some(u) = self.position()
         {
