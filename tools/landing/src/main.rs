@@ -15,6 +15,7 @@ mod plot_cmd;
 mod replay_cmd;
 mod run_cmd;
 mod status_cmd;
+mod touchdown_cmd;
 
 use benches::{
     aruco as bench_aruco, depth as bench_depth, faults as bench_faults, ipc as bench_ipc,
@@ -142,6 +143,11 @@ enum McapCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Take a recorded touchdown apart against the simulator's truth (FILE.truth.mcap
+    /// beside it): the offset over the pad when the drop began, how much of it the stack
+    /// could not see, the velocity and lean it dropped with, and what the fall added. Exit
+    /// code 1 without a truth file, a touchdown or a drop (docs/recording.md).
+    Touchdown(touchdown_cmd::TouchdownArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -293,6 +299,7 @@ fn main() -> ExitCode {
             other => other.map(|_| ()),
         },
         Command::Mcap(McapCommand::Info { file, json }) => mcap_info(&file, json),
+        Command::Mcap(McapCommand::Touchdown(args)) => touchdown_cmd::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Latency(args) => latency_cmd::run(&args, cli.ipc_prefix.as_deref()),
         Command::Replay(args) => match replay_cmd::run(&args) {

@@ -424,3 +424,67 @@ fn replaying_the_planner_reproduces_every_trajectory_in_lockstep_and_in_processe
         assert_eq!(v["replayed"], v["recorded"], "{v}");
     }
 }
+
+#[test]
+fn a_recorded_touchdown_is_taken_apart_into_the_offset_at_the_drop_and_the_fall() {
+    let path = recording();
+    let o = landing(&["mcap", "touchdown", "--json", path.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let num = |k: &str| v[k].as_f64().unwrap_or_else(|| panic!("{k}: {v}"));
+    let pair = |k: &str| [v[k][0].as_f64().unwrap(), v[k][1].as_f64().unwrap()];
+    // The flare is 0.25 m over the pad and the drop falls at 0.8 m/s (landing.toml).
+    let (height, lead) = (num("drop_height_m"), num("drop_lead_s"));
+    assert!(
+        (0.1..0.45).contains(&height),
+        "dropped from {height} m: {v}"
+    );
+    assert!(
+        (0.15..1.0).contains(&lead),
+        "dropped {lead} s before contact: {v}"
+    );
+    // paper-sim's pad drives at 3.24 km/h.
+    assert!((num("pad_speed_m_s") - 0.9).abs() < 0.2, "{v}");
+    // The truth's state at contact and the referee's touchdown point agree.
+    let norm = |p: [f64; 2]| p[0].hypot(p[1]);
+    let (contact, referee) = (
+        norm(pair("offset_at_contact_m")),
+        norm(pair("touchdown_pad_m")),
+    );
+    assert!(
+        (contact - referee).abs() < 0.01,
+        "{contact} against {referee}: {v}"
+    );
+    // The drop's start plus the fall is the contact, and the stack read the offset at
+    // the drop within the camera's calibration residual (centimetres).
+    let (at_drop, drift, at_contact) = (
+        pair("offset_at_drop_m"),
+        pair("fall_drift_m"),
+        pair("offset_at_contact_m"),
+    );
+    for i in 0..2 {
+        assert!((at_drop[i] + drift[i] - at_contact[i]).abs() < 1e-9, "{v}");
+    }
+    assert!(norm(pair("read_error_at_drop_m")) < 0.05, "{v}");
+    assert!(norm(pair("lean_before_drop_m_s2")) < 2.0, "{v}");
+    // The table names its rows.
+    let o = landing(&["mcap", "touchdown", path.to_str().unwrap()]);
+    let table = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success() && table.contains("drift through the fall"),
+        "{table}"
+    );
+
+    // A real flight has no truth: one line says what is missing.
+    let alone = temp("touchdown-alone");
+    std::fs::create_dir_all(&alone).unwrap();
+    let copy = alone.join("flight.mcap");
+    std::fs::copy(&path, &copy).unwrap();
+    let o = landing(&["mcap", "touchdown", copy.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("flight.truth.mcap") && err.contains("--truth"),
+        "{err}"
+    );
+}

@@ -1,0 +1,205 @@
+//! `landing mcap touchdown run.mcap`: a recorded touchdown taken apart against the
+//! simulator's truth (`evaluation::touchdown`), to read a tail part by part: the offset
+//! the drop began from, how much of it the stack could not see, and what the fall added.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use evaluation::touchdown::{TouchdownAnatomy, TouchdownSeries, touchdown_anatomy};
+use fsm::FsmConfig;
+use ipc_types::topics;
+
+/// Arguments of `landing mcap touchdown`.
+#[derive(Debug, Args)]
+pub struct TouchdownArgs {
+    /// The recording (`landing run --record FILE.mcap`).
+    #[arg(value_name = "FILE.mcap")]
+    file: PathBuf,
+    /// The simulator's truth (default: FILE.truth.mcap beside the recording).
+    #[arg(long, value_name = "FILE.truth.mcap")]
+    truth: Option<PathBuf>,
+    /// Print the anatomy as one JSON object (metres, m/s, m/s^2).
+    #[arg(long)]
+    json: bool,
+}
+
+/// What the recording says about the run: its scenario and seed, and the fsm's rates.
+#[derive(Default)]
+struct About {
+    scenario: Option<String>,
+    seed: Option<String>,
+    config: Option<String>,
+}
+
+fn read(path: &Path, series: &mut TouchdownSeries, about: &mut About) -> Result<()> {
+    let summary = recorder::read_recording(path, |m| {
+        if m.encoding != "json" {
+            return Ok(());
+        }
+        let t = m.log_time;
+        match m.topic.trim_start_matches('/') {
+            topics::SIM_TRUTH_STATE => series.truth.push((t, m.decode()?)),
+            topics::SIM_TRUTH => series.events.push((t, m.decode()?)),
+            topics::FSM_SETPOINT => series.setpoints.push((t, m.decode()?)),
+            topics::VEHICLE_STATE => series.states.push((t, m.decode()?)),
+            _ => {}
+        }
+        Ok(())
+    })
+    .with_context(|| format!("reading {}", path.display()))?;
+    if let Some(b) = &summary.broken {
+        eprintln!("  {}: {b}", path.display());
+    }
+    if let Some(meta) = summary.metadata.get("landing") {
+        about.scenario = about.scenario.take().or(meta.get("scenario").cloned());
+        about.seed = about.seed.take().or(meta.get("seed").cloned());
+        about.config = about.config.take().or(meta.get("config").cloned());
+    }
+    Ok(())
+}
+
+/// The speed that tells the drop from the touchdown's descent: halfway between the
+/// recorded configuration's `[fsm] land_rate_m_s` and `drop_rate_m_s` (the defaults where
+/// the recording carries no configuration or leaves them out).
+fn drop_threshold(config: Option<&str>) -> f64 {
+    let d = FsmConfig::default();
+    let fsm = config
+        .and_then(|c| c.parse::<toml::Table>().ok())
+        .and_then(|t| t.get("fsm").and_then(|f| f.as_table()).cloned());
+    let rate = |key: &str, default: f64| {
+        fsm.as_ref()
+            .and_then(|f| f.get(key))
+            .and_then(|v| v.as_float().or(v.as_integer().map(|i| i as f64)))
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .unwrap_or(default)
+    };
+    0.5 * (rate("land_rate_m_s", d.land_rate_m_s) + rate("drop_rate_m_s", d.drop_rate_m_s))
+}
+
+/// Runs `landing mcap touchdown`.
+pub fn run(args: &TouchdownArgs) -> Result<()> {
+    let truth = args
+        .truth
+        .clone()
+        .unwrap_or_else(|| args.file.with_extension("truth.mcap"));
+    if !truth.exists() {
+        bail!(
+            "{}: no truth file; the anatomy needs the simulator's truth (`landing run --record` \
+             writes FILE.truth.mcap beside the recording; or name it with --truth)",
+            truth.display()
+        );
+    }
+    let mut series = TouchdownSeries::default();
+    let mut about = About::default();
+    read(&truth, &mut series, &mut about)?;
+    read(&args.file, &mut series, &mut about)?;
+    series.truth.sort_by_key(|(t, _)| *t);
+    series.events.sort_by_key(|(t, _)| *t);
+    series.setpoints.sort_by_key(|(t, _)| *t);
+    series.states.sort_by_key(|(t, _)| *t);
+    let threshold = drop_threshold(about.config.as_deref());
+    let a = touchdown_anatomy(&series, threshold)
+        .with_context(|| format!("{}", args.file.display()))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&a)?);
+    } else {
+        print!("{}", table(&a, &about));
+    }
+    Ok(())
+}
+
+/// The anatomy as a table: centimetres, cm/s, and the lean in m/s^2.
+fn table(a: &TouchdownAnatomy, about: &About) -> String {
+    let row = |v: [f64; 2], scale: f64, digits: usize| {
+        format!(
+            "{:7.digits$} {:7.digits$} {:7.digits$}",
+            v[0] * scale,
+            v[1] * scale,
+            v[0].hypot(v[1]) * scale
+        )
+    };
+    let run = match (&about.scenario, &about.seed) {
+        (Some(s), Some(n)) => format!("{s}, seed {n}"),
+        (Some(s), None) => s.clone(),
+        _ => "a recorded flight".into(),
+    };
+    let mut out = format!(
+        "touchdown of {run}: the drop began {:.2} m over the pad, {:.2} s before contact; \
+         the pad at {:.2} m/s\n",
+        a.drop_height_m, a.drop_lead_s, a.pad_speed_m_s
+    );
+    out += "x along the pad's velocity, y to its left        x       y     |xy|\n";
+    let rows: [(&str, [f64; 2], f64, usize, &str); 8] = [
+        (
+            "offset at the drop's start (truth)",
+            a.offset_at_drop_m,
+            100.0,
+            1,
+            "cm",
+        ),
+        (
+            "  as the stack read it",
+            a.offset_read_at_drop_m,
+            100.0,
+            1,
+            "cm",
+        ),
+        (
+            "  not seen (truth - read)",
+            a.read_error_at_drop_m,
+            100.0,
+            1,
+            "cm",
+        ),
+        (
+            "velocity over the pad at the drop",
+            a.rel_velocity_at_drop_m_s,
+            100.0,
+            1,
+            "cm/s",
+        ),
+        ("drift through the fall", a.fall_drift_m, 100.0, 1, "cm"),
+        (
+            "offset at contact (truth)",
+            a.offset_at_contact_m,
+            100.0,
+            1,
+            "cm",
+        ),
+        (
+            "touchdown, the pad's own frame",
+            a.touchdown_pad_m,
+            100.0,
+            1,
+            "cm",
+        ),
+        (
+            "lean held before the drop",
+            a.lean_before_drop_m_s2,
+            1.0,
+            2,
+            "m/s^2",
+        ),
+    ];
+    for (name, v, scale, digits, unit) in rows {
+        out += &format!("{name:<46}{} {unit}\n", row(v, scale, digits));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_drop_threshold_sits_between_the_recorded_rates() {
+        let c = "[fsm]\nland_rate_m_s = 0.5\ndrop_rate_m_s = 0.9\n";
+        assert!((drop_threshold(Some(c)) - 0.7).abs() < 1e-12);
+        let d = FsmConfig::default();
+        let mid = 0.5 * (d.land_rate_m_s + d.drop_rate_m_s);
+        assert_eq!(drop_threshold(None), mid);
+        assert_eq!(drop_threshold(Some("not toml [")), mid);
+        assert_eq!(drop_threshold(Some("[fsm]\ndrop_rate_m_s = -1.0\n")), mid);
+    }
+}
