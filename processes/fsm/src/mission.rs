@@ -1732,8 +1732,9 @@ impl Fsm {
 
     /// Over the pad at height `z`, moving with it (velocity feed-forward), `vz` down.
     /// Descending, the horizontal error also feeds the velocity (`relative_gain`, chasing
-    /// `chase_relative_gain`): the autopilot's own position gain alone lets a gust carry
-    /// the vehicle off while it descends, and trails a pad that speeds up.
+    /// `chase_relative_gain`, dropping below the chase speed `drop_relative_gain`): the
+    /// autopilot's own position gain alone lets a gust carry the vehicle off while it
+    /// descends, and trails a pad that speeds up.
     fn pad_setpoint(&self, now_ns: u64, est: &PadEstimate, z: f64, vz: f64) -> Setpoint {
         let chasing = self.chasing(&est.velocity);
         let p = Vector3::new(est.position.x, est.position.y, z);

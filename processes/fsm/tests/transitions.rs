@@ -1718,7 +1718,7 @@ fn a_drop_keeps_pulling_toward_the_pad_centre_against_the_wind() {
     // height, inside the drop's gate, and through the 0.4 s fall it carried it further.
     // Here 0.1 m/s lost to the wind over a slow pad: the flare holds it 2.5 cm off (the
     // world's position gain of 2 and the descent's relative gain of 2), and without the
-    // pull through the drop the fall drifts on toward 5 cm.
+    // pull through the drop the fall drifts on (3.7 cm off at contact).
     let slow_pad_in_wind = |drop_relative_gain: f64| {
         let mut cfg = config();
         cfg.drop_relative_gain = drop_relative_gain;

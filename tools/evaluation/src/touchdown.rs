@@ -7,7 +7,7 @@
 //! Offsets are in the road frame of the drop's start: x along the pad's velocity, y to
 //! its left (the world's axes when the pad is slower than [`ROAD_SPEED_MIN_M_S`]).
 
-use ipc_types::msg::{Setpoint, TruthEvent, TruthKind, TruthState, VehicleState};
+use ipc_types::msg::{FsmStatus, Setpoint, TruthEvent, TruthKind, TruthState, VehicleState};
 use serde::Serialize;
 
 /// Below this pad speed the road has no direction: the world's axes are used, m/s.
@@ -17,8 +17,9 @@ pub const ROAD_SPEED_MIN_M_S: f64 = 0.1;
 pub const DROP_SEARCH_S: f64 = 2.0;
 /// Over this long before the drop the held lean is averaged, s.
 const LEAN_WINDOW_S: f64 = 0.3;
-/// The longest a vehicle state is carried forward to a setpoint's time, s.
-const CARRY_MAX_S: f64 = 0.2;
+/// The longest a vehicle state is carried forward to a setpoint's time, s: the fsm's own
+/// bound (processes/fsm/src/mission.rs).
+const CARRY_MAX_S: f64 = 1.0;
 const G: f64 = 9.80665;
 
 /// A touchdown taken apart (see the module's docs for the frame). Metres, m/s, m/s^2.
@@ -32,8 +33,9 @@ pub struct TouchdownAnatomy {
     pub pad_speed_m_s: f64,
     /// The vehicle's offset from the pad's centre when the drop began (truth).
     pub offset_at_drop_m: [f64; 2],
-    /// The same offset as the stack read it: its estimated position (carried to the
-    /// setpoint's time) minus the pad's estimate the setpoint steered to.
+    /// The same offset as the stack read it: its estimated position (carried from its
+    /// stamp to the setpoint's log time, as the fsm carries it to now) minus the pad's
+    /// estimate the setpoint steered to.
     pub offset_read_at_drop_m: [f64; 2],
     /// Truth minus what the stack read: the camera's calibration residual and the
     /// estimate's error, which no loop over the pad can see.
@@ -55,13 +57,23 @@ pub struct TouchdownAnatomy {
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum AnatomyError {
     /// The truth has no touchdown event.
-    #[error("no touchdown in the truth: the vehicle never came down on the pad")]
+    #[error("no touchdown in the truth: the vehicle never came to rest on a surface")]
     NoTouchdown,
     /// No setpoint descended at the drop's rate before the contact.
     #[error(
-        "no drop in the {DROP_SEARCH_S} s before the touchdown: no setpoint descending faster than {0} m/s"
+        "no drop in the {DROP_SEARCH_S} s before the touchdown: no setpoint descending faster than {0} m/s relative to the pad"
     )]
     NoDrop(f64),
+    /// The drop's rate is not above the touchdown's: the two cannot be told apart.
+    #[error(
+        "[fsm] drop_rate_m_s {drop} is not above land_rate_m_s {land}: the drop cannot be told from the descent"
+    )]
+    Rates {
+        /// The touchdown's descent rate, m/s.
+        land: f64,
+        /// The drop's, m/s.
+        drop: f64,
+    },
     /// A series the anatomy needs is empty around the drop.
     #[error("no {0} before the drop")]
     Missing(&'static str),
@@ -78,33 +90,53 @@ pub struct TouchdownSeries {
     pub setpoints: Vec<(u64, Setpoint)>,
     /// The autopilot's estimated states (`vehicle/state`).
     pub states: Vec<(u64, VehicleState)>,
+    /// The fsm's statuses (`fsm/status`): the pad's estimated vertical velocity, which
+    /// the setpoint's descent rides on.
+    pub statuses: Vec<(u64, FsmStatus)>,
 }
 
 /// Takes the first touchdown of `s` apart. The drop began at the first setpoint, within
-/// [`DROP_SEARCH_S`] before the contact, that descends faster than `drop_below_m_s` (m/s,
-/// positive): between the touchdown's rate and the drop's, `[fsm] land_rate_m_s` and
-/// `drop_rate_m_s`.
+/// [`DROP_SEARCH_S`] before the contact, that descends faster than halfway between the
+/// touchdown's rate `land_m_s` and the drop's `drop_m_s` (`[fsm] land_rate_m_s` and
+/// `drop_rate_m_s`), relative to the pad's estimated vertical velocity.
 pub fn touchdown_anatomy(
     s: &TouchdownSeries,
-    drop_below_m_s: f64,
+    land_m_s: f64,
+    drop_m_s: f64,
 ) -> Result<TouchdownAnatomy, AnatomyError> {
+    // Also refuses a rate that is not a number.
+    let separable = drop_m_s > land_m_s;
+    if !separable {
+        return Err(AnatomyError::Rates {
+            land: land_m_s,
+            drop: drop_m_s,
+        });
+    }
+    let threshold = 0.5 * (land_m_s + drop_m_s);
     let (contact_t, event) = s
         .events
         .iter()
         .find(|(_, e)| e.kind == TruthKind::Touchdown as u32)
         .ok_or(AnatomyError::NoTouchdown)?;
     let search_from = contact_t.saturating_sub((DROP_SEARCH_S * 1e9) as u64);
-    let (drop_t, _) = s
+    // The setpoint's descent is the pad's estimated vertical velocity plus the rate asked
+    // for (and never below the rate alone): the smaller of the two readings is the rate.
+    let descent = |t: u64, sp: &Setpoint| {
+        let pad_vz = latest(&s.statuses, t).map_or(0.0, |st| st.pad_velocity[2]);
+        let vz = sp.velocity[2];
+        let relative = if pad_vz.is_finite() { vz - pad_vz } else { vz };
+        -vz.min(relative)
+    };
+    let (drop_t, setpoint) = s
         .setpoints
         .iter()
         .filter(|(t, _)| (search_from..=*contact_t).contains(t))
-        .find(|(_, sp)| sp.velocity[2] < -drop_below_m_s)
-        .ok_or(AnatomyError::NoDrop(drop_below_m_s))?;
+        .find(|(t, sp)| descent(*t, sp) > threshold)
+        .ok_or(AnatomyError::NoDrop(threshold))?;
     let drop_t = *drop_t;
     let at_drop = latest(&s.truth, drop_t).ok_or(AnatomyError::Missing("truth state"))?;
     let at_contact = latest(&s.truth, *contact_t).ok_or(AnatomyError::Missing("truth state"))?;
-    let setpoint = latest(&s.setpoints, drop_t).ok_or(AnatomyError::Missing("setpoint"))?;
-    let (_, state) = s
+    let state = s
         .states
         .iter()
         .rev()
@@ -133,8 +165,14 @@ pub fn touchdown_anatomy(
     let offset_at_drop = offset(at_drop);
     let offset_at_contact = offset(at_contact);
 
-    // The state carried to the setpoint's time, as the fsm carries it.
-    let age_s = (drop_t as f64 - state.msg.capture_ns as f64) * 1e-9;
+    // The state carried to the setpoint's time, as the fsm carries it to now: from its
+    // stamp, or from its arrival when it has none.
+    let (state_t, state) = state;
+    let stamp = match state.msg.capture_ns {
+        0 => *state_t,
+        t => t.min(drop_t),
+    };
+    let age_s = (drop_t - stamp) as f64 * 1e-9;
     let carry = age_s.clamp(0.0, CARRY_MAX_S);
     let p = state.world_from_body.translation;
     let read = road([

@@ -76,7 +76,7 @@ fn close(a: [f64; 2], b: [f64; 2]) -> bool {
 
 #[test]
 fn a_touchdown_splits_into_the_offset_at_the_drop_what_was_read_and_the_fall() {
-    let a = touchdown_anatomy(&flight(), 0.75).expect("an anatomy");
+    let a = touchdown_anatomy(&flight(), 0.7, 0.8).expect("an anatomy");
     assert!((a.drop_lead_s - 0.4).abs() < 1e-9, "{a:?}");
     assert!((a.drop_height_m - 0.25).abs() < 1e-9, "{a:?}");
     assert!((a.pad_speed_m_s - 1.0).abs() < 1e-9, "{a:?}");
@@ -97,12 +97,39 @@ fn a_touchdown_splits_into_the_offset_at_the_drop_what_was_read_and_the_fall() {
 fn a_flight_without_a_touchdown_or_a_drop_is_named_for_what_it_lacks() {
     let mut s = flight();
     assert_eq!(
-        touchdown_anatomy(&s, 0.9),
+        touchdown_anatomy(&s, 0.8, 1.0),
         Err(AnatomyError::NoDrop(0.9)),
         "no setpoint descends faster than 0.9 m/s"
     );
+    assert_eq!(
+        touchdown_anatomy(&s, 0.8, 0.8),
+        Err(AnatomyError::Rates {
+            land: 0.8,
+            drop: 0.8
+        })
+    );
+    assert!(touchdown_anatomy(&s, 0.7, f64::NAN).is_err());
     s.events.clear();
-    assert_eq!(touchdown_anatomy(&s, 0.75), Err(AnatomyError::NoTouchdown));
+    assert_eq!(
+        touchdown_anatomy(&s, 0.7, 0.8),
+        Err(AnatomyError::NoTouchdown)
+    );
+}
+
+#[test]
+fn a_pad_estimate_rising_does_not_hide_the_drop() {
+    // The fsm rides the setpoint's descent on the pad's estimated vertical velocity: a
+    // pad read rising at 0.1 m/s makes the drop's setpoints -0.7 m/s, no faster than the
+    // touchdown's rate.
+    let mut s = flight();
+    for (t, sp) in &mut s.setpoints {
+        sp.velocity[2] += 0.1;
+        let mut st = FsmStatus::default();
+        st.pad_velocity[2] = 0.1;
+        s.statuses.push((*t, st));
+    }
+    let a = touchdown_anatomy(&s, 0.7, 0.8).expect("an anatomy");
+    assert!((a.drop_lead_s - 0.4).abs() < 1e-9, "{a:?}");
 }
 
 #[test]
@@ -113,4 +140,22 @@ fn a_quaternion_that_is_not_finite_leans_nowhere() {
     let side = std::f64::consts::FRAC_PI_4;
     assert_eq!(lean(&[side.sin(), 0.0, 0.0, side.cos()]), None);
     assert_eq!(lean(&[0.0, 0.0, 0.0, 1.0]), Some([0.0, 0.0]));
+    // Pitched nose down by 0.1 rad about body y (FLU): the up axis leans forward, +x.
+    let pitch = 0.1_f64;
+    let q = [0.0, (pitch / 2.0).sin(), 0.0, (pitch / 2.0).cos()];
+    let l = lean(&q).unwrap();
+    assert!(
+        (l[0] - G * pitch.tan()).abs() < 1e-9 && l[1].abs() < 1e-12,
+        "{l:?}"
+    );
+    // The same pitch yawed to face north (+y): the lean turns with the heading.
+    let (yaw, p) = (std::f64::consts::FRAC_PI_2, pitch / 2.0);
+    let (cy, sy) = ((yaw / 2.0).cos(), (yaw / 2.0).sin());
+    // q = q_yaw * q_pitch.
+    let q = [-sy * p.sin(), cy * p.sin(), sy * p.cos(), cy * p.cos()];
+    let l = lean(&q).unwrap();
+    assert!(
+        l[0].abs() < 1e-9 && (l[1] - G * pitch.tan()).abs() < 1e-9,
+        "{l:?}"
+    );
 }

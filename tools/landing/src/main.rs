@@ -146,7 +146,7 @@ enum McapCommand {
     /// Take a recorded touchdown apart against the simulator's truth (FILE.truth.mcap
     /// beside it): the offset over the pad when the drop began, how much of it the stack
     /// could not see, the velocity and lean it dropped with, and what the fall added. Exit
-    /// code 1 without a truth file, a touchdown or a drop (docs/recording.md).
+    /// code 2, one line, without a truth file, a touchdown or a drop (docs/recording.md).
     Touchdown(touchdown_cmd::TouchdownArgs),
 }
 

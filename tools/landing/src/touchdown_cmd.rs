@@ -24,7 +24,8 @@ pub struct TouchdownArgs {
     json: bool,
 }
 
-/// What the recording says about the run: its scenario and seed, and the fsm's rates.
+/// What the recording says about the run: its scenario, its seed and the configuration
+/// it flew (the text).
 #[derive(Default)]
 struct About {
     scenario: Option<String>,
@@ -43,6 +44,7 @@ fn read(path: &Path, series: &mut TouchdownSeries, about: &mut About) -> Result<
             topics::SIM_TRUTH => series.events.push((t, m.decode()?)),
             topics::FSM_SETPOINT => series.setpoints.push((t, m.decode()?)),
             topics::VEHICLE_STATE => series.states.push((t, m.decode()?)),
+            topics::FSM_STATUS => series.statuses.push((t, m.decode()?)),
             _ => {}
         }
         Ok(())
@@ -59,10 +61,10 @@ fn read(path: &Path, series: &mut TouchdownSeries, about: &mut About) -> Result<
     Ok(())
 }
 
-/// The speed that tells the drop from the touchdown's descent: halfway between the
-/// recorded configuration's `[fsm] land_rate_m_s` and `drop_rate_m_s` (the defaults where
-/// the recording carries no configuration or leaves them out).
-fn drop_threshold(config: Option<&str>) -> f64 {
+/// The touchdown's and the drop's descent rates, m/s: the recorded configuration's
+/// `[fsm] land_rate_m_s` and `drop_rate_m_s` (the defaults where the recording carries no
+/// configuration or leaves them out).
+fn rates(config: Option<&str>) -> (f64, f64) {
     let d = FsmConfig::default();
     let fsm = config
         .and_then(|c| c.parse::<toml::Table>().ok())
@@ -74,7 +76,10 @@ fn drop_threshold(config: Option<&str>) -> f64 {
             .filter(|v| v.is_finite() && *v > 0.0)
             .unwrap_or(default)
     };
-    0.5 * (rate("land_rate_m_s", d.land_rate_m_s) + rate("drop_rate_m_s", d.drop_rate_m_s))
+    (
+        rate("land_rate_m_s", d.land_rate_m_s),
+        rate("drop_rate_m_s", d.drop_rate_m_s),
+    )
 }
 
 /// Runs `landing mcap touchdown`.
@@ -98,8 +103,9 @@ pub fn run(args: &TouchdownArgs) -> Result<()> {
     series.events.sort_by_key(|(t, _)| *t);
     series.setpoints.sort_by_key(|(t, _)| *t);
     series.states.sort_by_key(|(t, _)| *t);
-    let threshold = drop_threshold(about.config.as_deref());
-    let a = touchdown_anatomy(&series, threshold)
+    series.statuses.sort_by_key(|(t, _)| *t);
+    let (land, drop) = rates(about.config.as_deref());
+    let a = touchdown_anatomy(&series, land, drop)
         .with_context(|| format!("{}", args.file.display()))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&a)?);
@@ -193,13 +199,13 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_drop_threshold_sits_between_the_recorded_rates() {
+    fn the_rates_come_from_the_recorded_configuration_else_the_defaults() {
         let c = "[fsm]\nland_rate_m_s = 0.5\ndrop_rate_m_s = 0.9\n";
-        assert!((drop_threshold(Some(c)) - 0.7).abs() < 1e-12);
+        assert_eq!(rates(Some(c)), (0.5, 0.9));
         let d = FsmConfig::default();
-        let mid = 0.5 * (d.land_rate_m_s + d.drop_rate_m_s);
-        assert_eq!(drop_threshold(None), mid);
-        assert_eq!(drop_threshold(Some("not toml [")), mid);
-        assert_eq!(drop_threshold(Some("[fsm]\ndrop_rate_m_s = -1.0\n")), mid);
+        let defaults = (d.land_rate_m_s, d.drop_rate_m_s);
+        assert_eq!(rates(None), defaults);
+        assert_eq!(rates(Some("not toml [")), defaults);
+        assert_eq!(rates(Some("[fsm]\ndrop_rate_m_s = -1.0\n")), defaults);
     }
 }

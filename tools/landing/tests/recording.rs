@@ -455,16 +455,9 @@ fn a_recorded_touchdown_is_taken_apart_into_the_offset_at_the_drop_and_the_fall(
         (contact - referee).abs() < 0.01,
         "{contact} against {referee}: {v}"
     );
-    // The drop's start plus the fall is the contact, and the stack read the offset at
-    // the drop within the camera's calibration residual (centimetres).
-    let (at_drop, drift, at_contact) = (
-        pair("offset_at_drop_m"),
-        pair("fall_drift_m"),
-        pair("offset_at_contact_m"),
-    );
-    for i in 0..2 {
-        assert!((at_drop[i] + drift[i] - at_contact[i]).abs() < 1e-9, "{v}");
-    }
+    // A calm fall drifts centimetres, and the stack read the offset at the drop within
+    // the camera's calibration residual (centimetres).
+    assert!(norm(pair("fall_drift_m")) < 0.04, "{v}");
     assert!(norm(pair("read_error_at_drop_m")) < 0.05, "{v}");
     assert!(norm(pair("lean_before_drop_m_s2")) < 2.0, "{v}");
     // The table names its rows.
@@ -482,7 +475,8 @@ fn a_recorded_touchdown_is_taken_apart_into_the_offset_at_the_drop_and_the_fall(
     std::fs::copy(&path, &copy).unwrap();
     let o = landing(&["mcap", "touchdown", copy.to_str().unwrap()]);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success(), "{err}");
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
     assert!(
         err.contains("flight.truth.mcap") && err.contains("--truth"),
         "{err}"
