@@ -122,7 +122,7 @@ pub fn touchdown_anatomy(
     // The setpoint's descent is the pad's estimated vertical velocity plus the rate asked
     // for (and never below the rate alone): the smaller of the two readings is the rate.
     let descent = |t: u64, sp: &Setpoint| {
-        let pad_vz = latest(&s.statuses, t).map_or(0.0, |st| st.pad_velocity[2]);
+        let pad_vz = latest(&s.statuses, t).map_or(0.0, |(_, st)| st.pad_velocity[2]);
         let vz = sp.velocity[2];
         let relative = if pad_vz.is_finite() { vz - pad_vz } else { vz };
         -vz.min(relative)
@@ -134,14 +134,10 @@ pub fn touchdown_anatomy(
         .find(|(t, sp)| descent(*t, sp) > threshold)
         .ok_or(AnatomyError::NoDrop(threshold))?;
     let drop_t = *drop_t;
-    let at_drop = latest(&s.truth, drop_t).ok_or(AnatomyError::Missing("truth state"))?;
-    let at_contact = latest(&s.truth, *contact_t).ok_or(AnatomyError::Missing("truth state"))?;
-    let state = s
-        .states
-        .iter()
-        .rev()
-        .find(|(t, _)| *t <= drop_t)
-        .ok_or(AnatomyError::Missing("vehicle state"))?;
+    let missing = AnatomyError::Missing;
+    let (_, at_drop) = latest(&s.truth, drop_t).ok_or(missing("truth state"))?;
+    let (_, at_contact) = latest(&s.truth, *contact_t).ok_or(missing("truth state"))?;
+    let (state_t, state) = latest(&s.states, drop_t).ok_or(missing("vehicle state"))?;
 
     let pad_v = [at_drop.pad_velocity[0], at_drop.pad_velocity[1]];
     let speed = pad_v[0].hypot(pad_v[1]);
@@ -167,7 +163,6 @@ pub fn touchdown_anatomy(
 
     // The state carried to the setpoint's time, as the fsm carries it to now: from its
     // stamp, or from its arrival when it has none.
-    let (state_t, state) = state;
     let stamp = match state.msg.capture_ns {
         0 => *state_t,
         t => t.min(drop_t),
@@ -211,9 +206,10 @@ pub fn touchdown_anatomy(
     })
 }
 
-/// The newest message at or before `t`.
-fn latest<T>(series: &[(u64, T)], t: u64) -> Option<&T> {
-    series.iter().rev().find(|(at, _)| *at <= t).map(|(_, m)| m)
+/// The newest entry at or before `t` of a series in log order.
+fn latest<T>(series: &[(u64, T)], t: u64) -> Option<&(u64, T)> {
+    let after = series.partition_point(|(at, _)| *at <= t);
+    after.checked_sub(1).and_then(|i| series.get(i))
 }
 
 /// The horizontal acceleration a body tilted by `q` (x, y, z, w; body FLU in world ENU)
