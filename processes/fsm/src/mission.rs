@@ -1077,6 +1077,8 @@ impl Fsm {
 
     fn go_around(&mut self, now_ns: u64, why: String) {
         self.go_arounds += 1;
+        // A drop under way is over: the next descent pulls toward the pad as the first.
+        self.dropping = false;
         if self.go_arounds > self.cfg.max_go_arounds {
             // Over a fast pad the vehicle flies at the road's speed: landing in place would
             // meet the road at it (8 m/s at 30 km/h, and it tips over). Brake first, a metre
