@@ -9,6 +9,7 @@ use clap::Args;
 use evaluation::touchdown::{TouchdownAnatomy, TouchdownSeries, touchdown_anatomy};
 use fsm::FsmConfig;
 use ipc_types::topics;
+use stack::StackConfig;
 
 /// Arguments of `landing mcap touchdown`.
 #[derive(Debug, Args)]
@@ -62,24 +63,19 @@ fn read(path: &Path, series: &mut TouchdownSeries, about: &mut About) -> Result<
 }
 
 /// The touchdown's and the drop's descent rates, m/s: the recorded configuration's
-/// `[fsm] land_rate_m_s` and `drop_rate_m_s` (the defaults where the recording carries no
-/// configuration or leaves them out).
-fn rates(config: Option<&str>) -> (f64, f64) {
-    let d = FsmConfig::default();
-    let fsm = config
-        .and_then(|c| c.parse::<toml::Table>().ok())
-        .and_then(|t| t.get("fsm").and_then(|f| f.as_table()).cloned());
-    let rate = |key: &str, default: f64| {
-        fsm.as_ref()
-            .and_then(|f| f.get(key))
-            .and_then(|v| v.as_float().or(v.as_integer().map(|i| i as f64)))
-            .filter(|v| v.is_finite() && *v > 0.0)
-            .unwrap_or(default)
+/// `[fsm] land_rate_m_s` and `drop_rate_m_s`, read as the stack reads its configuration
+/// (the defaults where the recording carries none). A recorded configuration that does
+/// not parse is an error: rates guessed past it would find the wrong drop.
+fn rates(config: Option<&str>, origin: &Path) -> Result<(f64, f64)> {
+    let fsm = match config {
+        Some(text) => {
+            stack_config::parse::<StackConfig>(text, origin)
+                .context("the recording's config (metadata)")?
+                .fsm
+        }
+        None => FsmConfig::default(),
     };
-    (
-        rate("land_rate_m_s", d.land_rate_m_s),
-        rate("drop_rate_m_s", d.drop_rate_m_s),
-    )
+    Ok((fsm.land_rate_m_s, fsm.drop_rate_m_s))
 }
 
 /// Runs `landing mcap touchdown`.
@@ -104,7 +100,7 @@ pub fn run(args: &TouchdownArgs) -> Result<()> {
     series.setpoints.sort_by_key(|(t, _)| *t);
     series.states.sort_by_key(|(t, _)| *t);
     series.statuses.sort_by_key(|(t, _)| *t);
-    let (land, drop) = rates(about.config.as_deref());
+    let (land, drop) = rates(about.config.as_deref(), &args.file)?;
     let a = touchdown_anatomy(&series, land, drop)
         .with_context(|| format!("{}", args.file.display()))?;
     if args.json {
@@ -200,12 +196,25 @@ mod tests {
 
     #[test]
     fn the_rates_come_from_the_recorded_configuration_else_the_defaults() {
-        let c = "[fsm]\nland_rate_m_s = 0.5\ndrop_rate_m_s = 0.9\n";
-        assert_eq!(rates(Some(c)), (0.5, 0.9));
+        let origin = Path::new("run.mcap");
+        let shipped = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../deploy/config/landing.toml"
+        );
+        let text = std::fs::read_to_string(shipped).unwrap();
+        let c = text
+            .replace("\nland_rate_m_s = 0.7\n", "\nland_rate_m_s = 0.5\n")
+            .replace("\ndrop_rate_m_s = 0.8\n", "\ndrop_rate_m_s = 0.9\n");
+        assert_eq!(rates(Some(&c), origin).unwrap(), (0.5, 0.9));
         let d = FsmConfig::default();
-        let defaults = (d.land_rate_m_s, d.drop_rate_m_s);
-        assert_eq!(rates(None), defaults);
-        assert_eq!(rates(Some("not toml [")), defaults);
-        assert_eq!(rates(Some("[fsm]\ndrop_rate_m_s = -1.0\n")), defaults);
+        assert_eq!(
+            rates(None, origin).unwrap(),
+            (d.land_rate_m_s, d.drop_rate_m_s)
+        );
+        // What the stack would refuse is refused, not read past.
+        assert!(rates(Some("not toml ["), origin).is_err());
+        let negative = text.replace("\ndrop_rate_m_s = 0.8\n", "\ndrop_rate_m_s = -1.0\n");
+        let e = rates(Some(&negative), origin).unwrap_err();
+        assert!(format!("{e:#}").contains("drop_rate_m_s"), "{e:#}");
     }
 }
