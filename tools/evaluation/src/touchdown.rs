@@ -8,7 +8,9 @@
 //! its left (the world's axes when the pad is slower than [`ROAD_SPEED_MIN_M_S`]).
 
 use ipc_types::msg::{FsmStatus, Setpoint, TruthEvent, TruthKind, TruthState, VehicleState};
+use nalgebra::Vector3;
 use serde::Serialize;
+use state_history::timed_pose_of;
 
 /// Below this pad speed the road has no direction: the world's axes are used, m/s.
 pub const ROAD_SPEED_MIN_M_S: f64 = 0.1;
@@ -180,7 +182,7 @@ pub fn touchdown_anatomy(
         .states
         .iter()
         .filter(|(t, _)| (lean_from..=drop_t).contains(t))
-        .filter_map(|(_, v)| lean(&v.world_from_body.rotation_xyzw))
+        .filter_map(|(_, v)| lean(v))
         .collect();
     let lean_world = mean(&leans).ok_or(AnatomyError::Missing("attitude"))?;
 
@@ -212,22 +214,13 @@ fn latest<T>(series: &[(u64, T)], t: u64) -> Option<&(u64, T)> {
     after.checked_sub(1).and_then(|i| series.get(i))
 }
 
-/// The horizontal acceleration a body tilted by `q` (x, y, z, w; body FLU in world ENU)
-/// holds at 1 g of vertical thrust: `g` times its up axis' horizontal part over its
-/// vertical part. None for a body on its side or a quaternion that is not finite.
-fn lean(q: &[f64; 4]) -> Option<[f64; 2]> {
-    let [x, y, z, w] = *q;
-    let n = (x * x + y * y + z * z + w * w).sqrt();
-    if !n.is_finite() || n < 1e-9 {
-        return None;
-    }
-    let (x, y, z, w) = (x / n, y / n, z / n, w / n);
-    let up = [
-        2.0 * (x * z + w * y),
-        2.0 * (y * z - w * x),
-        1.0 - 2.0 * (x * x + y * y),
-    ];
-    (up[2] > 0.1).then(|| [G * up[0] / up[2], G * up[1] / up[2]])
+/// The horizontal acceleration the vehicle's tilt holds at 1 g of vertical thrust: `g`
+/// times its up axis' horizontal part over its vertical part. None for a state the stack
+/// would not take as a pose (`state_history::timed_pose_of`: a number not finite, a
+/// quaternion far from unit length) or a body on its side.
+fn lean(v: &VehicleState) -> Option<[f64; 2]> {
+    let up = timed_pose_of(v)?.world_from_body.rotation * Vector3::z();
+    (up.z > 0.1).then(|| [G * up.x / up.z, G * up.y / up.z])
 }
 
 fn mean(v: &[[f64; 2]]) -> Option<[f64; 2]> {

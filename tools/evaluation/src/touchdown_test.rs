@@ -132,18 +132,27 @@ fn a_pad_estimate_rising_does_not_hide_the_drop() {
     assert!((a.drop_lead_s - 0.4).abs() < 1e-9, "{a:?}");
 }
 
+/// A vehicle state at rest with attitude `q` (x, y, z, w; body FLU in world ENU).
+fn attitude(q: [f64; 4]) -> VehicleState {
+    let mut v = VehicleState::default();
+    v.world_from_body.rotation_xyzw = q;
+    v
+}
+
 #[test]
 fn a_quaternion_that_is_not_finite_leans_nowhere() {
-    assert_eq!(lean(&[f64::NAN, 0.0, 0.0, 1.0]), None);
-    assert_eq!(lean(&[0.0, 0.0, 0.0, 0.0]), None);
+    assert_eq!(lean(&attitude([f64::NAN, 0.0, 0.0, 1.0])), None);
+    assert_eq!(lean(&attitude([0.0, 0.0, 0.0, 0.0])), None);
+    // Far from unit length: a writer's bug, not a pose.
+    assert_eq!(lean(&attitude([0.0, 0.0, 0.0, 1.5])), None);
     // On its side: no thrust holds it up.
     let side = std::f64::consts::FRAC_PI_4;
-    assert_eq!(lean(&[side.sin(), 0.0, 0.0, side.cos()]), None);
-    assert_eq!(lean(&[0.0, 0.0, 0.0, 1.0]), Some([0.0, 0.0]));
+    assert_eq!(lean(&attitude([side.sin(), 0.0, 0.0, side.cos()])), None);
+    assert_eq!(lean(&attitude([0.0, 0.0, 0.0, 1.0])), Some([0.0, 0.0]));
     // Pitched nose down by 0.1 rad about body y (FLU): the up axis leans forward, +x.
     let pitch = 0.1_f64;
     let q = [0.0, (pitch / 2.0).sin(), 0.0, (pitch / 2.0).cos()];
-    let l = lean(&q).unwrap();
+    let l = lean(&attitude(q)).unwrap();
     assert!(
         (l[0] - G * pitch.tan()).abs() < 1e-9 && l[1].abs() < 1e-12,
         "{l:?}"
@@ -153,7 +162,7 @@ fn a_quaternion_that_is_not_finite_leans_nowhere() {
     let (cy, sy) = ((yaw / 2.0).cos(), (yaw / 2.0).sin());
     // q = q_yaw * q_pitch.
     let q = [-sy * p.sin(), cy * p.sin(), sy * p.cos(), cy * p.cos()];
-    let l = lean(&q).unwrap();
+    let l = lean(&attitude(q)).unwrap();
     assert!(
         l[0].abs() < 1e-9 && (l[1] - G * pitch.tan()).abs() < 1e-9,
         "{l:?}"
