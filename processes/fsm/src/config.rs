@@ -71,12 +71,17 @@ pub struct FsmConfig {
     pub land_rate_m_s: f64,
     /// Land: height above the pad where the vehicle waits to be right over it, m.
     pub flare_height_m: f64,
-    /// Land: horizontal error below which the vehicle drops from the flare height, m.
+    /// Land: horizontal error below which the vehicle drops from the flare height, below
+    /// the chase speed, m: the offset the drop begins from is most of a paper-speed
+    /// touchdown's error beyond the camera's calibration.
     pub flare_align_m: f64,
+    /// The same above the chase speed, m: the highspeed scenarios were flown at 0.025, and
+    /// at the road's speed a longer wait costs road, not centimetres.
+    pub chase_flare_align_m: f64,
     /// Land: over this long at the flare height the drop's gate widens from
-    /// `flare_align_m` to `land_align_m` (quadratically: tight at first), s: a vehicle
-    /// that cannot get that close (a steady turn, gusts) drops a little wider rather
-    /// than time out.
+    /// `flare_align_m` (chasing `chase_flare_align_m`) to `land_align_m` (quadratically:
+    /// tight at first), s: a vehicle that cannot get that close (a steady turn, gusts)
+    /// drops a little wider rather than time out.
     pub flare_relax_s: f64,
     /// Land, below the chase speed: the drop waits until the camera reads the vehicle
     /// moving over the pad slower than this, m/s (widening with the wait as the offset's
@@ -344,7 +349,8 @@ impl Default for FsmConfig {
             land_speed_gate_m_s: 0.3,
             land_rate_m_s: 0.7,
             flare_height_m: 0.25,
-            flare_align_m: 0.025,
+            flare_align_m: 0.015,
+            chase_flare_align_m: 0.025,
             flare_relax_s: 4.0,
             flare_settle_m_s: 0.05,
             flare_fall_s: 0.4,
@@ -540,6 +546,7 @@ impl Validate for FsmConfig {
             ("go_around_m", self.go_around_m, 0.05, 5.0),
             ("flare_height_m", self.flare_height_m, 0.05, 3.0),
             ("flare_align_m", self.flare_align_m, 0.005, 1.0),
+            ("chase_flare_align_m", self.chase_flare_align_m, 0.005, 1.0),
             ("flare_relax_s", self.flare_relax_s, 0.1, 60.0),
             ("flare_settle_m_s", self.flare_settle_m_s, 0.005, 5.0),
             ("flare_fall_s", self.flare_fall_s, 0.0, 2.0),

@@ -1279,9 +1279,14 @@ impl Fsm {
         if at_flare && !held_by_manoeuvre {
             self.flare_waited_s += dt;
         }
+        let chasing = self.chasing(&est.velocity);
+        let tight = if chasing {
+            self.cfg.chase_flare_align_m
+        } else {
+            self.cfg.flare_align_m
+        };
         let relax = (self.flare_waited_s / self.cfg.flare_relax_s).clamp(0.0, 1.0);
-        let align =
-            self.cfg.flare_align_m + (gate - self.cfg.flare_align_m).max(0.0) * relax * relax;
+        let align = tight + (gate - tight).max(0.0) * relax * relax;
         // Below the chase speed, also wait until the vehicle has stopped moving over the
         // pad by the camera's own reading (a line through its last quarter second): the
         // drop is open loop, and the pad filter's velocity lags a braking just begun (the
@@ -1290,7 +1295,6 @@ impl Fsm {
         // (the pad too close to read) the filter's relative speed alone decides.
         let settle = self.cfg.flare_settle_m_s
             + (self.cfg.land_speed_gate_m_s - self.cfg.flare_settle_m_s).max(0.0) * relax * relax;
-        let chasing = self.chasing(&est.velocity);
         let camera_velocity = self.relative.velocity(now_ns);
         let settled = chasing || camera_velocity.is_none_or(|u| u.xy().norm() < settle);
         // Where the vehicle will be over the pad at contact, by the camera: the offset now

@@ -1338,9 +1338,19 @@ fn drop_and_contact(mut w: World) -> (f64, f64) {
     (dropped, w.contact_offset_m.unwrap())
 }
 
+/// The drop's first gate at the 2.5 cm these gates were built with (1.5 cm since): at
+/// 1.5 cm the offset's gate alone holds the drop through a braking or a lane change here,
+/// and hides what each of the other gates does.
+fn wide_flare_gate() -> FsmConfig {
+    FsmConfig {
+        flare_align_m: 0.025,
+        ..config()
+    }
+}
+
 #[test]
 fn a_drop_waits_for_a_braking_pad_to_stop_braking() {
-    let (dropped, off) = braking_touchdown(config());
+    let (dropped, off) = braking_touchdown(wide_flare_gate());
     // The braking lasts 2.2 s from the commit; the filter sees it end a little later.
     assert!(
         dropped > 2.0,
@@ -1351,7 +1361,7 @@ fn a_drop_waits_for_a_braking_pad_to_stop_braking() {
     // Without the wait (nor the camera's settle gate and the gate on the offset at
     // contact, which also hold it) the same flight drops in the braking, and ends past
     // the pad.
-    let mut cfg = config();
+    let mut cfg = wide_flare_gate();
     cfg.flare_accel_max_m_s2 = 100.0;
     cfg.flare_settle_m_s = 5.0;
     cfg.flare_fall_s = 0.0;
@@ -1385,7 +1395,7 @@ fn a_drop_waits_out_the_middle_of_a_lane_change() {
     // The touchdown's velocity error from the estimates, as when the hold was built: read
     // from the camera, the drop begun mid-change ends 0.7 cm off rather than 1.8, and the
     // hold's own part is smaller than this world can tell apart.
-    let mut held = config();
+    let mut held = wide_flare_gate();
     held.relative_velocity_from_camera = false;
     let (dropped, off) = lane_change_touchdown(held.clone(), 2.0);
     assert!(
@@ -1433,7 +1443,7 @@ fn a_drop_waits_until_the_camera_reads_the_vehicle_still_over_the_pad() {
     // runs began the drop that way, 9-16 cm/s off the pad's speed. Flown at the position
     // gain the paper-speed flights had then (`relative_gain` 1.0): at 2.0 the vehicle
     // trails the braking less, and the gate holds the drop 0.66 s longer, not over 1 s.
-    let mut cfg = config();
+    let mut cfg = wide_flare_gate();
     cfg.flare_fall_s = 0.0;
     cfg.relative_gain = 1.0;
     let ((dropped, off), (dropped_ungated, off_ungated)) =
@@ -1454,7 +1464,7 @@ fn a_drop_waits_until_the_vehicle_will_be_over_the_pad_at_contact() {
     // relative velocity carries the vehicle to over the fall keeps the drop out of the
     // braking (the vehicle trails the slowing pad at about 0.13 m/s, 5 cm over the fall):
     // 0.62 s after the commit and 5.8 cm off without it, 1.74 s and 3.6 cm with it.
-    let mut cfg = config();
+    let mut cfg = wide_flare_gate();
     cfg.flare_settle_m_s = 5.0;
     cfg.flare_fall_s = 0.4;
     let ((dropped, off), (dropped_now, off_now)) =

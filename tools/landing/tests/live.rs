@@ -68,27 +68,51 @@ fn a_foxglove_client_watches_the_mission_live_as_it_flies() {
 
     // Subscribe to the fsm's status as soon as it is advertised; collect the states.
     let mut states: Vec<String> = vec![];
-    let mut subscribed = false;
+    let mut status_channel: Option<Value> = None;
+    let mut rejected = 0;
+    // How the connection ended, for the failure message: a run that ends closes it.
+    let mut ended = String::from("closed by the server");
+    let subscribe = |ws: &mut WebSocket<_>, channel: &Value| {
+        let sub = serde_json::json!({
+            "op": "subscribe",
+            "subscriptions": [{"id": 1, "channelId": channel}],
+        });
+        ws.send(Message::Text(sub.to_string().into())).unwrap();
+    };
     loop {
         let msg = match ws.read() {
             Ok(m) => m,
             // The run ended: the server went with it.
-            Err(_) => break,
+            Err(e) => {
+                ended = format!("{e} after {:.1} s", started.elapsed().as_secs_f64());
+                break;
+            }
         };
         match msg {
             Message::Text(t) => {
                 let v: Value = serde_json::from_str(&t).unwrap();
-                if v["op"] == "advertise" && !subscribed {
+                if v["op"] == "advertise" && status_channel.is_none() {
                     for c in v["channels"].as_array().unwrap() {
                         if c["topic"] == "/fsm/status" {
-                            let sub = serde_json::json!({
-                                "op": "subscribe",
-                                "subscriptions": [{"id": 1, "channelId": c["id"]}],
-                            });
-                            ws.send(Message::Text(sub.to_string().into())).unwrap();
-                            subscribed = true;
+                            subscribe(&mut ws, &c["id"]);
+                            status_channel = Some(c["id"].clone());
                         }
                     }
+                }
+                // foxglove 0.30 sends an advertisement before it files the channel
+                // under the client (ConnectedClient::advertise_channels), so a client
+                // that answers at once can be told the channel is unknown: under load,
+                // 3 of 6 runs here were, and saw nothing. Ask again, as a client must.
+                if let Some(id) = &status_channel
+                    && v["op"] == "status"
+                    && v["message"] == format!("Unknown channel ID: {id}")
+                {
+                    // Until the server has filed it: tens of milliseconds on a loaded
+                    // machine, where a hundred answers in a row came back refused.
+                    rejected += 1;
+                    assert!(rejected < 500, "the subscription was refused for 5 s");
+                    std::thread::sleep(Duration::from_millis(10));
+                    subscribe(&mut ws, id);
                 }
             }
             Message::Binary(b) => {
@@ -110,7 +134,8 @@ fn a_foxglove_client_watches_the_mission_live_as_it_flies() {
     let landed = states.iter().position(|s| s == "landed");
     assert!(
         matches!((track, landed), (Some(t), Some(l)) if t < l),
-        "states seen live: {states:?}"
+        "states seen live: {states:?} (the status channel {status_channel:?}, refused {rejected} \
+         times; the connection ended: {ended})"
     );
     // Paced: the mission's ~10 simulated seconds took at least as long on the wall.
     assert!(
