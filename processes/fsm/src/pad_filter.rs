@@ -255,6 +255,10 @@ pub struct PadEstimate {
     pub manoeuvre_acceleration: Vector3<f64>,
     /// 1-sigma position uncertainty per axis, m.
     pub position_sigma: Vector3<f64>,
+    /// How long the heading has been measured for since the filter started, s (gaps
+    /// longer than [`HEADING_GAP_S`] not counted): a heading rate read off a glimpse of a
+    /// fast pad passing under the camera is noise, not a curve.
+    pub heading_seen_s: f64,
     /// Time since the last used observation's capture, s.
     pub age_s: f64,
 }
@@ -282,12 +286,18 @@ pub struct PadFilter {
     /// Whether the heading was measured since the last start (a filter started without
     /// one has a heading rate of nothing).
     heading_seen: bool,
+    /// [`PadEstimate::heading_seen_s`].
+    heading_seen_s: f64,
     /// Capture time the state refers to, ns.
     t_ns: u64,
     updates: u32,
     rejects_in_row: u32,
     counters: FilterCounters,
 }
+
+/// The longest gap between two heading measurements counted in
+/// [`PadEstimate::heading_seen_s`], s: a few dropped frames, not a pass out of view.
+pub const HEADING_GAP_S: f64 = 0.2;
 
 /// Yaw of the pad's x axis from a quaternion (x, y, z, w), rad.
 fn yaw_of(q: [f64; 4]) -> Option<f64> {
@@ -320,6 +330,7 @@ impl PadFilter {
             axes: None,
             yaw: Axis::new(0.0, 1.0, 1.0),
             heading_seen: false,
+            heading_seen_s: 0.0,
             t_ns: 0,
             updates: 0,
             rejects_in_row: 0,
@@ -390,6 +401,9 @@ impl PadFilter {
             if e * e / s <= 9.0 {
                 self.yaw.update(e, s);
                 self.yaw.x = wrap(self.yaw.x);
+                if self.heading_seen && dt <= HEADING_GAP_S {
+                    self.heading_seen_s += dt;
+                }
                 self.heading_seen = true;
             }
         }
@@ -450,6 +464,7 @@ impl PadFilter {
             acceleration: acc,
             manoeuvre_acceleration: manoeuvre_acc,
             position_sigma: sigma,
+            heading_seen_s: self.heading_seen_s,
             age_s,
         };
         let finite = est
@@ -528,6 +543,7 @@ impl PadFilter {
             1.0,
         );
         self.heading_seen = yaw.is_some();
+        self.heading_seen_s = 0.0;
         self.t_ns = t;
         self.updates = 1;
         self.rejects_in_row = 0;

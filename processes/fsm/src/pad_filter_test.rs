@@ -184,3 +184,28 @@ fn a_fast_pad_is_not_turned_by_its_heading() {
     );
     assert!((fast - plain).abs() < 1e-12, "{fast} against {plain}");
 }
+
+#[test]
+fn the_time_a_heading_was_measured_counts_what_was_seen_not_the_gaps() {
+    // A pad glimpsed for a third of a second, out of view for two, then seen again for a
+    // second: its heading was measured for about 1.3 s, not the 3.3 s the track spans.
+    let mut f = PadFilter::new(PadFilterConfig::default());
+    let mut t = 0;
+    let mut seen = |f: &mut PadFilter, from: u64, frames: u64| {
+        for k in 0..frames {
+            t = from + k * FRAME_NS;
+            let x = 10.0 * t as f64 * 1e-9;
+            f.update(t, &observation(t, Vector3::new(x, 0.0, 0.4)));
+        }
+        t
+    };
+    let end = seen(&mut f, 0, 10);
+    let glimpse = f.estimate(end).map(|e| e.heading_seen_s);
+    assert!(
+        glimpse.is_some_and(|s| (0.25..0.35).contains(&s)),
+        "{glimpse:?}"
+    );
+    let end = seen(&mut f, end + 2_000_000_000, 31);
+    let both = f.estimate(end).map(|e| e.heading_seen_s);
+    assert!(both.is_some_and(|s| (1.2..1.35).contains(&s)), "{both:?}");
+}

@@ -120,6 +120,16 @@ struct World {
     /// (Hz): low over the pad in highspeed-50 it swung +-2 deg at 1.2 Hz with the vehicle's
     /// roll.
     heading_wobble: (f64, f64),
+    /// The pad's heading as the markers read it drifts at this rate (rad/s) for this long
+    /// (s) from the first sighting, then stays that far off: read off a fast pad crossing
+    /// the view of a vehicle that pitches and rolls to chase it (highspeed-50, seed 21: a
+    /// 0.1-0.15 rad/s rate read off a straight road).
+    heading_misread: (f64, f64),
+    /// When the camera first saw the pad, ns.
+    first_seen_t: Option<u64>,
+    /// The most horizontal acceleration the airframe makes, m/s^2 (0: any): a racer
+    /// tilting 45 deg makes about 10.
+    accel_max_m_s2: f64,
     /// The largest horizontal acceleration the vehicle made in Land, m/s^2 (about its
     /// lean beyond the drag's: 1.7 m/s^2 is 10 deg).
     land_accel_max: f64,
@@ -195,6 +205,9 @@ impl World {
             track_log: Vec::new(),
             descend_accel: Vec::new(),
             heading_wobble: (0.0, 0.0),
+            heading_misread: (0.0, 0.0),
+            first_seen_t: None,
+            accel_max_m_s2: 0.0,
             land_accel_max: 0.0,
             velocity_noise_m_s: 0.0,
             flare_rel_speed_max: 0.0,
@@ -448,6 +461,13 @@ impl World {
         } else {
             target_v
         };
+        if self.accel_max_m_s2 > 0.0 {
+            let dv = (self.vel - before)
+                .xy()
+                .cap_magnitude(self.accel_max_m_s2 * dt);
+            self.vel.x = before.x + dv.x;
+            self.vel.y = before.y + dv.y;
+        }
         if self.drag_per_s > 0.0 && self.armed && !self.on_ground() {
             // PX4's velocity integrator (MPC_XY_VEL_I_ACC 0.4) against the drag.
             let e = (target_v - accel_v - before).xy();
@@ -538,6 +558,7 @@ impl World {
         if self.t >= self.next_obs {
             self.next_obs = self.t + 33_000_000;
             if let Some(obs) = self.observation() {
+                self.first_seen_t.get_or_insert(self.t);
                 self.fsm.on_observation(self.t, &obs);
             }
         }
@@ -588,6 +609,11 @@ impl World {
         let (amplitude, hz) = self.heading_wobble;
         let heading =
             heading + amplitude * (std::f64::consts::TAU * hz * self.t as f64 * 1e-9).sin();
+        let (rate, over_s) = self.heading_misread;
+        let seen_s = self
+            .first_seen_t
+            .map_or(0.0, |t0| self.t.saturating_sub(t0) as f64 * 1e-9);
+        let heading = heading + rate * seen_s.min(over_s);
         PadObservation {
             msg: Header::captured_at(self.t.saturating_sub(CAPTURE_AGE_NS)),
             camera_from_pad: Pose {
@@ -1606,6 +1632,33 @@ fn a_heading_read_swinging_with_the_roll_does_not_rock_a_chase_at_50_km_h() {
     assert!(off < 0.08, "touched down {off} m off the pad");
     let a = w.land_accel_max;
     assert!(a < 1.0, "rocked at up to {a} m/s^2 sideways over the pad");
+}
+
+#[test]
+fn a_heading_rate_read_off_a_glimpse_of_a_fast_pad_does_not_turn_the_chase_off_the_road() {
+    // highspeed-50 on seed 21 at ad0ddcd, 4 runs of 16: the pad crossed the waiting
+    // vehicle's view in 0.3 s, its heading read drifting 0.1-0.15 rad/s; the chase fed
+    // that turn forward, Lost followed its arc, and the vehicle flew 15 m off the straight
+    // road and never saw the pad again.
+    let mut w = road_chase(config());
+    w.pad_vel = Vector3::new(13.89, 0.0, 0.0);
+    w.heading_misread = (-0.14, 0.4);
+    w.accel_max_m_s2 = 10.0;
+    w.expect(MissionState::Track, 30.0);
+    let mut off_road: f64 = 0.0;
+    let end = w.t + 8_000_000_000;
+    while w.t < end && w.state() != MissionState::Land {
+        w.step();
+        off_road = off_road.max(w.pos.y.abs());
+    }
+    assert!(
+        off_road < 1.0,
+        "flew {off_road:.2} m off the road: {:?}",
+        w.reasons()
+    );
+    w.expect(MissionState::Landed, 60.0);
+    let off = w.contact_offset_m.unwrap();
+    assert!(off < 0.08, "touched down {off} m off the pad");
 }
 
 #[test]

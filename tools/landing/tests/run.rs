@@ -135,8 +135,11 @@ fn a_pad_at_30_km_h_is_chased_and_landed_on_vision_only() {
 
 #[test]
 fn a_pad_at_30_km_h_on_a_curve_is_chased_and_landed_on() {
-    // A 60 m radius at 8.3 m/s: the pad turns under the vehicle the whole time.
-    lands(&["run", "--scenario", "highspeed-30-curve", "--json"]);
+    // A 60 m radius at 8.3 m/s: the pad turns under the vehicle the whole time. Within
+    // 5 cm: the touchdown's relative-velocity term compared across the road (a setpoint
+    // turning now against a vehicle velocity lagging the turn) pulled it 4.6 cm inside the
+    // curve on average (6.3 cm off on this seed; 3.2 with the along-road part alone).
+    lands_within(&["run", "--scenario", "highspeed-30-curve", "--json"], 0.05);
 }
 
 #[test]
