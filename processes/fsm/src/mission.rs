@@ -1807,10 +1807,14 @@ impl Fsm {
                 Some(u) if camera => u + (v - est.velocity),
                 _ => v - self.velocity(),
             };
-            let relative = if chasing {
-                along_road(&relative, &est.velocity)
-            } else {
-                relative
+            // Chasing, only its part along the road. Across it, in a curve, the setpoint's
+            // velocity turns now while the vehicle's measured velocity lags the turn (its
+            // stamp, PX4's velocity loop): the difference read 10-50 cm/s toward the inside
+            // and pulled the touchdown 4.6 cm inside the curve (highspeed-30-curve); the
+            // position pull and the trim hold the across error.
+            let relative = match along(&relative, &est.velocity) {
+                Some(part) if chasing => part,
+                _ => relative,
             };
             let dv = relative.xy() * self.cfg.relative_velocity_gain;
             let dv = dv.cap_magnitude(self.cfg.relative_accel_max_m_s2);
@@ -1834,24 +1838,16 @@ fn pad_acceleration(est: &PadEstimate) -> Vector3<f64> {
     if speed < HEADING_SPEED_MIN_M_S {
         return Vector3::new(a.x, a.y, 0.0);
     }
-    let along = v / speed * a.dot(&(v / speed));
-    Vector3::new(along.x, along.y, 0.0) + turn_acceleration(est)
+    along(&est.acceleration, &est.velocity).unwrap_or_else(Vector3::zeros) + turn_acceleration(est)
 }
 
-/// Chasing, the part of the touchdown's relative velocity `relative` along the pad's
-/// `velocity`. Across the road, in a curve, the setpoint's velocity turns now while the
-/// vehicle's measured velocity lags the turn (its stamp, PX4's velocity loop): the
-/// difference read 10-50 cm/s toward the inside and pulled the touchdown 4.6 cm inside the
-/// curve (highspeed-30-curve); the position pull and the trim hold the across error.
-/// Unchanged for a pad too slow to have a direction.
-fn along_road(relative: &Vector3<f64>, velocity: &Vector3<f64>) -> Vector3<f64> {
-    match velocity.xy().try_normalize(1e-3) {
-        Some(u) => {
-            let along = u * relative.xy().dot(&u);
-            Vector3::new(along.x, along.y, relative.z)
-        }
-        None => *relative,
-    }
+/// The horizontal part of `x` along the horizontal `direction` (no vertical part): a
+/// pad's acceleration or a relative velocity split along the road; `None` when
+/// `direction` has no horizontal length to speak of.
+fn along(x: &Vector3<f64>, direction: &Vector3<f64>) -> Option<Vector3<f64>> {
+    let u = direction.xy().try_normalize(1e-3)?;
+    let part = u * x.xy().dot(&u);
+    Some(Vector3::new(part.x, part.y, 0.0))
 }
 
 /// The pad's velocity turned at its heading rate: the pull of the curve it drives, for
